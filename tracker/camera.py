@@ -1,0 +1,67 @@
+"""Pinhole camera model with OpenCV distortion and a mount rotation (pure)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from tracker.geometry import FloatArray, mount_rotation, rotation_from_rpy
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Intrinsics (pixels), distortion (OpenCV order k1, k2, p1, p2[, k3...]) and mount.
+
+    ``mount_rpy_deg``: the camera's roll/pitch/yaw in the body frame FRD (see
+    :mod:`tracker.geometry`); pitch -90 looks straight down.
+    """
+
+    width: int = field(default=640, metadata={"ge": 1})
+    height: int = field(default=480, metadata={"ge": 1})
+    fx: float = field(default=525.0, metadata={"gt": 0})
+    fy: float = field(default=525.0, metadata={"gt": 0})
+    cx: float = 319.5
+    cy: float = 239.5
+    distortion: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    mount_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def matrix(self) -> FloatArray:
+        """The 3x3 intrinsic matrix K."""
+        return np.array(
+            [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
+        )
+
+    @property
+    def dist_coeffs(self) -> FloatArray:
+        """Distortion coefficients as a float64 array (OpenCV order)."""
+        return np.asarray(self.distortion, dtype=np.float64)
+
+    @property
+    def r_body_cam(self) -> FloatArray:
+        """Rotation taking camera-frame vectors to the body frame."""
+        return mount_rotation(self.mount_rpy_deg)
+
+    def project_camera_points(self, points_cam: FloatArray) -> FloatArray:
+        """Project Nx3 points in the camera frame to Nx2 distorted pixel coordinates.
+
+        Points must be in front of the camera (z > 0); callers check visibility.
+        """
+        pts = np.asarray(points_cam, dtype=np.float64).reshape(-1, 1, 3)
+        zero = np.zeros(3, dtype=np.float64)
+        uv, _ = cv2.projectPoints(pts, zero, zero, self.matrix, self.dist_coeffs)
+        return np.asarray(uv.reshape(-1, 2), dtype=np.float64)
+
+    def world_to_camera(
+        self,
+        points_ned: FloatArray,
+        vehicle_ned: FloatArray,
+        vehicle_rpy_rad: tuple[float, float, float],
+    ) -> FloatArray:
+        """Nx3 NED world points -> Nx3 camera-frame points for a vehicle pose."""
+        r_ned_body = rotation_from_rpy(*vehicle_rpy_rad)
+        r_ned_cam = r_ned_body @ self.r_body_cam
+        rel = np.asarray(points_ned, dtype=np.float64) - np.asarray(vehicle_ned, dtype=np.float64)
+        return np.asarray(rel @ r_ned_cam, dtype=np.float64)  # = (R_ned_cam^T @ rel^T)^T
