@@ -18,7 +18,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.appearance import bhattacharyya, kernel_histograms, particle_likelihood
+from tracker.appearance import (
+    bhattacharyya,
+    joint_planes,
+    kernel_histograms,
+    particle_likelihood,
+)
 from tracker.config import TrackerConfig, check_config
 from tracker.features import GRAY_FEATURES, colour_weights, feature_bins, is_grayscale
 from tracker.particles import (
@@ -28,6 +33,7 @@ from tracker.particles import (
     propagate,
     systematic_resample,
     weighted_estimate,
+    window_sums,
 )
 from tracker.ranking import log_likelihood_ratio, masked_histograms, rank_features, ring_masks
 from tracker.types import Box, Cue, TrackResult
@@ -74,6 +80,8 @@ class AdaptiveTracker:
         self._cue: Cue = "grayscale" if is_grayscale(window.patch, cfg.gray_tolerance) else "colour"
         self._candidates = GRAY_FEATURES if self._cue == "grayscale" else tuple(range(49))
         self._first = (window, self._state.copy())
+        self._ref_mean = self._box_mean(window, self._state)
+        self._gain = np.ones(3)
         self._p_first: FloatArray | None = None
         self._model = self._rank(window, self._state)
         self._particles = np.tile(self._state, (cfg.particles, 1))
@@ -109,7 +117,9 @@ class AdaptiveTracker:
         For reports and inspection only (fig. 5); tracking never computes whole-frame features.
         """
         image = check_image(image_bgr)
-        planes = feature_bins(image, self._model.features, self.config.bins)
+        planes = feature_bins(
+            image, self._model.features, self.config.bins, self.config.stretch_features
+        )
         return [
             (fid, self._model.llr[i][planes[i]].astype(np.float32))
             for i, fid in enumerate(self._model.features)
@@ -131,9 +141,40 @@ class AdaptiveTracker:
         factor = work_factor(w, h, self.config.work_area_px)
         return cut_window(image, (state[0], state[1]), extent, factor)
 
+    def _box_mean(self, window: Window, state: FloatArray) -> FloatArray:
+        """Mean BGR of the box ``state`` inside the window's patch."""
+        c = window.to_patch(state[None, :2])[0]
+        half = self._half(state[2], window)[0]
+        h, w = window.patch.shape[:2]
+        x0, x1 = int(np.clip(c[0] - half[0], 0, w - 1)), int(np.clip(c[0] + half[0], 1, w))
+        y0, y1 = int(np.clip(c[1] - half[1], 0, h - 1)), int(np.clip(c[1] + half[1], 1, h))
+        region = window.patch[y0 : max(y1, y0 + 1), x0 : max(x1, x0 + 1)]
+        return np.maximum(region.reshape(-1, 3).mean(axis=0), 1.0)
+
+    def _compensated(self, window: Window) -> Window:
+        """The window with the illumination gain removed (per channel, clipped to 0..255)."""
+        band = self.config.gain_deadband
+        excess = np.sign(self._gain - 1.0) * np.maximum(np.abs(self._gain - 1.0) - band, 0.0)
+        if not self.config.gain_compensation or np.abs(excess).max() < 0.01:
+            return window
+        gain = (1.0 + excess).astype(np.float32)  # a dead band keeps small drifts uncorrected
+        patch = np.clip(window.patch * gain, 0, 255).astype(np.uint8)
+        return Window(window.x0, window.y0, window.fx, window.fy, patch)
+
+    def _update_gain(self, raw: Window, state: FloatArray) -> None:
+        """gain <- (1-r) gain + r * (first-frame target mean / current target mean)."""
+        ratio = np.clip(self._ref_mean / self._box_mean(raw, state), 0.25, 4.0)
+        if self.config.gain_mode == "grey":
+            ratio = np.full(3, float(self._ref_mean.sum() / self._box_mean(raw, state).sum()))
+            ratio = np.clip(ratio, 0.25, 4.0)
+        rate = self.config.gain_rate
+        self._gain = (1.0 - rate) * self._gain + rate * ratio
+
     def _likelihood(self, window: Window) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float32]]:
         """Bin images of the selected features and their mean back-projected LLR image."""
-        planes = feature_bins(window.patch, self._model.features, self.config.bins)
+        planes = feature_bins(
+            window.patch, self._model.features, self.config.bins, self.config.stretch_features
+        )
         llr = self._model.llr
         image = llr[0][planes[0]]
         for i in range(1, len(planes)):
@@ -146,35 +187,47 @@ class AdaptiveTracker:
         centre = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0]
         patch_box = (centre[0] - half[0], centre[1] - half[1], 2 * half[0], 2 * half[1])
-        planes = feature_bins(window.patch, self._candidates, cfg.bins)
+        planes = feature_bins(window.patch, self._candidates, cfg.bins, cfg.stretch_features)
         inner, ring = ring_masks(window.patch.shape[:2], patch_box, cfg.ring_area_ratio)
         p_now = masked_histograms(planes, inner, cfg.bins)
         q = masked_histograms(planes, ring, cfg.bins)
         if self._p_first is None:
             self._p_first = p_now
         p = cfg.anchor_weight * self._p_first + (1.0 - cfg.anchor_weight) * p_now
-        top, _ = rank_features(p, q, self._candidates, cfg.loglik_floor, cfg.top_features)
+        directions = colour_weights().astype(np.float64) if self._cue == "colour" else None
+        top, _ = rank_features(
+            p, q, self._candidates, cfg.loglik_floor, cfg.top_features, directions,
+            cfg.max_feature_cosine,
+        )
         rows = [self._candidates.index(f) for f in top]
         llr = log_likelihood_ratio(p[rows], q[rows], cfg.loglik_floor)
         first_window, first_state = self._first
         first = self._hist(first_window, first_state[None], top)[0]
         sel = planes[rows]
-        recent = kernel_histograms(sel, centre[None], half[None], cfg.sample_grid, cfg.bins)[0]
+        recent = self._kernel(sel, centre[None], half[None])[0]
         model = cfg.anchor_weight * first + (1.0 - cfg.anchor_weight) * recent
         around = centre[None] + _NEIGHBOURS * 2.0 * half[None]
         halves = np.repeat(half[None], len(around), axis=0)
-        bg = kernel_histograms(sel, around, halves, cfg.sample_grid, cfg.bins)
+        bg = self._kernel(sel, around, halves)
         rho_bg = float(bhattacharyya(bg, model).mean())
         rho_ref = float(bhattacharyya(first[None], model)[0])
         return _Model(top, llr, first, recent, rho_ref, min(rho_bg, rho_ref - 0.05))
 
     def _hist(self, window: Window, states: FloatArray, ids: tuple[int, ...]) -> FloatArray:
-        planes = feature_bins(window.patch, ids, self.config.bins)
+        planes = feature_bins(window.patch, ids, self.config.bins, self.config.stretch_features)
         centres = window.to_patch(states[:, :2])
-        return kernel_histograms(
-            planes, centres, self._half(states[:, 2], window), self.config.sample_grid,
-            self.config.bins,
-        )
+        return self._kernel(planes, centres, self._half(states[:, 2], window))
+
+    def _kernel(
+        self, planes: npt.NDArray[np.intp], centres: FloatArray, halves: FloatArray
+    ) -> FloatArray:
+        """Kernel histograms (eq. 2) of the appearance model: joint or per-feature."""
+        cfg = self.config
+        if cfg.appearance == "joint":
+            joint = joint_planes(planes, cfg.bins, cfg.joint_bins)
+            nbins = cfg.joint_bins ** planes.shape[0]
+            return kernel_histograms(joint, centres, halves, cfg.sample_grid, nbins)
+        return kernel_histograms(planes, centres, halves, cfg.sample_grid, cfg.bins)
 
     def _confidence(self, rho: FloatArray) -> FloatArray:
         """Calibrated confidence: 0 at the background's similarity, 1 at the first frame's."""
@@ -198,32 +251,45 @@ class AdaptiveTracker:
         noise = self._noise()
         scale_range = (cfg.min_scale, cfg.max_scale)
         particles = propagate(self._particles, noise, cfg.scale_noise, scale_range, self.rng)
-        window = self._window(image, self._state, 2.0 * noise, 1.0)
+        raw = self._window(image, self._state, 2.0 * noise, 1.0)
+        window = self._compensated(raw)
         planes, lik = self._likelihood(window)
         centres = window.to_patch(particles[:, :2])
         halves = self._half(particles[:, 2], window)
         shifted = round(cfg.particles * cfg.mean_shift_fraction)
+        tables = integral_images(np.maximum(lik, 0.0))
         if shifted and cfg.mean_shift_iterations:
-            tables = integral_images(np.maximum(lik, 0.0))
             centres[:shifted] = mean_shift(
                 tables, centres[:shifted], halves[:shifted], cfg.mean_shift_iterations
             )
             particles[:shifted, :2] = window.to_frame(centres[:shifted])
         model = self._model_hist()
-        hists = kernel_histograms(planes, centres, halves, cfg.sample_grid, cfg.bins)
+        hists = self._kernel(planes, centres, halves)
         weights = particle_likelihood(bhattacharyya(hists, model), cfg.omega)
+        if cfg.llr_gain > 0:
+            weights = weights * self._llr_factor(lik, centres, halves)
         kept = np.where(weights >= cfg.weight_threshold, weights, 0.0)
         if kept.sum() <= 0:
             kept = weights
         candidates = np.stack([weighted_estimate(particles, kept), particles[np.argmax(kept)]])
-        cand_hists = kernel_histograms(
-            planes, window.to_patch(candidates[:, :2]), self._half(candidates[:, 2], window),
-            cfg.sample_grid, cfg.bins,
+        cand_hists = self._kernel(
+            planes, window.to_patch(candidates[:, :2]), self._half(candidates[:, 2], window)
         )
         rhos = bhattacharyya(cand_hists, model)
         best = int(np.argmax(rhos))
         self._particles = particles[systematic_resample(kept, self.rng)]
-        return self._accept(window, candidates[best], cand_hists[best], float(rhos[best]))
+        result = self._accept(window, candidates[best], cand_hists[best], float(rhos[best]))
+        if result.box is not None and result.confidence >= cfg.lost_below_confidence:
+            self._update_gain(raw, candidates[best])
+        return result
+
+    def _llr_factor(
+        self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
+    ) -> FloatArray:
+        """``exp(gain * (mean LLR in box - max over particles))``: the likelihood image's vote."""
+        sums, area = window_sums(integral_images(lik)[:1], centres, halves)
+        mean = sums[0] / np.maximum(area, 1.0)
+        return np.exp(self.config.llr_gain * (mean - mean.max()))
 
     def _accept(
         self, window: Window, state: FloatArray, hist: FloatArray, rho: float
@@ -253,7 +319,7 @@ class AdaptiveTracker:
         cfg = self.config
         widen = cfg.reacquire_growth ** self._lost_frames
         self._lost_frames += 1
-        window = self._window(image, self._state, 0.0, widen)
+        window = self._compensated(self._window(image, self._state, 0.0, widen))
         planes, lik = self._likelihood(window)
         half = self._half(self._state[2], window)[0]
         positive = np.maximum(lik, 0.0)
@@ -265,7 +331,7 @@ class AdaptiveTracker:
         centres = np.vstack([[ix + 0.5, iy + 0.5], scatter])
         halves = np.repeat(half[None], len(centres), axis=0)
         centres = mean_shift(integral_images(positive), centres, halves, cfg.mean_shift_iterations)
-        hists = kernel_histograms(planes, centres, halves, cfg.sample_grid, cfg.bins)
+        hists = self._kernel(planes, centres, halves)
         rhos = bhattacharyya(hists, self._model_hist())
         best = int(np.argmax(rhos))
         confidence = float(self._confidence(rhos[best : best + 1])[0])

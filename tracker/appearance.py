@@ -68,3 +68,17 @@ def bhattacharyya_distance(rho: FloatArray) -> FloatArray:
 def particle_likelihood(rho: FloatArray, omega: float) -> FloatArray:
     """``q(c|u) ~ exp(-omega * s^2)`` with ``s^2 = 1 - rho``."""
     return np.exp(-omega * np.clip(1.0 - rho, 0.0, None))
+
+
+def joint_planes(
+    bin_images: npt.NDArray[np.intp], bins: int, joint_bins: int
+) -> npt.NDArray[np.intp]:
+    """Fold k feature planes (values < bins) into one joint index plane, shape (1, H, W).
+
+    Each feature is requantised to ``joint_bins`` levels; the joint histogram has
+    ``joint_bins**k`` bins and keeps the correlation between features that marginals lose.
+    """
+    out = np.zeros(bin_images.shape[1:], dtype=np.intp)
+    for plane in bin_images:
+        out = out * joint_bins + (plane * joint_bins) // bins
+    return out[None]

@@ -1,4 +1,4 @@
-"""Configuration of the adaptive landmark tracker (one frozen dataclass, TOML section ``[tracker]``).
+"""Configuration of the adaptive landmark tracker (TOML section ``[tracker]``).
 
 Constraints live in field metadata (``ge``, ``gt``, ``le``, ``lt``) and are checked by the
 application loader; :func:`check_config` re-checks them for direct library use.
@@ -7,7 +7,7 @@ application loader; :func:`check_config` re-checks them for direct library use.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, Literal
 
 
 @dataclass(frozen=True)
@@ -23,13 +23,22 @@ class TrackerConfig:
     mean_shift_fraction: float = field(default=0.5, metadata={"ge": 0.0, "le": 1.0})
     mean_shift_iterations: int = field(default=4, metadata={"ge": 0, "le": 50})
     bins: int = field(default=16, metadata={"ge": 4, "le": 256})
+    stretch_features: bool = False
+    gain_compensation: bool = True
+    gain_mode: Literal["grey", "colour"] = "grey"
+    gain_deadband: float = field(default=0.0, metadata={"ge": 0.0, "lt": 1.0})
+    gain_rate: float = field(default=0.3, metadata={"gt": 0.0, "le": 1.0})
+    appearance: Literal["joint", "marginal"] = "joint"
+    joint_bins: int = field(default=8, metadata={"ge": 2, "le": 32})
     top_features: int = field(default=3, metadata={"ge": 1, "le": 49})
+    max_feature_cosine: float = field(default=0.6, metadata={"ge": 0.0, "le": 1.0})
     rerank_every_frames: int = field(default=10, metadata={"ge": 1})
     rerank_below_confidence: float = field(default=0.5, metadata={"ge": 0.0, "le": 1.0})
     anchor_weight: float = field(default=0.5, metadata={"ge": 0.0, "le": 1.0})
     model_update_rate: float = field(default=0.05, metadata={"ge": 0.0, "le": 1.0})
     ring_area_ratio: float = field(default=1.0, metadata={"gt": 0.0, "le": 8.0})
     loglik_floor: float = field(default=0.001, metadata={"gt": 0.0, "lt": 1.0})
+    llr_gain: float = field(default=0.0, metadata={"ge": 0.0})
     omega: float = field(default=20.0, metadata={"gt": 0.0})
     weight_threshold: float = field(default=0.02, metadata={"ge": 0.0, "lt": 1.0})
     motion_history_frames: int = field(default=5, metadata={"ge": 1})

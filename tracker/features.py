@@ -68,23 +68,37 @@ def _colour_mapping(ids: tuple[int, ...], bins: int) -> tuple[npt.NDArray[np.flo
 
 
 def colour_feature_bins(
-    patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int
+    patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int, stretch: bool = False
 ) -> npt.NDArray[np.intp]:
-    """Bin index images of colour features, shape (k, H, W), values in 0..bins-1."""
+    """Bin index images of colour features, shape (k, H, W), values in 0..bins-1.
+
+    With ``stretch`` each feature is mapped from the patch's own [min, max] instead of its
+    fixed range, which makes the bins invariant to a global gain (illumination level).
+    """
     matrix, offset = _colour_mapping(ids, bins)
     h, w = patch_bgr.shape[:2]
     pixels = patch_bgr.reshape(-1, 3).astype(np.float32)
     values = pixels @ matrix + offset  # (N, k) = ((w . rgb) - low) * bins / (range + 1)
+    if stretch:
+        low = values.min(axis=0)
+        span = values.max(axis=0) - low
+        values = (values - low) * (bins / np.maximum(span * (1.0 + 1.0 / bins), 1e-3))
     out = values.astype(np.intp).T.reshape(len(ids), h, w)
     np.clip(out, 0, bins - 1, out=out)
     return out
 
 
 def gray_feature_bins(
-    patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int
+    patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int, stretch: bool = False
 ) -> npt.NDArray[np.intp]:
-    """Bin index images of the grayscale fallback features, shape (k, H, W)."""
+    """Bin index images of the grayscale fallback features, shape (k, H, W).
+
+    With ``stretch`` the grey levels are first stretched to the patch's [min, max].
+    """
     gray = patch_bgr[:, :, 1].astype(np.float32)
+    if stretch:
+        low = float(gray.min())
+        gray = (gray - low) * (255.0 / max(float(gray.max()) - low, 1.0))
     planes = []
     for fid in ids:
         if fid == GRAY_INTENSITY:
@@ -105,18 +119,18 @@ def gray_feature_bins(
 
 
 def feature_bins(
-    patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int
+    patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int, stretch: bool = False
 ) -> npt.NDArray[np.intp]:
     """Bin index images for any mix of ids: colour ids 0..48, grayscale ids 49..51."""
     if all(i < GRAY_INTENSITY for i in ids):
-        return colour_feature_bins(patch_bgr, ids, bins)
+        return colour_feature_bins(patch_bgr, ids, bins, stretch)
     if all(i in _GRAY_NAMES for i in ids):
-        return gray_feature_bins(patch_bgr, ids, bins)
+        return gray_feature_bins(patch_bgr, ids, bins, stretch)
     colour = [i for i in ids if i < GRAY_INTENSITY]
     gray = [i for i in ids if i >= GRAY_INTENSITY]
     parts = {
-        **dict(zip(colour, colour_feature_bins(patch_bgr, tuple(colour), bins), strict=True)),
-        **dict(zip(gray, gray_feature_bins(patch_bgr, tuple(gray), bins), strict=True)),
+        **dict(zip(colour, colour_feature_bins(patch_bgr, tuple(colour), bins, stretch), strict=True)),
+        **dict(zip(gray, gray_feature_bins(patch_bgr, tuple(gray), bins, stretch), strict=True)),
     }
     return np.stack([parts[i] for i in ids])
 

@@ -65,6 +65,19 @@ def integral_images(weight_image: npt.NDArray[np.float32]) -> FloatArray:
     return out
 
 
+def window_sums(
+    tables: FloatArray, centres: FloatArray, half_sizes: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Sums of the tabled images over each centre's box, (3, P), and the box areas (P,) in px."""
+    _, hp1, wp1 = tables.shape
+    x0 = np.clip(np.rint(centres[:, 0] - half_sizes[:, 0]), 0, wp1 - 1).astype(np.intp)
+    x1 = np.clip(np.rint(centres[:, 0] + half_sizes[:, 0]), 0, wp1 - 1).astype(np.intp)
+    y0 = np.clip(np.rint(centres[:, 1] - half_sizes[:, 1]), 0, hp1 - 1).astype(np.intp)
+    y1 = np.clip(np.rint(centres[:, 1] + half_sizes[:, 1]), 0, hp1 - 1).astype(np.intp)
+    sums = tables[:, y1, x1] - tables[:, y0, x1] - tables[:, y1, x0] + tables[:, y0, x0]
+    return sums, ((x1 - x0) * (y1 - y0)).astype(np.float64)
+
+
 def mean_shift(
     tables: FloatArray, centres: FloatArray, half_sizes: FloatArray, iterations: int
 ) -> FloatArray:
@@ -74,14 +87,9 @@ def mean_shift(
     Epanechnikov kernel, whose shadow is flat (the box stands in for the inscribed ellipse so the
     sums come from integral images in O(1) per centre).  Centres with no weight stay put.
     """
-    _, hp1, wp1 = tables.shape
     c = centres.astype(np.float64).copy()
     for _ in range(iterations):
-        x0 = np.clip(np.rint(c[:, 0] - half_sizes[:, 0]), 0, wp1 - 1).astype(np.intp)
-        x1 = np.clip(np.rint(c[:, 0] + half_sizes[:, 0]), 0, wp1 - 1).astype(np.intp)
-        y0 = np.clip(np.rint(c[:, 1] - half_sizes[:, 1]), 0, hp1 - 1).astype(np.intp)
-        y1 = np.clip(np.rint(c[:, 1] + half_sizes[:, 1]), 0, hp1 - 1).astype(np.intp)
-        sums = tables[:, y1, x1] - tables[:, y0, x1] - tables[:, y1, x0] + tables[:, y0, x0]
+        sums, _ = window_sums(tables, c, half_sizes)
         ok = sums[0] > 1e-9
         c[ok, 0] = sums[1, ok] / sums[0, ok]
         c[ok, 1] = sums[2, ok] / sums[0, ok]

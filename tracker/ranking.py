@@ -50,12 +50,34 @@ def variance_ratio(p: FloatArray, q: FloatArray, floor: float) -> FloatArray:
 
 
 def rank_features(
-    p: FloatArray, q: FloatArray, ids: tuple[int, ...], floor: float, top: int
+    p: FloatArray,
+    q: FloatArray,
+    ids: tuple[int, ...],
+    floor: float,
+    top: int,
+    directions: FloatArray | None = None,
+    max_cosine: float = 1.0,
 ) -> tuple[tuple[int, ...], FloatArray]:
-    """The ``top`` ids with the highest variance ratio (best first) and all ratios."""
+    """The ``top`` ids with the highest variance ratio (best first) and all ratios.
+
+    With ``directions`` (one weight vector per id), a feature whose direction has
+    ``|cos| > max_cosine`` with an already chosen one is skipped while enough others remain:
+    the top-VR colour features are often near-duplicates (R+2G, 2R+G, R+G), and a joint
+    histogram of duplicates is no better than one feature.
+    """
     ratios = variance_ratio(p, q, floor)
-    order = np.argsort(-ratios, kind="stable")[:top]
-    return tuple(ids[i] for i in order), ratios
+    order = np.argsort(-ratios, kind="stable")
+    if directions is None or max_cosine >= 1.0:
+        return tuple(ids[i] for i in order[:top]), ratios
+    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    chosen: list[int] = []
+    for i in order:
+        if all(abs(float(unit[i] @ unit[j])) <= max_cosine for j in chosen):
+            chosen.append(int(i))
+        if len(chosen) == top:
+            break
+    chosen += [int(i) for i in order if i not in chosen][: top - len(chosen)]
+    return tuple(ids[i] for i in chosen), ratios
 
 
 def ring_masks(
