@@ -181,8 +181,13 @@ class AdaptiveTracker:
             image = image + llr[i][planes[i]]
         return planes, (image / len(planes)).astype(np.float32)
 
-    def _rank(self, window: Window, state: FloatArray) -> _Model:
-        """Select the top features by variance ratio (eq. 6-8) and rebuild the model."""
+    def _rank(self, window: Window, state: FloatArray, trusted: bool = True) -> _Model:
+        """Select the top features by variance ratio (eq. 6-8) and rebuild the model.
+
+        The object histograms mix the first frame's with the current estimate's
+        (``anchor_weight``); when the estimate is not ``trusted`` (low confidence) only the
+        first frame's are used, so a drifting estimate cannot redefine the target.
+        """
         cfg = self.config
         centre = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0]
@@ -193,10 +198,16 @@ class AdaptiveTracker:
         q = masked_histograms(planes, ring, cfg.bins)
         if self._p_first is None:
             self._p_first = p_now
-        p = cfg.anchor_weight * self._p_first + (1.0 - cfg.anchor_weight) * p_now
+        anchor = cfg.anchor_weight if trusted else 1.0
+        p = anchor * self._p_first + (1.0 - anchor) * p_now
         directions = colour_weights().astype(np.float64) if self._cue == "colour" else None
         top, _ = rank_features(
-            p, q, self._candidates, cfg.loglik_floor, cfg.top_features, directions,
+            p,
+            q,
+            self._candidates,
+            cfg.loglik_floor,
+            cfg.top_features,
+            directions,
             cfg.max_feature_cosine,
         )
         rows = [self._candidates.index(f) for f in top]
@@ -204,7 +215,7 @@ class AdaptiveTracker:
         first_window, first_state = self._first
         first = self._hist(first_window, first_state[None], top)[0]
         sel = planes[rows]
-        recent = self._kernel(sel, centre[None], half[None])[0]
+        recent = self._kernel(sel, centre[None], half[None])[0] if trusted else first
         model = cfg.anchor_weight * first + (1.0 - cfg.anchor_weight) * recent
         around = centre[None] + _NEIGHBOURS * 2.0 * half[None]
         halves = np.repeat(half[None], len(around), axis=0)
@@ -242,8 +253,11 @@ class AdaptiveTracker:
         cfg = self.config
         side = 0.5 * (self._size0[0] + self._size0[1]) * self._state[2]
         return motion_noise(
-            self._history, cfg.motion_history_frames, cfg.motion_gain,
-            cfg.motion_min_frac * side, cfg.motion_max_frac * side,
+            self._history,
+            cfg.motion_history_frames,
+            cfg.motion_gain,
+            cfg.motion_min_frac * side,
+            cfg.motion_max_frac * side,
         )
 
     def _track(self, image: npt.NDArray[np.uint8]) -> TrackResult:
@@ -251,6 +265,9 @@ class AdaptiveTracker:
         noise = self._noise()
         scale_range = (cfg.min_scale, cfg.max_scale)
         particles = propagate(self._particles, noise, cfg.scale_noise, scale_range, self.rng)
+        if cfg.drift_gain > 0 and len(self._history) >= 2:  # CONDENSATION drift: mean velocity
+            steps = np.diff(np.asarray(self._history), axis=0)
+            particles[:, :2] += cfg.drift_gain * steps.mean(axis=0)
         raw = self._window(image, self._state, 2.0 * noise, 1.0)
         window = self._compensated(raw)
         planes, lik = self._likelihood(window)
@@ -310,14 +327,14 @@ class AdaptiveTracker:
         self._since_rank += 1
         low = confidence < cfg.rerank_below_confidence and self._since_rank >= 3
         if self._since_rank >= cfg.rerank_every_frames or low:
-            self._model = self._rank(window, state)
+            self._model = self._rank(window, state, not low)
             self._since_rank = 0
         return self._result(self._box(state), confidence)
 
     def _search_lost(self, image: npt.NDArray[np.uint8]) -> TrackResult:
         """Widening search: mode of the smoothed likelihood plus scattered, mean-shifted samples."""
         cfg = self.config
-        widen = cfg.reacquire_growth ** self._lost_frames
+        widen = cfg.reacquire_growth**self._lost_frames
         self._lost_frames += 1
         window = self._compensated(self._window(image, self._state, 0.0, widen))
         planes, lik = self._likelihood(window)
@@ -351,8 +368,12 @@ class AdaptiveTracker:
 
     def _result(self, box: Box | None, confidence: float) -> TrackResult:
         return TrackResult(
-            box=box, confidence=confidence, features=self._model.features, lost=box is None,
-            cue=self._cue, particles=self.config.particles,
+            box=box,
+            confidence=confidence,
+            features=self._model.features,
+            lost=box is None,
+            cue=self._cue,
+            particles=self.config.particles,
         )
 
 

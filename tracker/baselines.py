@@ -119,9 +119,7 @@ class ParticleFilterTracker(_FixedHistogramTracker):
         self._state = weighted_estimate(particles, weights)
         self._particles = particles[systematic_resample(weights, self.rng)]
         est_rho = float(bhattacharyya(self._hists(window, self._state[None]), self._model)[0])
-        return TrackResult(
-            self._box(self._state), est_rho, (), False, self._cue, cfg.particles
-        )
+        return TrackResult(self._box(self._state), est_rho, (), False, self._cue, cfg.particles)
 
 
 class MeanShiftTracker(_FixedHistogramTracker):

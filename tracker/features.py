@@ -129,7 +129,9 @@ def feature_bins(
     colour = [i for i in ids if i < GRAY_INTENSITY]
     gray = [i for i in ids if i >= GRAY_INTENSITY]
     parts = {
-        **dict(zip(colour, colour_feature_bins(patch_bgr, tuple(colour), bins, stretch), strict=True)),
+        **dict(
+            zip(colour, colour_feature_bins(patch_bgr, tuple(colour), bins, stretch), strict=True)
+        ),
         **dict(zip(gray, gray_feature_bins(patch_bgr, tuple(gray), bins, stretch), strict=True)),
     }
     return np.stack([parts[i] for i in ids])

@@ -55,7 +55,9 @@ def make_tracker(name: str, seed: int = 0) -> Tracker:
     try:
         return TRACKERS[name](seed)
     except KeyError:
-        raise InputError(f"unknown tracker {name!r}; expected one of {', '.join(TRACKERS)}") from None
+        raise InputError(
+            f"unknown tracker {name!r}; expected one of {', '.join(TRACKERS)}"
+        ) from None
 
 
 def run_frames(
