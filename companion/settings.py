@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from companion.errors import ConfigError
+from companion.monitoring.config import MonitorConfig
 from companion.validate import FieldError, build
 from tracker.camera import CameraModel
 
@@ -48,12 +49,22 @@ class LoggingConfig:
 
 
 @dataclass(frozen=True)
+class FlightLogConfig:
+    """Where the flight log goes (relative to the working directory) and how often it syncs."""
+
+    dir: str = field(default="flightlogs", metadata={"min_len": 1})
+    fsync_interval_s: float = field(default=1.0, metadata={"gt": 0, "le": 10})
+
+
+@dataclass(frozen=True)
 class Settings:
     """The whole configuration: one frozen section per component."""
 
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     camera: CameraModel = field(default_factory=CameraModel)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
+    monitor: MonitorConfig = field(default_factory=MonitorConfig)
+    flightlog: FlightLogConfig = field(default_factory=FlightLogConfig)
     #: The files that were read, in order (set by the loader, not by users).
     config_files: tuple[str, ...] = field(default=(), metadata={"internal": True})
 

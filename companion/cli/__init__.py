@@ -21,7 +21,12 @@ from companion.logs import setup_logging
 from companion.settings import load_settings
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMAND_MODULES: tuple[str, ...] = ("config_cmd",)
+COMMAND_MODULES: tuple[str, ...] = (
+    "monitor_cmd",
+    "router_cmd",
+    "log_cmd",
+    "config_cmd",
+)
 
 log = logging.getLogger("companion")
 
