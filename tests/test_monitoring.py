@@ -77,3 +77,13 @@ def test_queryables_answer_config_and_landmarks(
 )
 def test_vehicle_of(key: str, expected: tuple[str, str] | None) -> None:
     assert vehicle_of(key) == expected
+
+
+def test_client_mode_without_a_router_is_a_one_line_link_error() -> None:
+    from companion.errors import LinkError
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with pytest.raises(LinkError) as info:
+        MonitorPublisher(MonitorConfig(mode="client", connect=(endpoint,)), "v1")
+    assert str(info.value).startswith(f"zenoh (client, {endpoint}): Unable to connect")
+    assert "\n" not in str(info.value)

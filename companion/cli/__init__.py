@@ -23,6 +23,7 @@ from companion.settings import load_settings
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES: tuple[str, ...] = (
     "monitor_cmd",
+    "dashboard_cmd",
     "router_cmd",
     "log_cmd",
     "config_cmd",

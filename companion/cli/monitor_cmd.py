@@ -38,7 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Watch until Ctrl-C, --seconds, or a snapshot is saved."""
-    cfg = dataclasses.replace(settings.monitor, mode="peer" if not args.connect else "client",
+    # peer mode: it keeps retrying an endpoint that is down, so the view shows stale
+    # data with its age instead of failing (client mode gives up at once)
+    cfg = dataclasses.replace(settings.monitor, mode="peer",
                               connect=tuple(args.connect or settings.monitor.connect))
     watcher = MonitorWatcher(cfg, args.vehicle)
     try:

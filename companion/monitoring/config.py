@@ -8,6 +8,8 @@ from typing import Literal
 
 import zenoh
 
+from companion.errors import LinkError
+
 ZenohMode = Literal["peer", "client", "router"]
 
 
@@ -44,5 +46,15 @@ def zenoh_config(mode: ZenohMode, listen: tuple[str, ...] = (), connect: tuple[s
 
 
 def open_session(cfg: MonitorConfig) -> zenoh.Session:
-    """Open a Zenoh session for ``cfg``; a bad endpoint raises zenoh.ZError."""
-    return zenoh.open(zenoh_config(cfg.mode, cfg.listen, cfg.connect, cfg.multicast_scouting))
+    """Open a Zenoh session for ``cfg``; failure is a one-line LinkError.
+
+    In ``client`` mode Zenoh fails at once when no endpoint answers; ``peer`` mode keeps
+    retrying its ``connect`` endpoints in the background.
+    """
+    try:
+        return zenoh.open(zenoh_config(cfg.mode, cfg.listen, cfg.connect,
+                                       cfg.multicast_scouting))
+    except zenoh.ZError as err:
+        where = ", ".join(cfg.listen + cfg.connect) or "no endpoints"
+        reason = str(err).split("  at ", 1)[0].rstrip(". ")
+        raise LinkError(f"zenoh ({cfg.mode}, {where}): {reason}") from None

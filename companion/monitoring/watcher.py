@@ -21,6 +21,8 @@ from companion.monitoring.config import MonitorConfig, open_session
 from companion.monitoring.keys import PREFIX, key_for, vehicle_of
 
 EVENTS_KEPT = 20
+#: Pose payloads kept per vehicle for plots (a minute at 50 Hz).
+HISTORY_KEPT = 3000
 
 
 @dataclass(frozen=True)
@@ -33,6 +35,7 @@ class VehicleView:
     counts: Mapping[str, int]
     events: tuple[Any, ...]
     preview_jpeg: bytes | None
+    pose_history: tuple[tuple[float, Any], ...] = ()
 
     def age_s(self, topic: str, now_s: float | None = None) -> float | None:
         """Seconds since ``topic`` last arrived (None if never): stale data shows its age."""
@@ -56,6 +59,8 @@ class _Vehicle:
     counts: dict[str, int] = field(default_factory=dict)
     events: deque[Any] = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
     preview: bytes | None = None
+    pose_history: deque[tuple[float, Any]] = field(
+        default_factory=lambda: deque(maxlen=HISTORY_KEPT))
 
 
 class MonitorWatcher:
@@ -91,6 +96,8 @@ class MonitorWatcher:
                 state.latest[topic] = value
                 if topic == "events":
                     state.events.append(value)
+                elif topic == "pose":
+                    state.pose_history.append((time.monotonic(), value))
             state.received_s[topic] = time.monotonic()
             state.counts[topic] = state.counts.get(topic, 0) + 1
             self._arrived.notify_all()
@@ -101,7 +108,7 @@ class MonitorWatcher:
             return FleetView(
                 {
                     vid: VehicleView(vid, dict(v.latest), dict(v.received_s), dict(v.counts),
-                                     tuple(v.events), v.preview)
+                                     tuple(v.events), v.preview, tuple(v.pose_history))
                     for vid, v in self._vehicles.items()
                 },
                 self._malformed,
