@@ -1,0 +1,210 @@
+"""Maximum a posteriori pose refinement (Gauss-Newton) and its covariance.
+
+State ``x = (p_n, p_e, p_d, roll, pitch, yaw)``: the vehicle (= camera centre) position in
+NED and the body attitude (ZYX Euler).  Residuals, each whitened by its 1-sigma:
+
+* pixels:   ``r_i = (pi(K, R_cam_ned (L_i - p)) - u_i) / sigma_i``   (ideal, undistorted px)
+* attitude: ``r = wrap(rpy - rpy_0) / sigma``                         (autopilot prior)
+* altitude: ``r = (p_d - d_0) / sigma``
+* range:    ``r = (n.(c - p) / n.(R_nb a_b) - d) / sigma``           (beam meets the face plane)
+
+Gauss-Newton ``dx = -(J^T J)^-1 J^T r``; at convergence the covariance is the inverse of the
+whitened normal matrix ``P = (J^T J)^-1`` (first order, Cramer-Rao for Gaussian noise).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tracker.geometry import FloatArray, rot_x, rot_y, rot_z
+
+IntArray = npt.NDArray[np.int64]
+
+_MIN_DEPTH_M = 1e-3
+
+
+@dataclass(frozen=True)
+class PointSet:
+    """Correspondences: Nx3 NED points, Nx2 ideal pixels, N sigmas (px), N landmark indices."""
+
+    points_ned: FloatArray
+    pixels: FloatArray
+    sigma_px: FloatArray
+    landmark_index: IntArray
+
+
+@dataclass(frozen=True)
+class RangePrior:
+    """A laser range along ``axis_body`` meeting the plane (``plane_point``, ``plane_normal``)."""
+
+    distance_m: float
+    sigma_m: float
+    axis_body: FloatArray
+    plane_point: FloatArray
+    plane_normal: FloatArray
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Optional prior information from the autopilot and the rangefinder."""
+
+    attitude_rpy_rad: FloatArray | None = None
+    attitude_sigma_rad: FloatArray | None = None
+    altitude_down_m: float | None = None
+    altitude_sigma_m: float = 0.1
+    range: RangePrior | None = None
+
+
+@dataclass(frozen=True)
+class Refined:
+    """Result of :func:`refine_pose`; ``reason`` is set when it failed."""
+
+    position_ned_m: FloatArray
+    attitude_rpy_rad: FloatArray
+    covariance: FloatArray
+    point_errors: FloatArray  # N normalised squared pixel errors
+    reason: str = ""
+    bad_point: int = -1  # the point behind the camera, when that is the reason
+    cost: float = 0.0  # whitened residual sum of squares (chi-square) at the solution
+
+
+def _rotation_and_derivatives(rpy: FloatArray) -> tuple[FloatArray, list[FloatArray]]:
+    """``R = Rz(y) Ry(p) Rx(r)`` and ``dR/droll, dR/dpitch, dR/dyaw``."""
+    r, p, y = float(rpy[0]), float(rpy[1]), float(rpy[2])
+    rx, ry, rz = rot_x(r), rot_y(p), rot_z(y)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    drx = np.array([[0.0, 0.0, 0.0], [0.0, -sr, -cr], [0.0, cr, -sr]])
+    dry = np.array([[-sp, 0.0, cp], [0.0, 0.0, 0.0], [-cp, 0.0, -sp]])
+    drz = np.array([[-sy, -cy, 0.0], [cy, -sy, 0.0], [0.0, 0.0, 0.0]])
+    rzy = rz @ ry
+    return rzy @ rx, [rzy @ drx, rz @ dry @ rx, drz @ ry @ rx]
+
+
+def wrap_angle(a: FloatArray) -> FloatArray:
+    """Wrap angles to [-pi, pi)."""
+    return np.asarray((a + np.pi) % (2.0 * np.pi) - np.pi, dtype=np.float64)
+
+
+def _residuals(
+    x: FloatArray, k: FloatArray, r_body_cam: FloatArray, pts: PointSet, priors: Priors
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Whitened residuals, Jacobian (rows x 6) and camera depths of the points."""
+    p, rpy = x[:3], x[3:]
+    r_nb, dr_nb = _rotation_and_derivatives(rpy)
+    r_nc = r_nb @ r_body_cam
+    rel = pts.points_ned - p
+    xc = rel @ r_nc  # X_c = R_cam_ned (L - p)
+    z = xc[:, 2]
+    zs = np.where(np.abs(z) < _MIN_DEPTH_M, _MIN_DEPTH_M, z)
+    fx, fy = k[0, 0], k[1, 1]
+    u = fx * xc[:, 0] / zs + k[0, 2]
+    v = fy * xc[:, 1] / zs + k[1, 2]
+    w = 1.0 / pts.sigma_px
+    res = [((u - pts.pixels[:, 0]) * w), ((v - pts.pixels[:, 1]) * w)]
+    # d pi / d X_c rows for u and v (whitened)
+    du = np.column_stack([fx / zs, np.zeros_like(zs), -fx * xc[:, 0] / zs**2]) * w[:, None]
+    dv = np.column_stack([np.zeros_like(zs), fy / zs, -fy * xc[:, 1] / zs**2]) * w[:, None]
+    dxc_p = -r_nc.T  # dX_c/dp = -R_cam_ned (same for all points)
+    ju_p, jv_p = du @ dxc_p, dv @ dxc_p
+    dxc_att = [rel @ (d @ r_body_cam) for d in dr_nb]  # dX_c/dtheta_i, N x 3 each
+    ju_a = np.column_stack([np.sum(du * d, axis=1) for d in dxc_att])
+    jv_a = np.column_stack([np.sum(dv * d, axis=1) for d in dxc_att])
+    rows_r = [np.concatenate(res)]
+    rows_j = [np.vstack([np.hstack([ju_p, ju_a]), np.hstack([jv_p, jv_a])])]
+    _prior_rows(x, r_nb, dr_nb, priors, rows_r, rows_j)
+    return np.concatenate(rows_r), np.vstack(rows_j), z
+
+
+def _prior_rows(
+    x: FloatArray,
+    r_nb: FloatArray,
+    dr_nb: list[FloatArray],
+    priors: Priors,
+    rows_r: list[FloatArray],
+    rows_j: list[FloatArray],
+) -> None:
+    """Append the whitened prior residuals and Jacobian rows."""
+    if priors.attitude_rpy_rad is not None and priors.attitude_sigma_rad is not None:
+        s = priors.attitude_sigma_rad
+        rows_r.append(wrap_angle(x[3:] - priors.attitude_rpy_rad) / s)
+        rows_j.append(np.hstack([np.zeros((3, 3)), np.diag(1.0 / s)]))
+    if priors.altitude_down_m is not None:
+        rows_r.append(np.array([(x[2] - priors.altitude_down_m) / priors.altitude_sigma_m]))
+        rows_j.append(np.array([[0.0, 0.0, 1.0 / priors.altitude_sigma_m, 0.0, 0.0, 0.0]]))
+    rp = priors.range
+    if rp is not None:
+        n = rp.plane_normal
+        a = r_nb @ rp.axis_body
+        na = float(n @ a)
+        if abs(na) < 1e-6:
+            na = 1e-6
+        t = float(n @ (rp.plane_point - x[:3])) / na  # t = n.(c - p) / n.a
+        rows_r.append(np.array([(t - rp.distance_m) / rp.sigma_m]))
+        jp = -n / na
+        ja = np.array([-t * float(n @ (d @ rp.axis_body)) / na for d in dr_nb])
+        rows_j.append(np.hstack([jp, ja])[None, :] / rp.sigma_m)
+
+
+def refine_pose(
+    k: FloatArray,
+    r_body_cam: FloatArray,
+    pts: PointSet,
+    priors: Priors,
+    x0: FloatArray,
+    max_iterations: int = 10,
+    max_condition: float = 1e12,
+) -> Refined:
+    """Gauss-Newton from ``x0`` (6,) to the MAP pose, with its covariance ``(J^T J)^-1``."""
+    x = np.asarray(x0, dtype=np.float64).copy()
+    r, j, z = _residuals(x, k, r_body_cam, pts, priors)
+    cost = float(r @ r)
+    for _ in range(max_iterations):
+        h = j.T @ j
+        try:
+            dx = -np.linalg.solve(h, j.T @ r)
+        except np.linalg.LinAlgError:
+            return _failed(x, "degenerate geometry: singular normal matrix")
+        step, accepted = 1.0, False
+        for _half in range(4):  # step halving keeps the cost decreasing
+            xn = x + step * dx
+            rn, jn, zn = _residuals(xn, k, r_body_cam, pts, priors)
+            cn = float(rn @ rn)
+            if cn <= cost * (1.0 + 1e-12):
+                x, r, j, z, cost, accepted = xn, rn, jn, zn, cn, True
+                break
+            step *= 0.5
+        if not accepted or (np.max(np.abs(step * dx[:3])) < 1e-7 and np.max(np.abs(dx[3:])) < 1e-9):
+            break
+    return _finish(x, r, j, z, pts, max_condition)
+
+
+def _finish(
+    x: FloatArray, r: FloatArray, j: FloatArray, z: FloatArray, pts: PointSet, max_cond: float
+) -> Refined:
+    """Covariance at the solution, cheirality and conditioning checks."""
+    if np.any(z <= _MIN_DEPTH_M):
+        bad = int(np.argmin(z))
+        return _failed(x, f"point {bad} is behind the camera", index=bad)
+    h = j.T @ j
+    scale = np.sqrt(np.diag(h))
+    if np.any(scale <= 0) or not np.all(np.isfinite(h)):
+        return _failed(x, "degenerate geometry: a pose parameter is unobservable")
+    hn = h / np.outer(scale, scale)  # condition of the scaled normal matrix
+    cond = float(np.linalg.cond(hn))
+    if not np.isfinite(cond) or cond > max_cond:
+        return _failed(x, f"degenerate geometry: normal matrix condition {cond:.3g}")
+    cov = np.linalg.inv(hn) / np.outer(scale, scale)
+    cov = 0.5 * (cov + cov.T)
+    n = pts.points_ned.shape[0]
+    errs = r[:n] ** 2 + r[n : 2 * n] ** 2
+    x[3:] = wrap_angle(x[3:])
+    return Refined(x[:3].copy(), x[3:].copy(), cov, errs, cost=float(r @ r))
+
+
+def _failed(x: FloatArray, reason: str, index: int = -1) -> Refined:
+    """A failed refinement carrying the reason (and the offending point index, if any)."""
+    nan6 = np.full((6, 6), np.nan)
+    return Refined(x[:3].copy(), x[3:].copy(), nan6, np.zeros(0), reason, index)
