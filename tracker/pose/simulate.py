@@ -142,6 +142,4 @@ def simulate_frame(
         if d is not None:
             d_noisy = d + float(rng.normal(0.0, noise.range_sigma_m))
             laser = RangeSample(t_us, d_noisy, laser_axis_body, noise.range_sigma_m)
-    return SimFrame(
-        t_us, tuple(o for o in obs if o is not None), p, rpy, attitude, altitude, laser
-    )
+    return SimFrame(t_us, tuple(o for o in obs if o is not None), p, rpy, attitude, altitude, laser)

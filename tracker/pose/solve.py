@@ -116,7 +116,7 @@ def solve_pose(
     """
     cfg = config or PoseConfig()
     for i, obs in enumerate(observations):
-        problem = check_observation(obs)
+        problem = check_observation(obs, camera.width, camera.height)
         if problem:
             return NoFix(time_us, f"observation {i}: {problem}")
     notes: list[str] = []

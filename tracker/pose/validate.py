@@ -12,8 +12,11 @@ def _finite(values: tuple[float, ...]) -> bool:
     return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
 
 
-def check_observation(obs: Observation) -> str:
-    """Empty when ``obs`` is usable, else what is wrong with it (one line)."""
+def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
+    """Empty when ``obs`` is usable, else what is wrong with it (one line).
+
+    Pixel coordinates must be finite and within one image size of the image.
+    """
     if len(obs.centre_px) != 2 or not _finite(tuple(obs.centre_px)):
         return f"centre_px must be two finite numbers, got {obs.centre_px!r}"
     if len(obs.box_wh_px) != 2 or not _finite(tuple(obs.box_wh_px)):
@@ -30,6 +33,13 @@ def check_observation(obs: Observation) -> str:
             return "corners_px contains a value that is not finite"
     if obs.signature is not None and not _finite(tuple(obs.signature)):
         return "signature contains a value that is not finite"
+    pts = [obs.centre_px, *(obs.corners_px or ())]
+    if any(
+        not (-width_px <= u <= 2 * width_px and -height_px <= v <= 2 * height_px) for u, v in pts
+    ):
+        return "a pixel coordinate lies more than one image size outside the image"
+    if max(obs.box_wh_px) > 3 * max(width_px, height_px):
+        return f"box_wh_px {obs.box_wh_px!r} is larger than three image sizes"
     return ""
 
 
