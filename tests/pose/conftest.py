@@ -7,7 +7,7 @@ import pytest
 
 from tracker.camera import CameraModel
 from tracker.geometry import FloatArray
-from tracker.pose import MapLandmark, Observation
+from tracker.pose import MapLandmark, Observation, PoseFix
 from tracker.pose.simulate import SensorNoise, observe_landmark
 
 NO_NOISE = SensorNoise(pixel_sigma_px=0.0, centre_sigma_px=0.0)
@@ -37,6 +37,16 @@ def see(
     rng = np.random.default_rng(seed)
     out = [observe_landmark(lm, camera, p, rpy, rng, noise) for lm in landmarks]
     return [o for o in out if o is not None]
+
+
+def assert_exact(
+    fix: PoseFix, p: np.ndarray, rpy: tuple[float, float, float] | None = None
+) -> None:
+    """Noise-free input: the error is negligible (< 1 %) against the fix's own 1-sigma."""
+    sigma = np.sqrt(np.diag(fix.covariance))
+    assert np.all(np.abs(np.asarray(fix.position_ned_m) - p) < 0.01 * sigma[:3])
+    if rpy is not None:
+        assert np.all(np.abs(np.asarray(fix.attitude_rpy_rad) - rpy) < 0.01 * sigma[3:])
 
 
 @pytest.fixture

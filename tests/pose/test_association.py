@@ -18,7 +18,7 @@ from tracker.pose import (
 )
 from tracker.pose.association import bhattacharyya_distance
 
-from .conftest import TRUE_P, TRUE_RPY, see, wall
+from .conftest import TRUE_P, TRUE_RPY, assert_exact, see, wall
 
 
 def _prior(offset: tuple[float, float, float], sigma_m: float, sigma_deg: float) -> PosePrior:
@@ -50,7 +50,7 @@ def test_solve_pose_uses_the_association(camera: CameraModel) -> None:
     lms, obs = _unlabelled(camera)
     fix = solve_pose(obs, lms, camera, 0, prior=PRIOR)
     assert isinstance(fix, PoseFix) and set(fix.landmark_ids) == {"A", "B", "C", "D"}
-    np.testing.assert_allclose(fix.position_ned_m, TRUE_P, atol=1e-6)
+    assert_exact(fix, TRUE_P, TRUE_RPY)
 
 
 def test_without_a_predicted_pose_unlabelled_detections_stay_unnamed(

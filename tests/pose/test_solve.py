@@ -21,7 +21,7 @@ from tracker.pose import (
 )
 from tracker.pose.simulate import SensorNoise, cast_laser
 
-from .conftest import TRUE_P, TRUE_RPY, see, wall
+from .conftest import TRUE_P, TRUE_RPY, assert_exact, see, wall
 
 T_US = 1_000_000
 ATT = AttitudeSample(T_US, *TRUE_RPY)
@@ -36,9 +36,8 @@ def _centres_only(obs: list[Observation]) -> list[Observation]:
     return [replace(o, corners_px=None) for o in obs]
 
 
-def _assert_pose(fix: PoseFix, tol_m: float = 1e-6) -> None:
-    np.testing.assert_allclose(fix.position_ned_m, TRUE_P, atol=tol_m)
-    np.testing.assert_allclose(fix.attitude_rpy_rad, TRUE_RPY, atol=1e-6)
+def _assert_pose(fix: PoseFix) -> None:
+    assert_exact(fix, TRUE_P, TRUE_RPY)
 
 
 def test_single_square_landmark_uses_ippe_square(camera: CameraModel) -> None:
@@ -98,7 +97,7 @@ def test_one_centre_with_laser_and_attitude_uses_range_bearing(camera: CameraMod
         solve_pose(obs, [lm], camera, T_US, attitude=AttitudeSample(T_US, *rpy), laser=laser)
     )
     assert fix.solver == "range_bearing"
-    np.testing.assert_allclose(fix.position_ned_m, p, atol=1e-6)
+    assert_exact(fix, p, rpy)
 
 
 def test_one_centre_with_altitude_and_attitude_uses_altitude_bearing() -> None:
@@ -109,7 +108,7 @@ def test_one_centre_with_altitude_and_attitude_uses_altitude_bearing() -> None:
     alt = AltitudeSample(T_US, -30.0)
     fix = _fix(solve_pose(obs, [lm], cam, T_US, attitude=AttitudeSample(T_US, *rpy), altitude=alt))
     assert fix.solver == "altitude_bearing"
-    np.testing.assert_allclose(fix.position_ned_m, p, atol=1e-6)
+    assert_exact(fix, p, rpy)
 
 
 def test_distortion_and_a_down_looking_mount_are_handled() -> None:
@@ -122,7 +121,7 @@ def test_distortion_and_a_down_looking_mount_are_handled() -> None:
     obs = see(lms, cam, p, rpy)
     assert len(obs) == 4
     fix = _fix(solve_pose(obs, lms, cam, T_US))
-    np.testing.assert_allclose(fix.position_ned_m, p, atol=1e-5)
+    assert_exact(fix, p, rpy)
 
 
 def test_a_wrongly_labelled_landmark_is_dropped_as_an_outlier(camera: CameraModel) -> None:

@@ -17,12 +17,12 @@ Corner order (the order of :attr:`Observation.corners_px` too) is OpenCV's
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from tracker.geometry import FloatArray
 from tracker.pose.types import MapLandmark
-
-_UP_NED = np.array([0.0, 0.0, -1.0])
 
 
 def face_rotation(facing_deg: float | None) -> FloatArray:
@@ -30,9 +30,9 @@ def face_rotation(facing_deg: float | None) -> FloatArray:
     if facing_deg is None:
         return np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
     psi = np.deg2rad(facing_deg)
-    normal = np.array([np.cos(psi), np.sin(psi), 0.0])
-    right = np.cross(-normal, _UP_NED)  # r = -n x u
-    return np.column_stack([right, _UP_NED, normal])
+    c, s = float(np.cos(psi)), float(np.sin(psi))
+    # n = (c, s, 0); u = (0, 0, -1); r = -n x u = (s, -c, 0)
+    return np.array([[s, 0.0, c], [-c, 0.0, s], [0.0, -1.0, 0.0]])
 
 
 def face_corners(width_m: float, height_m: float) -> FloatArray:
@@ -41,13 +41,19 @@ def face_corners(width_m: float, height_m: float) -> FloatArray:
     return np.array([[-w, h, 0.0], [w, h, 0.0], [w, -h, 0.0], [-w, -h, 0.0]])
 
 
+@lru_cache(maxsize=4096)
 def landmark_normal_ned(landmark: MapLandmark) -> FloatArray:
-    """Outward unit normal of the face in NED."""
-    return face_rotation(landmark.facing_deg)[:, 2].copy()
+    """Outward unit normal of the face in NED (read-only, cached per landmark)."""
+    n = face_rotation(landmark.facing_deg)[:, 2].copy()
+    n.setflags(write=False)
+    return n
 
 
+@lru_cache(maxsize=4096)
 def landmark_corners_ned(landmark: MapLandmark) -> FloatArray:
-    """4x3 NED corners: ``c_i = centre + R_ned_face @ p_i``."""
+    """4x3 NED corners: ``c_i = centre + R_ned_face @ p_i`` (read-only, cached)."""
     r = face_rotation(landmark.facing_deg)
     centre = np.asarray(landmark.position_ned_m, dtype=np.float64)
-    return np.asarray(centre + face_corners(landmark.width_m, landmark.height_m) @ r.T)
+    out = np.asarray(centre + face_corners(landmark.width_m, landmark.height_m) @ r.T)
+    out.setflags(write=False)
+    return out

@@ -91,30 +91,35 @@ def wrap_angle(a: FloatArray) -> FloatArray:
 def _residuals(
     x: FloatArray, k: FloatArray, r_body_cam: FloatArray, pts: PointSet, priors: Priors
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Whitened residuals, Jacobian (rows x 6) and camera depths of the points."""
+    """Whitened residuals (u0, v0, u1, v1, ..., priors), Jacobian (rows x 6), point depths."""
     p, rpy = x[:3], x[3:]
     r_nb, dr_nb = _rotation_and_derivatives(rpy)
     r_nc = r_nb @ r_body_cam
     rel = pts.points_ned - p
     xc = rel @ r_nc  # X_c = R_cam_ned (L - p)
+    n = xc.shape[0]
     z = xc[:, 2]
     zs = np.where(np.abs(z) < _MIN_DEPTH_M, _MIN_DEPTH_M, z)
-    fx, fy = k[0, 0], k[1, 1]
-    u = fx * xc[:, 0] / zs + k[0, 2]
-    v = fy * xc[:, 1] / zs + k[1, 2]
+    f = np.array([k[0, 0], k[1, 1]])
+    uv = f * xc[:, :2] / zs[:, None] + k[:2, 2]  # pinhole u = fx X/Z + cx, v = fy Y/Z + cy
     w = 1.0 / pts.sigma_px
-    res = [((u - pts.pixels[:, 0]) * w), ((v - pts.pixels[:, 1]) * w)]
-    # d pi / d X_c rows for u and v (whitened)
-    du = np.column_stack([fx / zs, np.zeros_like(zs), -fx * xc[:, 0] / zs**2]) * w[:, None]
-    dv = np.column_stack([np.zeros_like(zs), fy / zs, -fy * xc[:, 1] / zs**2]) * w[:, None]
-    dxc_p = -r_nc.T  # dX_c/dp = -R_cam_ned (same for all points)
-    ju_p, jv_p = du @ dxc_p, dv @ dxc_p
-    dxc_att = [rel @ (d @ r_body_cam) for d in dr_nb]  # dX_c/dtheta_i, N x 3 each
-    ju_a = np.column_stack([np.sum(du * d, axis=1) for d in dxc_att])
-    jv_a = np.column_stack([np.sum(dv * d, axis=1) for d in dxc_att])
-    rows_r = [np.concatenate(res)]
-    rows_j = [np.vstack([np.hstack([ju_p, ju_a]), np.hstack([jv_p, jv_a])])]
+    res = ((uv - pts.pixels) * w[:, None]).reshape(-1)
+    # d(u, v)/dX_c (whitened): [[fx/Z, 0, -fx X/Z^2], [0, fy/Z, -fy Y/Z^2]]
+    jpi = np.zeros((n, 2, 3))
+    wz = w / zs
+    jpi[:, 0, 0] = f[0] * wz
+    jpi[:, 1, 1] = f[1] * wz
+    jpi[:, :, 2] = -f * xc[:, :2] * (wz / zs)[:, None]
+    # dX_c/dx: -R_cam_ned for the position, rel @ (dR_nb/dtheta_i R_body_cam) for the angles
+    m = np.empty((n, 3, 6))
+    m[:, :, :3] = -r_nc.T
+    d_all = np.hstack([d @ r_body_cam for d in dr_nb])  # 3 x 9
+    m[:, :, 3:] = (rel @ d_all).reshape(n, 3, 3).transpose(0, 2, 1)
+    jac = np.matmul(jpi, m).reshape(2 * n, 6)
+    rows_r, rows_j = [res], [jac]
     _prior_rows(x, r_nb, dr_nb, priors, rows_r, rows_j)
+    if len(rows_r) == 1:
+        return res, jac, z
     return np.concatenate(rows_r), np.vstack(rows_j), z
 
 
@@ -148,6 +153,14 @@ def _prior_rows(
         rows_j.append(np.hstack([jp, ja])[None, :] / rp.sigma_m)
 
 
+def initial_cost(
+    k: FloatArray, r_body_cam: FloatArray, pts: PointSet, priors: Priors, x: FloatArray
+) -> float:
+    """Whitened residual sum of squares at ``x`` (no refinement)."""
+    r, _, _ = _residuals(np.asarray(x, dtype=np.float64), k, r_body_cam, pts, priors)
+    return float(r @ r)
+
+
 def refine_pose(
     k: FloatArray,
     r_body_cam: FloatArray,
@@ -163,20 +176,23 @@ def refine_pose(
     cost = float(r @ r)
     for _ in range(max_iterations):
         h = j.T @ j
+        g = j.T @ r
         try:
-            dx = -np.linalg.solve(h, j.T @ r)
+            dx = -np.linalg.solve(h, g)
         except np.linalg.LinAlgError:
             return _failed(x, "degenerate geometry: singular normal matrix")
-        step, accepted = 1.0, False
-        for _half in range(4):  # step halving keeps the cost decreasing
+        # converged when the step is far below the uncertainty: dx^T H dx = -g^T dx (sigma^2)
+        if float(-g @ dx) < 1e-6:
+            break
+        accepted = False
+        for step in (1.0, 0.5, 0.25, 0.125):  # step halving keeps the cost decreasing
             xn = x + step * dx
             rn, jn, zn = _residuals(xn, k, r_body_cam, pts, priors)
             cn = float(rn @ rn)
             if cn <= cost * (1.0 + 1e-12):
                 x, r, j, z, cost, accepted = xn, rn, jn, zn, cn, True
                 break
-            step *= 0.5
-        if not accepted or (np.max(np.abs(step * dx[:3])) < 1e-7 and np.max(np.abs(dx[3:])) < 1e-9):
+        if not accepted:
             break
     return _finish(x, r, j, z, pts, max_condition)
 
@@ -192,14 +208,15 @@ def _finish(
     scale = np.sqrt(np.diag(h))
     if np.any(scale <= 0) or not np.all(np.isfinite(h)):
         return _failed(x, "degenerate geometry: a pose parameter is unobservable")
-    hn = h / np.outer(scale, scale)  # condition of the scaled normal matrix
-    cond = float(np.linalg.cond(hn))
-    if not np.isfinite(cond) or cond > max_cond:
+    outer = np.outer(scale, scale)
+    lam, vec = np.linalg.eigh(h / outer)  # the scaled normal matrix, for its condition
+    if lam[0] <= 0 or lam[-1] > max_cond * lam[0]:
+        cond = lam[-1] / lam[0] if lam[0] > 0 else float("inf")
         return _failed(x, f"degenerate geometry: normal matrix condition {cond:.3g}")
-    cov = np.linalg.inv(hn) / np.outer(scale, scale)
+    cov = (vec / lam) @ vec.T / outer  # P = H^-1
     cov = 0.5 * (cov + cov.T)
     n = pts.points_ned.shape[0]
-    errs = r[:n] ** 2 + r[n : 2 * n] ** 2
+    errs = np.sum(r[: 2 * n].reshape(n, 2) ** 2, axis=1)
     x[3:] = wrap_angle(x[3:])
     return Refined(x[:3].copy(), x[3:].copy(), cov, errs, cost=float(r @ r))
 

@@ -35,7 +35,14 @@ from tracker.pose.landmarks import (
     landmark_corners_ned,
     landmark_normal_ned,
 )
-from tracker.pose.refine import PointSet, Priors, RangePrior, Refined, refine_pose
+from tracker.pose.refine import (
+    PointSet,
+    Priors,
+    RangePrior,
+    Refined,
+    initial_cost,
+    refine_pose,
+)
 from tracker.pose.solvers import (
     bearing_least_squares,
     bearings_ned,
@@ -56,6 +63,8 @@ from tracker.pose.validate import check_observation, fresh_samples
 
 #: Chi-square difference below which both planar (IPPE) solutions explain the corners.
 _FLIP_CHI2 = 4.0
+#: A second IPPE solution starting this much (chi-square) worse is not refined.
+_SKIP_CHI2 = 25.0
 
 
 @dataclass(frozen=True)
@@ -203,16 +212,15 @@ def _solve_robust(
 
 def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int, str]:
     """Index of the landmark to drop with the reason, or (-1, "") when all fit."""
-    start, worst, worst_i = 0, 0.0, -1
     for gi, g in enumerate(groups):
         c = np.asarray(g.landmark.position_ned_m)
         if float(landmark_normal_ned(g.landmark) @ (ref.position_ned_m - c)) <= 0.0:
             return gi, f"landmark {g.landmark.landmark_id!r}: the camera is behind its face"
-        n = g.points_ned.shape[0]
-        per_point = float(np.mean(ref.point_errors[start : start + n]))
-        start += n
-        if per_point > worst:
-            worst, worst_i = per_point, gi
+    counts = np.array([g.points_ned.shape[0] for g in groups])
+    idx = np.repeat(np.arange(len(groups)), counts)
+    per_point = np.bincount(idx, weights=ref.point_errors, minlength=len(groups)) / counts
+    worst_i = int(np.argmax(per_point))
+    worst = float(per_point[worst_i])
     if worst > ctx.config.outlier_chi2_per_point:
         lid = groups[worst_i].landmark.landmark_id
         return worst_i, f"landmark {lid!r}: reprojection error {math.sqrt(worst):.1f} sigma"
@@ -221,13 +229,12 @@ def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int
 
 def _point_set(groups: list[_Group]) -> PointSet:
     """Stack every landmark's points for the refinement."""
+    counts = [g.points_ned.shape[0] for g in groups]
     return PointSet(
         np.vstack([g.points_ned for g in groups]),
         np.vstack([g.pixels_ideal for g in groups]),
-        np.concatenate([np.full(g.points_ned.shape[0], g.sigma_px) for g in groups]),
-        np.concatenate(
-            [np.full(g.points_ned.shape[0], i, dtype=np.int64) for i, g in enumerate(groups)]
-        ),
+        np.repeat([g.sigma_px for g in groups], counts),
+        np.repeat(np.arange(len(groups), dtype=np.int64), counts),
     )
 
 
@@ -394,7 +401,15 @@ def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
         ctx.r_body_cam,
         square,
     )
-    refined = [_refine(ctx, pts, _priors(ctx, _laser_for(ctx, [g], c.x0)), c.x0) for c in cands]
+    refined: list[Refined] = []
+    for c in cands:
+        priors = _priors(ctx, _laser_for(ctx, [g], c.x0))
+        best = min((r.cost for r in refined if not r.reason), default=None)
+        if best is not None and initial_cost(ctx.k, ctx.r_body_cam, pts, priors, c.x0) > (
+            best + _SKIP_CHI2
+        ):
+            continue  # far worse from the start: not a rival local minimum worth refining
+        refined.append(_refine(ctx, pts, priors, c.x0))
     ok = sorted((r for r in refined if not r.reason), key=lambda r: r.cost)
     solver = "ippe_square" if square else "ippe"
     if not ok:

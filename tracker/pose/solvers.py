@@ -117,8 +117,12 @@ def bearings_ned(pixels_ideal: FloatArray, k: FloatArray, r_ned_cam: FloatArray)
     return np.asarray(b / np.linalg.norm(b, axis=1, keepdims=True))
 
 
-def _skew(v: FloatArray) -> FloatArray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+def _skews(v: FloatArray) -> FloatArray:
+    """Nx3x3 cross-product matrices ``[v_i]x``."""
+    s = np.zeros((v.shape[0], 3, 3))
+    s[:, 0, 1], s[:, 0, 2], s[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    s[:, 1, 0], s[:, 2, 0], s[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return s
 
 
 def bearing_least_squares(
@@ -135,8 +139,9 @@ def bearing_least_squares(
     ``n.p = n.c - d n.(R_nb a_b)`` for a laser meeting the plane (n, c).  Returns ``None``
     when the rows do not fix all three coordinates.
     """
-    a_rows = [_skew(b) for b in bearings]
-    b_rows = [_skew(b) @ p for b, p in zip(bearings, points_ned, strict=True)]
+    sk = _skews(bearings)
+    a_rows = [sk.reshape(-1, 3)]
+    b_rows = [np.einsum("nij,nj->ni", sk, points_ned).reshape(-1)]
     if altitude_down_m is not None:
         a_rows.append(np.array([[0.0, 0.0, 1.0]]) * 10.0)
         b_rows.append(np.array([altitude_down_m * 10.0]))

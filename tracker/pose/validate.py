@@ -9,7 +9,11 @@ from tracker.pose.types import AltitudeSample, AttitudeSample, Observation, Rang
 
 
 def _finite(values: tuple[float, ...]) -> bool:
-    return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
+    """All real numbers and finite (False for non-numbers too)."""
+    try:
+        return all(map(math.isfinite, values))
+    except TypeError:
+        return False
 
 
 def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
