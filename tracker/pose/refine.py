@@ -14,12 +14,13 @@ whitened normal matrix ``P = (J^T J)^-1`` (first order, Cramer-Rao for Gaussian 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from tracker.geometry import FloatArray, rot_x, rot_y, rot_z
+from tracker.geometry import FloatArray
 
 IntArray = npt.NDArray[np.int64]
 
@@ -71,16 +72,36 @@ class Refined:
     cost: float = 0.0  # whitened residual sum of squares (chi-square) at the solution
 
 
-def _rotation_and_derivatives(rpy: FloatArray) -> tuple[FloatArray, list[FloatArray]]:
-    """``R = Rz(y) Ry(p) Rx(r)`` and ``dR/droll, dR/dpitch, dR/dyaw``."""
-    r, p, y = float(rpy[0]), float(rpy[1]), float(rpy[2])
-    rx, ry, rz = rot_x(r), rot_y(p), rot_z(y)
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    drx = np.array([[0.0, 0.0, 0.0], [0.0, -sr, -cr], [0.0, cr, -sr]])
-    dry = np.array([[-sp, 0.0, cp], [0.0, 0.0, 0.0], [-cp, 0.0, -sp]])
-    drz = np.array([[-sy, -cy, 0.0], [cy, -sy, 0.0], [0.0, 0.0, 0.0]])
-    rzy = rz @ ry
-    return rzy @ rx, [rzy @ drx, rz @ dry @ rx, drz @ ry @ rx]
+def _rotation_and_derivatives(rpy: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``R = Rz(y) Ry(p) Rx(r)`` and the stacked ``dR/droll, dR/dpitch, dR/dyaw`` (3x3x3)."""
+    sr, cr = math.sin(rpy[0]), math.cos(rpy[0])
+    sp, cp = math.sin(rpy[1]), math.cos(rpy[1])
+    sy, cy = math.sin(rpy[2]), math.cos(rpy[2])
+    m = np.array(
+        [
+            [  # R
+                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                [-sp, cp * sr, cp * cr],
+            ],
+            [  # dR/droll
+                [0.0, cy * sp * cr + sy * sr, -cy * sp * sr + sy * cr],
+                [0.0, sy * sp * cr - cy * sr, -sy * sp * sr - cy * cr],
+                [0.0, cp * cr, -cp * sr],
+            ],
+            [  # dR/dpitch
+                [-cy * sp, cy * cp * sr, cy * cp * cr],
+                [-sy * sp, sy * cp * sr, sy * cp * cr],
+                [-cp, -sp * sr, -sp * cr],
+            ],
+            [  # dR/dyaw
+                [-sy * cp, -sy * sp * sr - cy * cr, -sy * sp * cr + cy * sr],
+                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                [0.0, 0.0, 0.0],
+            ],
+        ]
+    )
+    return m[0], m[1:]
 
 
 def wrap_angle(a: FloatArray) -> FloatArray:
@@ -92,32 +113,30 @@ def _residuals(
     x: FloatArray, k: FloatArray, r_body_cam: FloatArray, pts: PointSet, priors: Priors
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Whitened residuals (u0, v0, u1, v1, ..., priors), Jacobian (rows x 6), point depths."""
-    p, rpy = x[:3], x[3:]
-    r_nb, dr_nb = _rotation_and_derivatives(rpy)
-    r_nc = r_nb @ r_body_cam
-    rel = pts.points_ned - p
-    xc = rel @ r_nc  # X_c = R_cam_ned (L - p)
+    r_nb, dr_nb = _rotation_and_derivatives(x[3:])
+    # one product gives X_c = R_cam_ned (L - p) and dX_c/dtheta_i = (dR_nb_i R_body_cam)^T (L - p)
+    mats = np.concatenate([r_nb[None], dr_nb]) @ r_body_cam  # 4 x 3 x 3
+    rel = pts.points_ned - x[:3]
+    prod = rel @ mats.transpose(1, 0, 2).reshape(3, 12)  # N x (4 x 3)
+    xc = prod[:, :3]
     n = xc.shape[0]
     z = xc[:, 2]
     zs = np.where(np.abs(z) < _MIN_DEPTH_M, _MIN_DEPTH_M, z)
+    xn = xc[:, :2] / zs[:, None]
     f = np.array([k[0, 0], k[1, 1]])
-    uv = f * xc[:, :2] / zs[:, None] + k[:2, 2]  # pinhole u = fx X/Z + cx, v = fy Y/Z + cy
     w = 1.0 / pts.sigma_px
-    res = ((uv - pts.pixels) * w[:, None]).reshape(-1)
-    # d(u, v)/dX_c (whitened): [[fx/Z, 0, -fx X/Z^2], [0, fy/Z, -fy Y/Z^2]]
-    jpi = np.zeros((n, 2, 3))
-    wz = w / zs
-    jpi[:, 0, 0] = f[0] * wz
-    jpi[:, 1, 1] = f[1] * wz
-    jpi[:, :, 2] = -f * xc[:, :2] * (wz / zs)[:, None]
-    # dX_c/dx: -R_cam_ned for the position, rel @ (dR_nb/dtheta_i R_body_cam) for the angles
-    m = np.empty((n, 3, 6))
-    m[:, :, :3] = -r_nc.T
-    d_all = np.hstack([d @ r_body_cam for d in dr_nb])  # 3 x 9
-    m[:, :, 3:] = (rel @ d_all).reshape(n, 3, 3).transpose(0, 2, 1)
-    jac = np.matmul(jpi, m).reshape(2 * n, 6)
+    res = ((f * xn + k[:2, 2] - pts.pixels) * w[:, None]).reshape(-1)  # u = fx X/Z + cx
+    # dX_c/dx per component (N x 6): position columns -R_cam_ned, angle columns from prod
+    d = np.empty((n, 3, 6))
+    d[:, :, :3] = -mats[0].T
+    d[:, :, 3:] = prod[:, 3:].reshape(n, 3, 3).transpose(0, 2, 1)
+    # d(u, v) = f w / Z (dX - (X/Z) dZ) for X -> u and Y -> v
+    jac = (d[:, :2, :] - xn[:, :, None] * d[:, 2:3, :]) * (f[None, :] * (w / zs)[:, None])[
+        :, :, None
+    ]
+    jac = jac.reshape(2 * n, 6)
     rows_r, rows_j = [res], [jac]
-    _prior_rows(x, r_nb, dr_nb, priors, rows_r, rows_j)
+    _prior_rows(x, r_nb, list(dr_nb), priors, rows_r, rows_j)
     if len(rows_r) == 1:
         return res, jac, z
     return np.concatenate(rows_r), np.vstack(rows_j), z

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -138,9 +139,7 @@ def solve_pose(
     assoc = associate(usable, landmarks, camera, prior, cfg)
     notes += list(assoc.notes)
     notes += [f"observation {a.observation_index} ambiguous: {a.reason}" for a in assoc.ambiguities]
-    ctx = _Context(
-        camera, camera.matrix, camera.dist_coeffs, camera.r_body_cam, cfg, attitude, altitude, laser
-    )
+    ctx = _Context(camera, *_camera_arrays(camera), cfg, attitude, altitude, laser)
     by_id = {lm.landmark_id: lm for lm in landmarks}
     groups = _make_groups(
         ctx, usable, [(m.observation_index, by_id[m.landmark_id]) for m in assoc.matches], notes
@@ -148,6 +147,15 @@ def solve_pose(
     if not groups:
         return NoFix(time_us, "no identified landmark in view", tuple(notes))
     return _solve_robust(ctx, groups, time_us, reset_counter, notes)
+
+
+@lru_cache(maxsize=16)
+def _camera_arrays(camera: CameraModel) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """K, distortion and R_body_cam of a camera (computed once per camera model)."""
+    arrays = (camera.matrix, camera.dist_coeffs, camera.r_body_cam)
+    for a in arrays:
+        a.setflags(write=False)
+    return arrays
 
 
 def _make_groups(
