@@ -119,7 +119,8 @@ class Renderer:
         for quad in self._far_to_near(objects, pos):
             self._draw(img, quad, r, pos)
         if self._maps is not None:
-            img = cv2.remap(img, self._maps[0], self._maps[1], cv2.INTER_LINEAR)
+            img = np.asarray(cv2.remap(img, self._maps[0], self._maps[1], cv2.INTER_LINEAR),
+                             dtype=np.uint8)
         boxes = tuple(b for lm in w.landmarks if (b := self.truth_box(lm.quad, r, pos)))
         pose = TruthPose(*state.position_ned_m, *state.attitude_rpy_rad)
         camera = TruthCamera(state.position_ned_m, r)
@@ -151,8 +152,9 @@ class Renderer:
             pts = np.round(uv * (1 << SHIFT)).astype(np.int32)
             cv2.fillPoly(img, [pts], quad.colour_bgr, cv2.LINE_8, SHIFT)
             return
-        x0, y0 = max(0, int(np.floor(uv[:, 0].min()))), max(0, int(np.floor(uv[:, 1].min())))
-        x1, y1 = min(cw, int(np.ceil(uv[:, 0].max())) + 1), min(ch, int(np.ceil(uv[:, 1].max())) + 1)
+        lo, hi = np.floor(uv.min(axis=0)).astype(int), np.ceil(uv.max(axis=0)).astype(int)
+        x0, y0 = max(0, int(lo[0])), max(0, int(lo[1]))
+        x1, y1 = min(cw, int(hi[0]) + 1), min(ch, int(hi[1]) + 1)
         if x1 <= x0 or y1 <= y0:
             return
         th, tw = quad.texture.shape[:2]

@@ -113,8 +113,8 @@ def facade_texture(rng: np.random.Generator, width_m: float, height_m: float) ->
     ppm = 16.0
     w, h = max(16, round(width_m * ppm)), max(16, round(height_m * ppm))
     base = np.array(_hsv_colour(float(rng.uniform(5, 30)), 40, 190), np.float32)
-    noise = rng.normal(0.0, 6.0, (h // 4 + 1, w // 4 + 1, 1)).astype(np.float32)
-    noise = cv2.resize(noise, (w, h), interpolation=cv2.INTER_LINEAR)[..., None]
+    coarse = rng.normal(0.0, 6.0, (h // 4 + 1, w // 4 + 1)).astype(np.float32)
+    noise = np.asarray(cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR))[..., None]
     img = np.clip(base + noise, 0, 255).astype(np.uint8)
     win = (70, 60, 55)
     for y in np.arange(1.0, height_m - 1.0, 3.0):

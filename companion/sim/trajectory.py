@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -92,7 +93,7 @@ class Trajectory:
         first = wps[0]
         self._legs.append(self._leg(t, first, first))
         t += first.hold_s
-        for a, b in zip(wps, wps[1:], strict=False):
+        for a, b in itertools.pairwise(wps):
             leg = self._leg(t, a, b)
             self._legs.append(leg)
             t += leg.move_s + leg.hold_s

@@ -101,7 +101,8 @@ def face_corners(
     return np.array([centre - hw + hh, centre + hw + hh, centre + hw - hh, centre - hw - hh])
 
 
-def _seed_for(seed: int, key: str) -> np.random.Generator:
+def seeded_rng(seed: int, key: str) -> np.random.Generator:
+    """A generator that depends only on the world seed and a name (textures per id)."""
     return np.random.default_rng([seed, zlib.crc32(key.encode("utf-8"))])
 
 
@@ -158,7 +159,7 @@ def parse_landmark(
     name = str(props.get("name", lid))
     texture = _appearance(props.get("appearance"), base, where)
     if texture is None:
-        rng = _seed_for(seed, lid)
+        rng = seeded_rng(seed, lid)
         make = textures.signpost_texture if category == "signpost" else textures.poster_texture
         texture = make(rng, width, height, name)
     quad = Quad(face_corners(centre, width, height, facing), texture, landmark_id=lid)
@@ -205,7 +206,7 @@ class World:
         self.facades = self._facades()
         self.poles = [p for lm in self.landmarks if (p := self._pole(lm)) is not None]
         half, g = cfg.ground_extent_m / 2.0, cfg.ground_down_m
-        rng = _seed_for(self.seed, "ground")
+        rng = seeded_rng(self.seed, "ground")
         tex = textures.ground_texture(rng, cfg.ground_texture_px)
         self.ground = Quad(_flat_square(half, g), tex, two_sided=True)
         self.far_ground = Quad(_flat_square(20_000.0, g + 1e-3), None, cfg.far_ground_bgr, True)
@@ -232,7 +233,7 @@ class World:
             anchor = members[0].centre_ned - n * cfg.facade_gap_m
             centre = anchor + right * ((lo + hi) / 2.0 - float(anchor @ right))
             centre[2] = (cfg.ground_down_m + top_down) / 2.0
-            rng = _seed_for(self.seed, f"facade:{members[0].landmark_id}")
+            rng = seeded_rng(self.seed, f"facade:{members[0].landmark_id}")
             tex = textures.facade_texture(rng, width, height)
             out.append(Quad(face_corners(centre, width, height, facing), tex))
         return out
