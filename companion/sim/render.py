@@ -23,7 +23,7 @@ from tracker.camera import CameraModel
 from tracker.geometry import FloatArray
 
 Z_NEAR_M = 0.01
-EDGE_SAMPLES = 8  # points per edge when distortion bends straight edges
+EDGE_SAMPLES = 16  # points per edge when distortion bends straight edges
 SHIFT = 4  # fillPoly sub-pixel bits
 
 
@@ -85,6 +85,7 @@ class Renderer:
         self.k_render[0, 2] += mx
         self.k_render[1, 2] += my
         self._sky = sky_gradient(*self.canvas_size)
+        self._ones_cache: dict[tuple[int, int], np.ndarray] = {}
 
     def _build_distortion_maps(self) -> None:
         """For each output (distorted) pixel, where to read it in the pinhole canvas."""
@@ -92,7 +93,10 @@ class Renderer:
         xs, ys = np.meshgrid(np.arange(cam.width, dtype=np.float64),
                              np.arange(cam.height, dtype=np.float64))
         grid = np.stack([xs.ravel(), ys.ravel()], 1).reshape(-1, 1, 2)
-        und = cv2.undistortPoints(grid, cam.matrix, cam.dist_coeffs, P=cam.matrix).reshape(-1, 2)
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-6)
+        und = cv2.undistortPoints(
+            grid, cam.matrix, cam.dist_coeffs, None, None, cam.matrix, criteria
+        ).reshape(-1, 2)
         lim_x, lim_y = cam.width * 0.5, cam.height * 0.5
         und[:, 0] = np.clip(und[:, 0], -lim_x, cam.width - 1 + lim_x)
         und[:, 1] = np.clip(und[:, 1], -lim_y, cam.height - 1 + lim_y)
@@ -166,11 +170,23 @@ class Renderer:
         size = (x1 - x0, y1 - y0)
         patch = cv2.warpPerspective(quad.texture, h, size, flags=cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REPLICATE)
+        # Exact coverage: a pixel belongs to the face when its centre maps inside the
+        # texture (nearest-neighbour warp of an all-ones image).  fillPoly alone covers up
+        # to a pixel too much; it is kept to exclude the mirror image of the plane behind
+        # the camera, which the homography also maps into the texture.
+        inside = cv2.warpPerspective(self._ones(tw, th), h, size, flags=cv2.INTER_NEAREST,
+                                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         mask = np.zeros((size[1], size[0]), np.uint8)
         pts = np.round((uv - (x0, y0)) * (1 << SHIFT)).astype(np.int32)
-        cv2.fillPoly(mask, [pts], 255, cv2.LINE_8, SHIFT)
+        cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, SHIFT)
         roi = img[y0:y1, x0:x1]
-        np.copyto(roi, patch, where=mask.astype(bool)[..., None])
+        np.copyto(roi, patch, where=(mask & inside).astype(bool)[..., None])
+
+    def _ones(self, width: int, height: int) -> np.ndarray:
+        key = (width, height)
+        if key not in self._ones_cache:
+            self._ones_cache[key] = np.ones((height, width), np.uint8)
+        return self._ones_cache[key]
 
     def image_outline(self, pc: FloatArray) -> FloatArray:
         """Image polygon of a camera-frame quad in front of the camera (with distortion)."""
