@@ -174,8 +174,10 @@ class Renderer:
         # texture (nearest-neighbour warp of an all-ones image).  fillPoly alone covers up
         # to a pixel too much; it is kept to exclude the mirror image of the plane behind
         # the camera, which the homography also maps into the texture.
-        inside: np.ndarray = cv2.warpPerspective(self._ones(tw, th), h, size, flags=cv2.INTER_NEAREST,
-                                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        inside: np.ndarray = cv2.warpPerspective(
+            self._ones(tw, th), h, size, flags=cv2.INTER_NEAREST,
+            borderMode=cv2.BORDER_CONSTANT, borderValue=0,
+        )
         mask = np.zeros((size[1], size[0]), np.uint8)
         pts = np.round((uv - (x0, y0)) * (1 << SHIFT)).astype(np.int32)
         cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, SHIFT)
