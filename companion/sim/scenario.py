@@ -9,11 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import tomllib
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
 
 from companion.errors import ConfigError
 from companion.sim.effects import EffectSpec
@@ -21,6 +18,7 @@ from companion.sim.rangefinder import RangeFinderConfig
 from companion.sim.trajectory import TrajectoryConfig
 from companion.sim.world import WorldConfig
 from companion.sources.stream_format import Origin
+from companion.validate import FieldError, build
 from tracker.camera import CameraModel
 
 SCENARIO_DIR = Path(__file__).resolve().parents[2] / "config" / "scenarios"
@@ -45,7 +43,7 @@ class ScenarioConfig:
 
     name: str = "unnamed"
     description: str = ""
-    landmarks: str = "../landmarks.geojson"  # relative to the scenario file
+    landmarks: str = field(default="../landmarks.geojson", metadata={"path": True})
     seconds: float = field(default=20.0, metadata={"gt": 0})
     fps: float = field(default=30.0, metadata={"gt": 0})
     seed: int = field(default=0, metadata={"ge": 0})
@@ -56,77 +54,7 @@ class ScenarioConfig:
     world: WorldConfig = field(default_factory=WorldConfig)
     rangefinder: RangeFinderConfig = field(default_factory=RangeFinderConfig)
     effects: tuple[EffectSpec, ...] = ()
-    path: str = ""  # the file it was loaded from (set by the loader)
-
-
-def _fail(where: str, expected: str, value: Any) -> ConfigError:
-    return ConfigError(f"{where}: expected {expected}, got {value!r}")
-
-
-def _check_limits(value: float, meta: Any, where: str) -> None:
-    for key, ok, text in (
-        ("ge", lambda v, b: v >= b, ">="),
-        ("gt", lambda v, b: v > b, ">"),
-        ("le", lambda v, b: v <= b, "<="),
-        ("lt", lambda v, b: v < b, "<"),
-    ):
-        if key in meta and not ok(value, meta[key]):
-            raise _fail(where, f"a number {text} {meta[key]}", value)
-
-
-def convert(tp: Any, value: Any, where: str, meta: Any = None) -> Any:
-    """Validate a TOML value against a type annotation (dataclass, tuple, Literal, scalar)."""
-    meta = meta or {}
-    origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
-        return build(tp, value, where)
-    if origin is Literal:
-        if value not in typing.get_args(tp):
-            raise _fail(where, "one of " + ", ".join(map(str, typing.get_args(tp))), value)
-        return value
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, list):
-            raise _fail(where, "a list", value)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(convert(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise _fail(where, f"a list of {len(args)} values", value)
-        pairs = enumerate(zip(args, value, strict=True))
-        return tuple(convert(a, v, f"{where}[{i}]") for i, (a, v) in pairs)
-    if origin in (typing.Union, types.UnionType):
-        return convert(next(a for a in typing.get_args(tp) if a is not type(None)), value, where)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise _fail(where, "true or false", value)
-        return value
-    if tp in (int, float):
-        ok = isinstance(value, int) if tp is int else isinstance(value, int | float)
-        if isinstance(value, bool) or not ok:
-            raise _fail(where, "an integer" if tp is int else "a number", value)
-        _check_limits(value, meta, where)
-        return tp(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise _fail(where, "a string", value)
-        return value
-    raise ConfigError(f"{where}: unsupported type {tp}")
-
-
-def build(cls: Any, data: Any, where: str) -> Any:
-    """A frozen dataclass from a TOML table; unknown keys are errors (typos must not pass)."""
-    if not isinstance(data, dict):
-        raise _fail(where, "a table", data)
-    hints = typing.get_type_hints(cls)
-    known = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(known))
-    if unknown:
-        raise ConfigError(f"{where}.{unknown[0]}: unknown key (known: {', '.join(known)})")
-    kwargs = {
-        name: convert(hints[name], value, f"{where}.{name}", known[name].metadata)
-        for name, value in data.items()
-    }
-    return cls(**kwargs)
+    path: str = field(default="", metadata={"internal": True})  # set by the loader
 
 
 def scenario_path(name_or_file: str) -> Path:
@@ -148,7 +76,15 @@ def load_scenario(name_or_file: str) -> ScenarioConfig:
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML ({err})") from err
     data.setdefault("name", path.stem)
-    config: ScenarioConfig = build(ScenarioConfig, data, str(path))
+
+    def resolve(_key: str, value: str) -> str:
+        p = Path(value).expanduser()
+        return str(p if p.is_absolute() else (path.parent / p).resolve())
+
+    try:
+        config = build(ScenarioConfig, data, resolve_path=resolve)
+    except FieldError as err:
+        raise ConfigError(f"{path}: {err}") from None
     return dataclasses.replace(config, path=str(path))
 
 

@@ -33,8 +33,11 @@ class Frame:
         return int(self.image.shape[1]), int(self.image.shape[0])
 
 
-class EndOfStream(Exception):  # noqa: N818  (a normal end, not an error)
-    """Raised by :meth:`FrameSource.recv` when a finite source has no more frames."""
+class EndOfStream(EOFError):  # noqa: N818  (a normal end, not an error)
+    """Raised by :meth:`FrameSource.recv` when a finite source has no more frames.
+
+    An :class:`EOFError`, which is what the pipeline (``companion.app``) waits for.
+    """
 
 
 @dataclass
