@@ -45,12 +45,14 @@ class SourceStatus:
     """Counters a source keeps; the pipeline publishes them in its status.
 
     ``skipped`` counts frames dropped mid-stream (unreadable, wrong size, time going
-    backwards), with a count per reason in ``skip_reasons``; ``stalls`` counts stall
+    backwards), with a count per reason in ``skip_reasons``; ``dropped`` counts good frames
+    of a live source replaced by a newer one before they were taken; ``stalls`` counts stall
     timeouts of a live source; ``last_error`` is the latest one-line problem.
     """
 
     delivered: int = 0
     skipped: int = 0
+    dropped: int = 0
     stalls: int = 0
     loops: int = 0
     skip_reasons: dict[str, int] = field(default_factory=dict)
@@ -67,6 +69,7 @@ class SourceStatus:
         return {
             "delivered": self.delivered,
             "skipped": self.skipped,
+            "dropped": self.dropped,
             "stalls": self.stalls,
             "loops": self.loops,
             "skip_reasons": dict(self.skip_reasons),
