@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 import threading
 import time
 from pathlib import Path
@@ -55,7 +56,7 @@ async def test_video_file_ends_and_bad_files_are_one_line_errors(tmp_path: Path)
 
 
 class FakeCapture:
-    """Delivers ``n`` frames (the ``bad``-th one of another size), then blocks like a dead camera."""
+    """Delivers ``n`` frames (frame ``bad`` of another size), then blocks like a dead camera."""
 
     def __init__(self, n: int, opened: bool = True, bad: int = -1) -> None:
         self.n, self.opened, self.bad, self.count = n, opened, bad, 0
@@ -98,7 +99,7 @@ async def test_camera_delivers_newest_frames_then_stalls() -> None:
     finally:
         source.close()
     assert 1 <= len(got) <= 4
-    assert all(b.t_us > a.t_us and b.index > a.index for a, b in zip(got, got[1:], strict=False))
+    assert all(b.t_us > a.t_us and b.index > a.index for a, b in itertools.pairwise(got))
     assert source.status.stalls == 1 and source.status.skip_reasons == {"size": 1}
     assert source.status.delivered + source.status.dropped == 4
     assert fake.released.is_set()
@@ -112,7 +113,7 @@ async def test_camera_that_cannot_open_or_hangs_is_one_line_error() -> None:
         time.sleep(1.0)
         return FakeCapture(0)
 
-    with pytest.raises(SourceError, match="did not open within 0.2 s"):
+    with pytest.raises(SourceError, match=r"did not open within 0\.2 s"):
         await CameraSource.open("rtsp://127.0.0.1:1/x", open_timeout_s=0.2, capture_factory=hang)
 
 
