@@ -27,6 +27,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "router_cmd",
     "log_cmd",
     "config_cmd",
+    "synth_cmd",
+    "record_cmd",
 )
 
 log = logging.getLogger("companion")
