@@ -198,7 +198,7 @@ class FakeAutopilot:
             flags = 0x1FF if self.origin is not None else 0x07
             mav.ekf_status_report_send(flags, 0.1, 0.1, 0.1, 0.1, 0.0)
         elif name == "TIMESYNC":
-            mav.timesync_send(0, self._local_ns(), 0, 0)
+            mav.timesync_send(0, self._local_ns())
 
     def _local_ns(self) -> int:
         return self.clock_ns() - self.boot_ns
@@ -255,7 +255,7 @@ class FakeAutopilot:
     def _on_timesync(self, msg: MAVLinkMessage) -> None:
         now = self._local_ns()
         if msg.tc1 == 0:
-            self.codec.mav.timesync_send(now, msg.ts1, msg.get_srcSystem(), msg.get_srcComponent())
+            self.codec.mav.timesync_send(now, msg.ts1)
             return
         rtt_ns = now - msg.ts1
         if not 0 <= rtt_ns < self.config.timesync_max_rtt_ms * 1e6:

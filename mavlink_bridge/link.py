@@ -268,7 +268,7 @@ class MavlinkLink:
         target = getattr(msg, "target_system", 0)
         if target not in (0, self.codec.system_id):
             return
-        self.codec.mav.timesync_send(now_ns, msg.ts1, sysid, compid)
+        self.codec.mav.timesync_send(now_ns, msg.ts1)
         self.counters["timesync_answered"] += 1
 
     def _check_reboot(self, boot_ms: int) -> None:
