@@ -9,7 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncGenerator, Callable
 from typing import Any, Protocol
 
 from mavlink_bridge.config import MavlinkConfig
@@ -40,7 +40,7 @@ class VisionBridge(Protocol):
     async def send_landing_target(self, target: LandingTargetFix) -> SendResult: ...
     def statustext(self, text: str, severity: int = 6) -> None: ...
     def latest(self, name: str) -> Telemetry | None: ...
-    def subscribe(self, *names: str) -> AsyncIterator[Telemetry]: ...
+    def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]: ...
     @property
     def link_up(self) -> bool: ...
     @property
@@ -107,7 +107,7 @@ class PymavlinkBridge:
     def latest(self, name: str) -> Telemetry | None:
         return self.link.latest(name)
 
-    def subscribe(self, *names: str) -> AsyncIterator[Telemetry]:
+    def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
         return self.link.subscribe(*names)
 
     @property

@@ -17,7 +17,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncGenerator, Callable
 from typing import Any, Literal
 
 from mavlink_bridge.codec import Codec, MAVLinkMessage, load_signing_key
@@ -34,7 +34,7 @@ MAV_AUTOPILOT_INVALID = 8
 _MAV_STATE = {"starting": 1, "ok": 4, "degraded": 5, "failed": 6}  # BOOT ACTIVE CRITICAL EMERG.
 MAV_STATE_CRITICAL = 5
 MAV_SEVERITY_INFO = 6
-_REBOOT_BACKSTEP_MS = 2000
+_REBOOT_BACKSTEP_MS = 500  # time_boot_ms going back this far means a reboot
 
 
 class MavlinkLink:
@@ -284,7 +284,7 @@ class MavlinkLink:
         """The newest message of ``name`` from the autopilot, or None."""
         return self._cache.get(name)
 
-    async def subscribe(self, *names: str) -> AsyncIterator[Telemetry]:
+    async def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
         """Yield every new message of the given names; the queue is released in ``finally``.
 
         The queue is bounded (``rx_queue_len``); a slow reader loses the oldest items.

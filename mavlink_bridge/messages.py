@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -127,7 +127,7 @@ def fix_problem(fix: VisionFix, now_us: int, max_age_us: int) -> str | None:
     return None
 
 
-def vpe_fields(fix: VisionFix) -> dict[str, object]:
+def vpe_fields(fix: VisionFix) -> dict[str, Any]:
     """VISION_POSITION_ESTIMATE fields (ArduPilot and PX4 both read it as an NED pose)."""
     x, y, z = fix.position_ned_m
     roll, pitch, yaw = fix.attitude_rpy_rad
@@ -139,7 +139,7 @@ def vpe_fields(fix: VisionFix) -> dict[str, object]:
     }
 
 
-def odometry_fields(fix: VisionFix, profile: Profile) -> dict[str, object]:
+def odometry_fields(fix: VisionFix, profile: Profile) -> dict[str, Any]:
     """ODOMETRY fields per profile.
 
     ArduPilot: frame_id LOCAL_FRD (20) and child_frame_id BODY_FRD (12) exactly, otherwise it
@@ -179,7 +179,7 @@ def odometry_fields(fix: VisionFix, profile: Profile) -> dict[str, object]:
     }
 
 
-def landing_target_fields(lt: LandingTargetFix, profile: Profile) -> dict[str, object] | None:
+def landing_target_fields(lt: LandingTargetFix, profile: Profile) -> dict[str, Any] | None:
     """LANDING_TARGET fields per profile; ``None`` when the geometry is unusable.
 
     ArduPilot: frame BODY_FRD, x/y/z the body offset, distance = |offset| > 0, and

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import math
 import time
 
+from mavlink_bridge.bridge import origin_seen
 from mavlink_bridge.link import MAV_AUTOPILOT_INVALID, MAV_TYPE_ONBOARD_CONTROLLER
-from mavlink_bridge.messages import LandingTargetFix
+from mavlink_bridge.messages import LandingTargetFix, Profile
 from mavlink_bridge.telemetry import Attitude, DistanceSensor, GlobalPosition, LocalPositionNed
 
 from .conftest import stream_fixes, truth_fix, wait_for, wired
@@ -38,7 +40,7 @@ async def test_heartbeat_status_follows_application_health() -> None:
 
 
 async def test_telemetry_cache_and_generator_follow_the_vehicle() -> None:
-    async with wired() as (ap, bridge):
+    async with wired() as (_ap, bridge):
         assert await wait_for(lambda: all(bridge.latest(n) is not None for n in (
             "ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME",
             "DISTANCE_SENSOR", "EKF_STATUS_REPORT")))
@@ -66,7 +68,7 @@ async def test_origin_is_retried_through_failures_until_the_position_shows_it() 
         results = [c["result"] for c in ap.commands if c["command"] == 611]
         assert results[:5] == [4] * 5 and 0 in results
         assert ap.origin == (47.39, 8.54, 400.0)
-        assert await wait_for(lambda: bridge.latest("GLOBAL_POSITION_INT").value.has_origin)
+        assert await wait_for(lambda: origin_seen(bridge.latest("GLOBAL_POSITION_INT")))
         gpi = bridge.latest("GLOBAL_POSITION_INT")
         assert gpi is not None and isinstance(gpi.value, GlobalPosition)
         assert abs(gpi.value.lat_deg - 47.39) < 1e-3
@@ -83,7 +85,7 @@ async def test_ardupilot_odometry_is_fused_at_the_configured_rate() -> None:
         assert {r.reason for r in ap.vision} == {"fused"}
         assert {(r.frame_id, r.child_frame_id) for r in ap.vision} == {(20, 12)}
         stamps = [r.time_usec for r in ap.vision]
-        assert min(b - a for a, b in zip(stamps, stamps[1:], strict=False)) >= 20_000
+        assert min(b - a for a, b in itertools.pairwise(stamps)) >= 20_000
         assert all(r.innovation_m < 0.5 for r in ap.vision)
 
 
@@ -99,8 +101,10 @@ async def test_stale_and_non_finite_fixes_never_leave() -> None:
     async with wired() as (ap, bridge):
         old = truth_fix(ap, time_us=time.monotonic_ns() // 1000 - 500_000)
         assert await bridge.send_fix(old) == "stale"
-        assert await bridge.send_fix(truth_fix(ap, position_ned_m=(math.nan, 0, 0))) == "non_finite"
-        assert await bridge.send_fix(truth_fix(ap, attitude_rpy_rad=(0, math.inf, 0))) == "non_finite"
+        nan_pos = truth_fix(ap, position_ned_m=(math.nan, 0, 0))
+        inf_att = truth_fix(ap, attitude_rpy_rad=(0, math.inf, 0))
+        assert await bridge.send_fix(nan_pos) == "non_finite"
+        assert await bridge.send_fix(inf_att) == "non_finite"
         assert await bridge.send_fix(truth_fix(ap)) == "sent"
         assert await wait_for(lambda: len(ap.vision) == 1)
         assert bridge.stats()["vision"] == {"stale": 1, "non_finite": 2, "sent": 1}
@@ -134,12 +138,13 @@ async def test_px4_odometry_local_ned_vision_with_timesync() -> None:
 
 async def test_fake_enforces_frames_mocap_and_spacing() -> None:
     """The fake's rules: wrong ODOMETRY frames (ArduPilot), MOCAP (PX4), < 20 ms apart."""
-    for profile, fields, reason in (
+    cases: tuple[tuple[Profile, dict[str, int], str], ...] = (
         ("ardupilot", {"frame_id": 1}, "odometry_frames_not_20_12"),
         ("ardupilot", {"child_frame_id": 8}, "odometry_frames_not_20_12"),
         ("px4", {"estimator_type": 6}, "mocap_not_fused_by_ekf2"),
         ("px4", {"frame_id": 14}, "odometry_frame_unsupported"),
-    ):
+    )
+    for profile, fields, reason in cases:
         async with wired({"profile": profile}, {"profile": profile}) as (ap, bridge):
             from mavlink_bridge.messages import odometry_fields
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -42,12 +43,13 @@ def fix(t_us: int = 1_000_000, **kw: object) -> VisionFix:
 def test_endpoint_strings_parse(spec: str, kind: str, where: str, num: int) -> None:
     ep = parse_endpoint(spec)
     assert ep.kind == kind
-    assert (ep.device, ep.baud) == (where, num) if kind == "serial" else (ep.host, ep.port) == (where, num)
+    got = (ep.device, ep.baud) if kind == "serial" else (ep.host, ep.port)
+    assert got == (where, num)
     assert str(ep) == spec
 
 
-@pytest.mark.parametrize("spec", ["udp:1.2.3.4:5", "tcp:host", "udpin:host:99999", "serial:/dev/x:0",
-                                  "14550", "tcpin::x"])
+@pytest.mark.parametrize("spec", ["udp:1.2.3.4:5", "tcp:host", "udpin:host:99999",
+                                  "serial:/dev/x:0", "14550", "tcpin::x"])
 def test_bad_endpoint_strings_are_refused_with_the_string(spec: str) -> None:
     with pytest.raises(EndpointError, match="endpoint"):
         parse_endpoint(spec)
@@ -79,7 +81,7 @@ def test_ardupilot_odometry_uses_frames_20_and_12_exactly() -> None:
 def test_px4_odometry_is_local_ned_vision_and_marks_unknown_velocity() -> None:
     f = odometry_fields(fix(), "px4")
     assert (f["frame_id"], f["child_frame_id"], f["estimator_type"]) == (1, 12, 2)
-    assert math.isnan(f["vx"]) and math.isnan(f["velocity_covariance"][0])  # type: ignore[index]
+    assert math.isnan(f["vx"]) and math.isnan(f["velocity_covariance"][0])
     g = odometry_fields(fix(velocity_ned_m_s=(1.0, 0.0, 0.0)), "px4")
     assert all(math.isfinite(v) for v in (g["vx"], g["vy"], g["vz"]))
 
@@ -97,7 +99,7 @@ def test_vpe_fields_carry_pose_covariance_and_reset_counter() -> None:
     ({"covariance": (1.0,) * 20}, "bad_covariance"),
     ({"quality_percent": 101}, "bad_quality"),
 ])
-def test_bad_fixes_are_named(kw: dict[str, object], reason: str) -> None:
+def test_bad_fixes_are_named(kw: dict[str, Any], reason: str) -> None:
     assert fix_problem(fix(**kw), 1_000_000, 200_000) == reason
 
 
