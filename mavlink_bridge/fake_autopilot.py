@@ -4,8 +4,9 @@ It is first-class code: tests, ``companion demo`` and ``companion fake-autopilot
 
 * Flies ``truth(time_s) -> VehicleState`` (default: :func:`hover_then_circle`) and streams
   HEARTBEAT (component 1), ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT (0, 0 until the
-  origin is set, like ArduPilot), SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT, and in PX4
-  mode TIMESYNC requests at 10 Hz.
+  origin is set, like ArduPilot), SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT,
+  HOME_POSITION (once the origin is set), STATUSTEXT on events, and in PX4 mode TIMESYNC
+  requests at 10 Hz.
 * ACKs COMMAND_LONG/COMMAND_INT; the EKF origin (COMMAND_INT 611 for ArduPilot,
   SET_GPS_GLOBAL_ORIGIN for PX4) is accepted once, optionally after ``origin_fail_first``
   MAV_RESULT_FAILED answers as ArduPilot SITL gives while its EKF is not ready.
@@ -55,7 +56,7 @@ class FakeAutopilotConfig:
     periods_s: tuple[tuple[str, float], ...] = (
         ("HEARTBEAT", 1.0), ("ATTITUDE", 0.05), ("LOCAL_POSITION_NED", 0.1),
         ("GLOBAL_POSITION_INT", 0.2), ("SYSTEM_TIME", 1.0), ("DISTANCE_SENSOR", 0.1),
-        ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.1),
+        ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.1), ("HOME_POSITION", 1.0),
     )
 
 
@@ -199,6 +200,10 @@ class FakeAutopilot:
             mav.ekf_status_report_send(flags, 0.1, 0.1, 0.1, 0.1, 0.0)
         elif name == "TIMESYNC":
             mav.timesync_send(0, self._local_ns())
+        elif name == "HOME_POSITION" and self.origin is not None:
+            lat, lon, alt = self._global(0.0, 0.0, 0.0)
+            mav.home_position_send(lat, lon, alt, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
+                                   0.0, 0.0, 0.0)
 
     def _local_ns(self) -> int:
         return self.clock_ns() - self.boot_ns
@@ -340,12 +345,20 @@ class FakeAutopilot:
             "timesync_samples": self.timesync_samples,
             "timesync_synced": self.timesync_synced,
             "companion_heartbeats": len(self.heartbeats),
-            "heartbeat_period_s": {
-                "median": float(np.median(periods)) if periods.size else None,
-                "max": float(periods.max()) if periods.size else None,
-            },
+            "heartbeat_period_s": _period_stats(periods),
             "statustexts": self.statustexts,
             "rx": self.codec.rx.as_dict(),
             "faults": vars(self.faults.counters),
             "counters": dict(self.counters),
         }
+
+
+def _period_stats(periods: np.ndarray) -> dict[str, float | None]:
+    """Median/min/max of the companion's heartbeat periods and the jitter |period - median|."""
+    if periods.size == 0:
+        return {"median": None, "min": None, "max": None, "jitter_p99": None,
+                "jitter_max": None}
+    med = float(np.median(periods))
+    dev = np.abs(periods - med)
+    return {"median": med, "min": float(periods.min()), "max": float(periods.max()),
+            "jitter_p99": float(np.percentile(dev, 99)), "jitter_max": float(dev.max())}

@@ -17,7 +17,7 @@ from mavlink_bridge.messages import VisionFix
 FAST_PERIODS = (
     ("HEARTBEAT", 0.1), ("ATTITUDE", 0.05), ("LOCAL_POSITION_NED", 0.1),
     ("GLOBAL_POSITION_INT", 0.1), ("SYSTEM_TIME", 0.5), ("DISTANCE_SENSOR", 0.1),
-    ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.05),
+    ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.05), ("HOME_POSITION", 0.2),
 )
 DIAG_COV = tuple(0.01 if k in (0, 6, 11) else (0.001 if k in (15, 18, 20) else 0.0)
                  for k in range(21))

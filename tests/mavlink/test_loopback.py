@@ -8,10 +8,19 @@ import itertools
 import math
 import time
 
+import pytest
+
 from mavlink_bridge.bridge import origin_seen
 from mavlink_bridge.link import MAV_AUTOPILOT_INVALID, MAV_TYPE_ONBOARD_CONTROLLER
 from mavlink_bridge.messages import LandingTargetFix, Profile
-from mavlink_bridge.telemetry import Attitude, DistanceSensor, GlobalPosition, LocalPositionNed
+from mavlink_bridge.telemetry import (
+    Attitude,
+    DistanceSensor,
+    GeoPoint,
+    GlobalPosition,
+    LocalPositionNed,
+    StatusText,
+)
 
 from .conftest import stream_fixes, truth_fix, wait_for, wired
 
@@ -72,6 +81,12 @@ async def test_origin_is_retried_through_failures_until_the_position_shows_it() 
         gpi = bridge.latest("GLOBAL_POSITION_INT")
         assert gpi is not None and isinstance(gpi.value, GlobalPosition)
         assert abs(gpi.value.lat_deg - 47.39) < 1e-3
+        assert await wait_for(lambda: bridge.latest("HOME_POSITION") is not None)
+        home = bridge.latest("HOME_POSITION")
+        assert home is not None and isinstance(home.value, GeoPoint)
+        assert (home.value.lat_deg, home.value.alt_m) == pytest.approx((47.39, 400.0))
+        text = bridge.latest("STATUSTEXT")
+        assert text is not None and text.value == StatusText(6, "EKF3 IMU0 origin set")
         n_sent = bridge.origin_attempts
         await stream_fixes(ap, bridge, 5)
         assert bridge.origin_attempts == n_sent  # no more once confirmed
