@@ -29,6 +29,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "config_cmd",
     "synth_cmd",
     "record_cmd",
+    "fake_autopilot_cmd",
 )
 
 log = logging.getLogger("companion")
