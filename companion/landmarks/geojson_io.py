@@ -43,6 +43,7 @@ from companion.landmarks.record import (
     Scores,
     Status,
 )
+from companion.landmarks.repository import LandmarkRepository, Progress
 
 _SCORE_KEYS = ("distinctiveness", "flatness", "static", "impact")
 
@@ -312,3 +313,10 @@ def _write_image(img_dir: Path, lm: Landmark, used: set[str]) -> str:
     img_dir.mkdir(parents=True, exist_ok=True)
     (img_dir / name).write_bytes(lm.appearance.data)
     return f"{img_dir.name}/{name}"
+
+
+def import_map(repo: LandmarkRepository, path: str | Path, *, replace: bool = False,
+               progress: Progress | None = None) -> int:
+    """Validate the whole map first, then store it in one transaction (all or nothing)."""
+    landmarks = read_map(path)
+    return repo.import_landmarks(landmarks, replace=replace, source=str(path), progress=progress)

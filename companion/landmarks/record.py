@@ -90,7 +90,7 @@ class BBox:
     def contains(self, lat_deg: npt.ArrayLike, lon_deg: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         lat = np.asarray(lat_deg, dtype=np.float64)
         lon = np.asarray(lon_deg, dtype=np.float64)
-        return (  # type: ignore[no-any-return]
+        return (
             (lat >= self.min_lat_deg)
             & (lat <= self.max_lat_deg)
             & (lon >= self.min_lon_deg)
@@ -132,7 +132,7 @@ class Circle:
             return np.zeros(lat.shape, dtype=bool)
         # Distance on the local tangent plane at the centre (exact to mm at city scale).
         n, e, _ = pymap3d.geodetic2ned(lat, lon, 0.0, self.lat_deg, self.lon_deg, 0.0)
-        return np.hypot(n, e) <= self.radius_m  # type: ignore[no-any-return]
+        return np.hypot(n, e) <= self.radius_m
 
     def centre(self) -> tuple[float, float]:
         return (self.lat_deg, self.lon_deg)
