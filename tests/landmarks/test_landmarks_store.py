@@ -15,12 +15,19 @@ from typing import Any
 import numpy as np
 import pymap3d
 import pytest
-from conftest import ORIGIN_LAT, ORIGIN_LON, collection, feature, grid_features, write_json
 
 from companion.errors import InputError
 from companion.landmarks.geojson_io import import_map, read_map, write_map
 from companion.landmarks.record import BBox, Circle, Landmark, parse_area
 from companion.landmarks.sqlite_repo import MIGRATIONS, SCHEMA_VERSION, SqliteLandmarkRepository
+from tests.landmarks.helpers import (
+    ORIGIN_LAT,
+    ORIGIN_LON,
+    collection,
+    feature,
+    grid_features,
+    write_json,
+)
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
