@@ -27,6 +27,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "router_cmd",
     "log_cmd",
     "config_cmd",
+    "landmarks_cmd",
 )
 
 log = logging.getLogger("companion")

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
+import psycopg
 import pytest
 
 from tests.landmarks.helpers import ORIGIN_LAT, ORIGIN_LON, collection, grid_features, write_json
+from tests.landmarks.pgcluster import throwaway_cluster
 
 
 @pytest.fixture()
@@ -26,3 +30,21 @@ def sample_map(tmp_path: Path) -> Path:
     feats[9]["properties"]["status"] = "rejected"
     feats[9]["properties"]["status_reason"] = "moved"
     return write_json(tmp_path / "map.geojson", collection(feats))
+
+
+@pytest.fixture(scope="session")
+def postgis_url() -> Iterator[str]:
+    """A throwaway PostgreSQL cluster with PostGIS on 127.0.0.1 (skips if not installed)."""
+    with throwaway_cluster() as url:
+        yield url
+
+
+@pytest.fixture()
+def postgis_db(postgis_url: str) -> Iterator[str]:
+    """A fresh, empty database in the throwaway cluster, dropped afterwards."""
+    name = f"lm_{uuid.uuid4().hex[:12]}"
+    with psycopg.connect(postgis_url, autocommit=True) as conn:
+        conn.execute(f"CREATE DATABASE {name}")
+    yield postgis_url.rsplit("/", 1)[0] + "/" + name
+    with psycopg.connect(postgis_url, autocommit=True) as conn:
+        conn.execute(f"DROP DATABASE {name} WITH (FORCE)")
