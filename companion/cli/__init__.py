@@ -30,6 +30,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "synth_cmd",
     "record_cmd",
     "fake_autopilot_cmd",
+    "landmarks_cmd",
 )
 
 log = logging.getLogger("companion")
