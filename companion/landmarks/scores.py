@@ -2,7 +2,7 @@
 
 * distinctiveness ``d = VR / (VR + vr_half)`` where ``VR`` is the best variance ratio of
   the reference image's landmark box against its surroundings, computed by the tracker's
-  feature ranking (``tracker.ranking.best_variance_ratio``; not written twice here);
+  feature ranking (``tracker.distinctiveness.best_variance_ratio``; not written twice here);
 * flatness ``f = 1 / (1 + (rms / flatness_tolerance_m)^2)`` with ``rms`` the RMS distance
   of the measured 3-D points from their least-squares plane;
 * static ``s = (consistent / n) * min(1, n / static_min_sightings)`` over ``n``
@@ -15,36 +15,26 @@ A factor that cannot be measured keeps its declared value (from the map's ``scor
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Callable, Sequence
-from typing import cast
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from companion.errors import CompanionError
 from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.record import Appearance, Landmark, Point3, Scores, Status
 from companion.landmarks.repository import ScoreUpdate
+from tracker.distinctiveness import best_variance_ratio
 
 #: ``(image_bgr uint8 HxWx3, (x, y, w, h) box in pixels) -> best variance ratio >= 0``.
 VrScorer = Callable[[npt.NDArray[np.uint8], tuple[int, int, int, int]], float]
 
 
 def tracker_vr_scorer() -> VrScorer:
-    """The tracker's ``best_variance_ratio(image_bgr, box) -> float`` (imported lazily)."""
-    try:
-        ranking = importlib.import_module("tracker.ranking")
-    except ImportError as err:
-        raise CompanionError(f"distinctiveness: cannot import tracker.ranking ({err})") from None
-    scorer = getattr(ranking, "best_variance_ratio", None)
-    if not callable(scorer):
-        raise CompanionError("distinctiveness needs tracker.ranking.best_variance_ratio"
-                             "(image_bgr, box) -> float, which this build does not have")
-    return cast(VrScorer, scorer)
+    """The tracker's own ranking, :func:`tracker.distinctiveness.best_variance_ratio`."""
+    return best_variance_ratio
 
 
 def distinctiveness_from_vr(vr: float, vr_half: float) -> float:
