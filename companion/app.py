@@ -1,0 +1,288 @@
+"""The one asyncio pipeline: source -> perception (trackers, pose) -> MAVLink, watched live.
+
+    reader task ──LatestSlot (newest frame wins)──► worker task ──► sink (MAVLink bridge)
+                                                      │  heavy work in one executor thread
+    status task (1 Hz and on every health change) ────┴─► monitor (Zenoh) + flight log
+
+Everything heavy runs in a single worker thread (:meth:`FrameProcessor.process`) so the
+event loop stays free for heartbeats and telemetry.  Every task is kept in ``self._tasks``
+and always finishes: :meth:`CompanionApp.run` returns only after all of them ended.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from companion.pipeline.health import HealthInputs, HealthPolicy, State, health_state
+from companion.pipeline.latest import LatestSlot, SlotClosedError
+from companion.pipeline.stats import RateMeter, Rolling
+
+log = logging.getLogger(__name__)
+
+
+def now_us() -> int:
+    """The companion's clock: monotonic, microseconds (frames are stamped with it)."""
+    return time.monotonic_ns() // 1000
+
+
+class Frame(Protocol):
+    """What the pipeline needs of a frame (companion.sources.Frame satisfies it)."""
+
+    @property
+    def index(self) -> int: ...
+    @property
+    def t_us(self) -> int: ...
+    @property
+    def image(self) -> npt.NDArray[np.uint8]: ...
+
+
+class FrameSource(Protocol):
+    """``recv`` returns the next frame; raises EOFError at the end of a finite source."""
+
+    async def recv(self) -> Frame: ...
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What perception made of one frame (JSON-ready fields for monitoring)."""
+
+    frame_index: int
+    capture_t_us: int
+    tracks: tuple[dict[str, Any], ...] = ()
+    fix: Any | None = None
+    no_fix_reason: str | None = None
+    events: tuple[dict[str, Any], ...] = ()
+    bad_frame: bool = False
+    pose_json: dict[str, Any] | None = None
+
+
+class FrameProcessor(Protocol):
+    """Synchronous per-frame work (tracking and pose); runs in the worker thread."""
+
+    def process(self, frame: Frame) -> FrameResult: ...
+
+
+class FixSink(Protocol):
+    """The autopilot side (the MAVLink bridge, or a test double)."""
+
+    @property
+    def link_up(self) -> bool: ...
+    def set_health(self, state: State) -> None: ...
+    async def send_fix(self, fix: Any) -> bool: ...
+    async def statustext(self, text: str) -> None: ...
+
+
+class Reporter(Protocol):
+    """Where status, poses, tracks and events go (monitoring and the flight log)."""
+
+    def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None: ...
+
+
+@dataclass
+class Counters:
+    """Counts shown in the status and the demo summary."""
+
+    frames: int = 0
+    bad_frames: int = 0
+    fixes_sent: int = 0
+    fixes_refused: int = 0
+    no_fix: int = 0
+    source_errors: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(vars(self))
+
+
+@dataclass
+class AppStats:
+    """Latency per stage (ms) and rates, for the status and the summary."""
+
+    capture_to_wire_ms: Rolling = field(default_factory=Rolling)
+    process_ms: Rolling = field(default_factory=Rolling)
+    queue_ms: Rolling = field(default_factory=Rolling)
+    fps: RateMeter = field(default_factory=RateMeter)
+
+
+class CompanionApp:
+    """Owns the pipeline's tasks, its health state and its clean shutdown."""
+
+    def __init__(self, source: FrameSource, processor: FrameProcessor, sink: FixSink,
+                 reporter: Reporter, vehicle_id: str, status_period_s: float = 1.0,
+                 policy: HealthPolicy | None = None,
+                 clock_s: Callable[[], float] = time.monotonic) -> None:
+        self.source = source
+        self.processor = processor
+        self.sink = sink
+        self.reporter = reporter
+        self.vehicle_id = vehicle_id
+        self.status_period_s = status_period_s
+        self.policy = policy or HealthPolicy()
+        self.clock_s = clock_s
+        self.counters = Counters()
+        self.stats = AppStats()
+        self.state: State = "starting"
+        self._slot: LatestSlot[Frame] = LatestSlot()
+        self._executor = concurrent.futures.ThreadPoolExecutor(1, "companion-worker")
+        self._tasks: list[asyncio.Task[None]] = []
+        self._stop = asyncio.Event()
+        self._last_frame_s: float | None = None
+        self._last_fix_s: float | None = None
+        self._ever_tracked = False
+        self._recent_bad: list[bool] = []
+
+    # -- public -----------------------------------------------------------------------
+
+    def request_stop(self) -> None:
+        """Ask every task to finish (signal handlers call this)."""
+        self._stop.set()
+
+    @property
+    def dropped_frames(self) -> int:
+        """Frames replaced in the slot before the worker took them."""
+        return self._slot.dropped
+
+    async def run(self, seconds: float | None = None) -> None:
+        """Run until the source ends, ``seconds`` pass or :meth:`request_stop`."""
+        self._tasks = [
+            asyncio.create_task(self._reader(), name="reader"),
+            asyncio.create_task(self._worker(), name="worker"),
+            asyncio.create_task(self._status_loop(), name="status"),
+        ]
+        try:
+            if seconds is None:
+                await self._stop.wait()
+            else:
+                await asyncio.wait_for(self._stop.wait(), timeout=seconds)
+        except TimeoutError:
+            pass
+        finally:
+            await self._shutdown()
+
+    # -- tasks ------------------------------------------------------------------------
+
+    async def _reader(self) -> None:
+        try:
+            while not self._stop.is_set():
+                try:
+                    frame = await self.source.recv()
+                except EOFError:
+                    log.info("frame source ended")
+                    self._event("source-ended")
+                    break
+                self._last_frame_s = self.clock_s()
+                self._slot.put(frame)
+        except asyncio.CancelledError:
+            pass
+        except Exception as err:  # a source failure stops the flight cleanly, with a reason
+            log.error("frame source failed: %s", err)
+            self.counters.source_errors += 1
+            self._event("source-failed", reason=str(err))
+        finally:
+            self._slot.close()
+            self._stop.set()
+
+    async def _worker(self) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            while True:
+                frame = await self._slot.get()
+                taken_us = now_us()
+                self.stats.queue_ms.add((taken_us - frame.t_us) / 1000.0)
+                result = await loop.run_in_executor(self._executor, self.processor.process,
+                                                    frame)
+                self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
+                await self._handle(result)
+        except (SlotClosedError, asyncio.CancelledError):
+            pass
+
+    async def _handle(self, result: FrameResult) -> None:
+        now_s = self.clock_s()
+        self.counters.frames += 1
+        self.stats.fps.tick(now_s)
+        self._recent_bad = [*self._recent_bad[-29:], result.bad_frame]
+        if result.bad_frame:
+            self.counters.bad_frames += 1
+        for event in result.events:
+            self.reporter.report("events", result.capture_t_us, event)
+        self.reporter.report("tracks", result.capture_t_us,
+                             {"frame": result.frame_index, "tracks": list(result.tracks)})
+        if result.tracks:
+            self._ever_tracked = True
+        if result.fix is None:
+            self.counters.no_fix += 1
+        elif await self.sink.send_fix(result.fix):
+            self.counters.fixes_sent += 1
+            self._last_fix_s = now_s
+            self.stats.capture_to_wire_ms.add((now_us() - result.capture_t_us) / 1000.0)
+            if result.pose_json is not None:
+                self.reporter.report("pose", result.capture_t_us, result.pose_json)
+        else:
+            self.counters.fixes_refused += 1
+        self._update_health()
+
+    async def _status_loop(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._update_health()
+                self.reporter.report("status", now_us(), self.status())
+                try:
+                    await asyncio.wait_for(self._stop.wait(), self.status_period_s)
+                except TimeoutError:
+                    pass
+        except asyncio.CancelledError:
+            pass
+
+    # -- state ------------------------------------------------------------------------
+
+    def _update_health(self) -> None:
+        bad_ratio = sum(self._recent_bad) / len(self._recent_bad) if self._recent_bad else 0.0
+        state = health_state(
+            HealthInputs(self.clock_s(), self.counters.frames, self._last_frame_s,
+                         self._last_fix_s, self._ever_tracked, self.sink.link_up, bad_ratio),
+            self.policy,
+        )
+        if state != self.state:
+            old, self.state = self.state, state
+            log.info("health %s -> %s", old, state)
+            self.sink.set_health(state)
+            self._event("health", old=old, new=state)
+            self.reporter.report("status", now_us(), self.status())
+
+    def _event(self, name: str, **fields: Any) -> None:
+        self.reporter.report("events", now_us(), {"event": name, **fields})
+
+    def status(self) -> dict[str, Any]:
+        """The status payload (docs/monitoring.md)."""
+        return {
+            "vehicle": self.vehicle_id,
+            "state": self.state,
+            "fps": round(self.stats.fps.rate(self.clock_s()), 2),
+            "latency_ms": self.stats.capture_to_wire_ms.summary(),
+            "link": "up" if self.sink.link_up else "down",
+            "counters": self.counters.as_dict(),
+            "dropped_frames": self.dropped_frames,
+        }
+
+    async def _shutdown(self) -> None:
+        self._stop.set()
+        self._slot.close()
+        for task in self._tasks:
+            if task.get_name() == "reader":
+                task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._executor.shutdown(wait=True)
+        self._event("stopped", frames=self.counters.frames)
+        try:
+            await self.sink.statustext(f"stopped after {self.counters.frames} frames")
+        except Exception as err:  # the link may already be gone
+            log.warning("final STATUSTEXT not sent: %s", err)
+        self.reporter.report("status", now_us(), self.status())

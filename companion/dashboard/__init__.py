@@ -1,0 +1,1 @@
+"""A read-only web dashboard fed by the same Zenoh keys as ``companion monitor``."""

@@ -1,0 +1,1 @@
+"""Pieces of the asyncio pipeline owned by :mod:`companion.app`."""

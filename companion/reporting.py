@@ -1,0 +1,46 @@
+"""Fan-out of everything the pipeline reports: the flight log and Zenoh monitoring."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from companion.flightlog import FlightLogWriter
+from companion.monitoring.publisher import MonitorPublisher
+
+log = logging.getLogger(__name__)
+
+#: Flight-log record kind for each monitoring topic.
+LOG_KIND = {"status": "status", "pose": "fix", "tracks": "track", "events": "event"}
+
+
+class Reporter:
+    """Writes each report to the flight log and publishes it (either may be absent)."""
+
+    def __init__(self, flightlog: FlightLogWriter | None,
+                 monitor: MonitorPublisher | None) -> None:
+        self.flightlog = flightlog
+        self.monitor = monitor
+        self.failures = 0
+
+    def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None:
+        """Log and publish one payload; a failing sink is counted, never fatal."""
+        if self.flightlog is not None:
+            try:
+                self.flightlog.write(LOG_KIND.get(topic, topic), t_us, **data)
+            except (OSError, ValueError) as err:
+                self.failures += 1
+                log.warning("flight log write failed: %s", err)
+        if self.monitor is not None:
+            try:
+                self.monitor.publish_json(topic, {"t_us": t_us, **data})
+            except Exception as err:  # zenoh raises its own ZError
+                self.failures += 1
+                log.warning("monitor publish failed: %s", err)
+
+    def close(self) -> None:
+        """Flush and close both."""
+        if self.flightlog is not None:
+            self.flightlog.close()
+        if self.monitor is not None:
+            self.monitor.close()

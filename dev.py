@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""Set up and run landmark-companion from a fresh clone, with only Python >= 3.11 and git.
+
+    python3 dev.py demo [ARGS...]   install (once) and run the main job: companion demo
+    python3 dev.py test [ARGS...]   install (once) and run the whole test suite:
+                                    ruff, mypy, then pytest (ARGS go to pytest)
+    python3 dev.py lock             regenerate requirements/*.lock (maintainers)
+
+The environment is a virtualenv in .venv, installed from the hash-checked lock files in
+requirements/ and reinstalled only when a lock file or pyproject.toml changes.  Standard
+library only: this script runs before anything is installed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
+PY = BIN / ("python.exe" if os.name == "nt" else "python")
+LOCKS = {"runtime": ROOT / "requirements" / "runtime.lock",
+         "dev": ROOT / "requirements" / "dev.lock"}
+PYTEST_NO_TESTS = 5
+
+
+def say(text: str) -> None:
+    print(f"[dev] {text}", flush=True)
+
+
+def run(*cmd: str | Path, check: bool = True) -> int:
+    """Run a command from the project root; stop with its status when it fails."""
+    result = subprocess.run([str(c) for c in cmd], cwd=ROOT, check=False)
+    if check and result.returncode != 0:
+        say(f"failed ({result.returncode}): {' '.join(str(c) for c in cmd)}")
+        sys.exit(result.returncode)
+    return result.returncode
+
+
+def fingerprint(kind: str) -> str:
+    digest = hashlib.sha256(kind.encode())
+    for path in (LOCKS[kind], ROOT / "pyproject.toml"):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def ensure_env(kind: str) -> None:
+    """Create .venv and install the locked dependencies of ``kind`` unless already done."""
+    if sys.version_info < (3, 11):  # noqa: UP036 - runs before anything is checked
+        sys.exit(f"[dev] Python >= 3.11 is needed, this is {sys.version.split()[0]}")
+    stamp = VENV / f".installed-{kind}"
+    want = fingerprint(kind)
+    if PY.exists() and stamp.exists() and stamp.read_text() == want:
+        return
+    if not PY.exists():
+        say(f"creating the virtual environment in {VENV.name}/")
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    say(f"installing locked {kind} dependencies (first run takes a few minutes)")
+    run(PY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+        "--require-hashes", "-r", LOCKS[kind])
+    say("installing landmark-companion itself (editable)")
+    run(PY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+        "--no-deps", "-e", ".")
+    for old in VENV.glob(".installed-*"):
+        old.unlink()
+    stamp.write_text(want)
+    if kind == "dev":  # the dev lock includes every runtime package
+        (VENV / ".installed-runtime").write_text(fingerprint("runtime"))
+
+
+def cmd_demo(args: list[str]) -> int:
+    ensure_env("runtime")
+    return run(BIN / "companion", "--help", *args, check=False)
+
+
+def cmd_test(args: list[str]) -> int:
+    ensure_env("dev")
+    say("ruff")
+    run(PY, "-m", "ruff", "check", ".")
+    say("mypy")
+    run(PY, "-m", "mypy")
+    say("pytest")
+    status = run(PY, "-m", "pytest", *args, check=False)
+    if status == PYTEST_NO_TESTS:
+        say("pytest collected no tests: that is a failure here (wrong path or filter?)")
+        return 1
+    return status
+
+
+def cmd_lock(args: list[str]) -> int:
+    ensure_env("dev")
+    run(PY, "-m", "pip", "install", "--quiet", "pip-tools")
+    common = ["--quiet", "--generate-hashes", "--strip-extras", "--allow-unsafe",
+              "--no-emit-index-url", "--no-emit-find-links", *args]
+    run(PY, "-m", "piptools", "compile", *common, "-o", LOCKS["runtime"], "pyproject.toml")
+    run(PY, "-m", "piptools", "compile", *common, "--extra", "dev", "-o", LOCKS["dev"],
+        "pyproject.toml")
+    return 0
+
+
+COMMANDS = {"demo": cmd_demo, "test": cmd_test, "lock": cmd_lock}
+
+
+def main() -> int:
+    if len(sys.argv) < 2 or sys.argv[1] not in COMMANDS:
+        print(__doc__)
+        return 2
+    os.chdir(ROOT)
+    return COMMANDS[sys.argv[1]](sys.argv[2:])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

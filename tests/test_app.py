@@ -1,0 +1,187 @@
+"""The pipeline's orchestration with test doubles: newest frame wins, health, shutdown."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+
+from companion.app import CompanionApp, FrameResult, now_us
+from companion.pipeline.health import HealthInputs, health_state
+from companion.pipeline.latest import LatestSlot, SlotClosedError
+from companion.pipeline.stats import RateMeter, Rolling
+
+
+@dataclass(frozen=True)
+class FakeFrame:
+    index: int
+    t_us: int
+    image: Any
+
+
+class ListSource:
+    def __init__(self, n: int, period_s: float = 0.0) -> None:
+        self.n = n
+        self.i = 0
+        self.period_s = period_s
+
+    async def recv(self) -> FakeFrame:
+        if self.i >= self.n:
+            raise EOFError
+        await asyncio.sleep(self.period_s)
+        self.i += 1
+        return FakeFrame(self.i, now_us(), np.zeros((2, 2, 3), np.uint8))
+
+
+class Processor:
+    def __init__(self, delay_s: float = 0.0, track_from: int = 0) -> None:
+        self.delay_s = delay_s
+        self.track_from = track_from
+        self.seen: list[int] = []
+        self.thread_names: set[str] = set()
+
+    def process(self, frame: Any) -> FrameResult:
+        time.sleep(self.delay_s)
+        self.seen.append(frame.index)
+        self.thread_names.add(threading.current_thread().name)
+        tracking = frame.index >= self.track_from
+        return FrameResult(
+            frame.index, frame.t_us,
+            tracks=({"landmark_id": "a", "confidence": 0.9},) if tracking else (),
+            fix={"n": frame.index} if tracking else None,
+            pose_json={"position_ned_m": [0, 0, 0]} if tracking else None,
+        )
+
+
+class Sink:
+    def __init__(self, link_up: bool = True) -> None:
+        self.link_up = link_up
+        self.fixes: list[Any] = []
+        self.health: list[str] = []
+        self.texts: list[str] = []
+
+    def set_health(self, state: str) -> None:
+        self.health.append(state)
+
+    async def send_fix(self, fix: Any) -> bool:
+        self.fixes.append(fix)
+        return True
+
+    async def statustext(self, text: str) -> None:
+        self.texts.append(text)
+
+
+class Recorder:
+    def __init__(self) -> None:
+        self.items: list[tuple[str, dict[str, Any]]] = []
+
+    def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None:
+        self.items.append((topic, data))
+
+    def topic(self, name: str) -> list[dict[str, Any]]:
+        return [d for t, d in self.items if t == name]
+
+
+async def test_every_frame_processed_when_the_worker_keeps_up() -> None:
+    proc, sink, rec = Processor(track_from=3), Sink(), Recorder()
+    app = CompanionApp(ListSource(10, period_s=0.005), proc, sink, rec, "v1",
+                       status_period_s=0.05)
+    await asyncio.wait_for(app.run(), timeout=10)
+    assert proc.seen == list(range(1, 11))
+    assert app.counters.frames == 10
+    assert app.counters.fixes_sent == 8
+    assert [f["n"] for f in sink.fixes] == list(range(3, 11))
+    assert proc.thread_names == {"companion-worker_0"}  # heavy work off the event loop
+    assert app.stats.capture_to_wire_ms.count == 8
+    assert "tracking" in sink.health
+    assert sink.texts == ["stopped after 10 frames"]
+    events = [e["event"] for e in rec.topic("events")]
+    assert events[-2:] == ["source-ended", "stopped"] or events[-1] == "stopped"
+    assert rec.topic("status")[-1]["counters"]["frames"] == 10
+
+
+async def test_a_slow_worker_sees_the_newest_frames_and_drops_are_counted() -> None:
+    proc = Processor(delay_s=0.03)
+    app = CompanionApp(ListSource(40, period_s=0.002), proc, Sink(), Recorder(), "v1")
+    await asyncio.wait_for(app.run(), timeout=20)
+    assert app.dropped_frames > 0
+    assert len(proc.seen) + app.dropped_frames == 40
+    assert proc.seen == sorted(proc.seen)
+    assert proc.seen[-1] == 40  # the last frame is never dropped at shutdown
+
+
+async def test_stop_request_finishes_the_current_frame_and_exits() -> None:
+    proc = Processor(delay_s=0.05)
+    app = CompanionApp(ListSource(10_000, period_s=0.01), proc, Sink(), Recorder(), "v1")
+    task = asyncio.create_task(app.run())
+    await asyncio.sleep(0.3)
+    app.request_stop()
+    await asyncio.wait_for(task, timeout=5)
+    assert app.counters.frames == len(proc.seen)  # nothing processed is left unhandled
+    assert 0 < app.counters.frames < 100
+
+
+async def test_link_down_is_the_health_state() -> None:
+    sink = Sink(link_up=False)
+    app = CompanionApp(ListSource(5), Processor(), sink, Recorder(), "v1")
+    await asyncio.wait_for(app.run(), timeout=10)
+    assert sink.health[0] == "link-down"
+    assert "tracking" not in sink.health
+
+
+async def test_seconds_limit_stops_an_endless_source() -> None:
+    app = CompanionApp(ListSource(10**9, period_s=0.01), Processor(), Sink(), Recorder(), "v")
+    start = time.monotonic()
+    await asyncio.wait_for(app.run(seconds=0.3), timeout=5)
+    assert time.monotonic() - start < 3.0
+    assert app.counters.frames > 0
+
+
+def inputs(**kw: Any) -> HealthInputs:
+    base: dict[str, Any] = {"now_s": 10.0, "frames_processed": 5, "last_frame_s": 9.9,
+                            "last_fix_s": 9.9, "ever_tracked": True, "link_up": True}
+    return HealthInputs(**{**base, **kw})
+
+
+@pytest.mark.parametrize(("kw", "state"), [
+    ({"frames_processed": 0, "last_frame_s": None}, "starting"),
+    ({}, "tracking"),
+    ({"link_up": False}, "link-down"),
+    ({"last_frame_s": 8.0}, "degraded"),
+    ({"bad_frame_ratio": 0.6}, "degraded"),
+    ({"last_fix_s": 8.0}, "lost"),
+    ({"last_fix_s": None, "ever_tracked": False}, "searching"),
+    ({"last_fix_s": 9.3}, "tracking"),  # 0.7 s ago: not fresh, not yet lost
+])
+def test_health_states(kw: dict[str, Any], state: str) -> None:
+    assert health_state(inputs(**kw)) == state
+
+
+async def test_latest_slot_keeps_newest_and_closes() -> None:
+    slot: LatestSlot[int] = LatestSlot()
+    slot.put(1)
+    slot.put(2)
+    assert await slot.get() == 2
+    assert slot.dropped == 1
+    slot.put(3)
+    slot.close()
+    assert await slot.get() == 3  # closing does not lose what is there
+    with pytest.raises(SlotClosedError):
+        await slot.get()
+
+
+def test_rolling_percentiles_and_rate() -> None:
+    r = Rolling(size=100)
+    assert r.percentile(50) is None
+    for v in range(1, 101):
+        r.add(v)
+    assert r.summary() == {"p50": 50.5, "p99": 99.01}
+    m = RateMeter(window_s=1.0)
+    for i in range(11):
+        m.tick(i * 0.1)
+    assert m.rate(1.0) == pytest.approx(10.0)

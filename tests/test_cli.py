@@ -1,0 +1,90 @@
+"""The ``companion`` command as a user runs it: a real subprocess."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from companion import __version__
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def companion(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "companion", *args],
+        cwd=cwd, capture_output=True, text=True, timeout=60, check=False,
+    )
+
+
+def test_version() -> None:
+    out = companion("--version")
+    assert out.returncode == 0
+    assert out.stdout.strip() == f"companion {__version__}"
+
+
+def test_help_lists_the_commands_that_exist() -> None:
+    out = companion("--help")
+    assert out.returncode == 0
+    assert "config" in out.stdout
+    assert "--set SECTION.KEY=VALUE" in out.stdout
+
+
+def test_no_command_prints_help_and_fails() -> None:
+    out = companion()
+    assert out.returncode == 2
+    assert "usage: companion" in out.stdout
+
+
+def test_wrong_type_is_one_line_exit_2_no_traceback(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[camera]\nwidth = "wide"\n')
+    out = companion("--config", str(bad), "config")
+    assert out.returncode == 2
+    assert out.stderr == f'{bad}: camera.width: expected an integer >= 1, got "wide"\n'
+    assert out.stdout == ""
+
+
+def test_unknown_key_is_one_line_exit_2(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[camera]\nfocal = 3\n")
+    out = companion("config", "--config", str(bad))  # options also after the command
+    assert out.returncode == 2
+    assert out.stderr.startswith(f"{bad}: camera.focal: unknown key (expected one of: ")
+    assert out.stderr.count("\n") == 1
+    assert "Traceback" not in out.stderr
+
+
+def test_relative_config_path_is_shown_as_given(tmp_path: Path) -> None:
+    (tmp_path / "bad.toml").write_text("[vehicle]\nprofile = 'ardupilt'\n")
+    out = companion("--config", "bad.toml", "config", cwd=tmp_path)
+    assert out.returncode == 2
+    assert out.stderr == (
+        'bad.toml: vehicle.profile: expected one of "ardupilot", "px4", got "ardupilt"\n'
+    )
+
+
+def test_config_json_shows_overrides_and_files() -> None:
+    out = companion("--set", "vehicle.id=drone7", "config", "--json")
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)
+    assert data["settings"]["vehicle"]["id"] == "drone7"
+    assert data["files"][-1].endswith("ardupilot.toml")
+
+
+def test_json_log_format_writes_json_lines(tmp_path: Path) -> None:
+    script = (
+        "import logging, sys\n"
+        "from companion.logs import setup_logging\n"
+        "setup_logging('json', 'info', sys.stdout)\n"
+        "logging.getLogger('companion.x').info('hello %s', 'there', extra={'fps': 30})\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         timeout=30, check=True, cwd=ROOT)
+    record = json.loads(out.stdout)
+    assert record["msg"] == "hello there"
+    assert record["level"] == "info"
+    assert record["logger"] == "companion.x"
+    assert record["fps"] == 30
