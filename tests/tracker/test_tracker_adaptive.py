@@ -104,18 +104,18 @@ def test_bad_box_is_a_value_error_naming_box(moving_sign: Scene, box: object, wo
 def test_bad_frames_are_value_errors_naming_image(moving_sign: Scene) -> None:
     frames, truth = moving_sign
     t = AdaptiveTracker()
-    with pytest.raises(ValueError, match="^image_bgr: .*dtype uint8"):
+    with pytest.raises(ValueError, match=r"^image_bgr: .*dtype uint8"):
         t.init(frames[0].astype(np.float32), tuple(truth[0]))
-    with pytest.raises(ValueError, match="^image_bgr: .*3 channels"):
+    with pytest.raises(ValueError, match=r"^image_bgr: .*3 channels"):
         t.init(frames[0][:, :, 0], tuple(truth[0]))
-    with pytest.raises(ValueError, match="^image_bgr: .*numpy array"):
+    with pytest.raises(ValueError, match=r"^image_bgr: .*numpy array"):
         t.init([[1, 2]], tuple(truth[0]))  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="^update: call init"):
+    with pytest.raises(ValueError, match=r"^update: call init"):
         t.update(frames[0])
     t.init(frames[0], tuple(truth[0]))
-    with pytest.raises(ValueError, match="^image_bgr: .*same size"):
+    with pytest.raises(ValueError, match=r"^image_bgr: .*same size"):
         t.update(frames[1][:100])
-    with pytest.raises(ValueError, match="^image_bgr: .*3 channels"):
+    with pytest.raises(ValueError, match=r"^image_bgr: .*3 channels"):
         t.update(np.zeros((240, 320, 4), np.uint8))
 
 
