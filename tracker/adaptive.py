@@ -20,9 +20,10 @@ import numpy.typing as npt
 
 from tracker.appearance import (
     bhattacharyya,
+    histograms_from_samples,
     joint_planes,
-    kernel_histograms,
     particle_likelihood,
+    sample_bins,
 )
 from tracker.config import TrackerConfig, check_config
 from tracker.features import GRAY_FEATURES, colour_weights, feature_bins, is_grayscale
@@ -146,8 +147,8 @@ class AdaptiveTracker:
         c = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0]
         h, w = window.patch.shape[:2]
-        x0, x1 = int(np.clip(c[0] - half[0], 0, w - 1)), int(np.clip(c[0] + half[0], 1, w))
-        y0, y1 = int(np.clip(c[1] - half[1], 0, h - 1)), int(np.clip(c[1] + half[1], 1, h))
+        x0, x1 = _clamp(c[0] - half[0], 0, w - 1), _clamp(c[0] + half[0], 1, w)
+        y0, y1 = _clamp(c[1] - half[1], 0, h - 1), _clamp(c[1] + half[1], 1, h)
         region = window.patch[y0 : max(y1, y0 + 1), x0 : max(x1, x0 + 1)]
         return np.maximum(region.reshape(-1, 3).mean(axis=0), 1.0)
 
@@ -234,16 +235,17 @@ class AdaptiveTracker:
     ) -> FloatArray:
         """Kernel histograms (eq. 2) of the appearance model: joint or per-feature."""
         cfg = self.config
+        samples = sample_bins(planes, centres, halves, cfg.sample_grid)
         if cfg.appearance == "joint":
-            joint = joint_planes(planes, cfg.bins, cfg.joint_bins)
+            joint = joint_planes(samples, cfg.bins, cfg.joint_bins)
             nbins = cfg.joint_bins ** planes.shape[0]
-            return kernel_histograms(joint, centres, halves, cfg.sample_grid, nbins)
-        return kernel_histograms(planes, centres, halves, cfg.sample_grid, cfg.bins)
+            return histograms_from_samples(joint, cfg.sample_grid, nbins)
+        return histograms_from_samples(samples, cfg.sample_grid, cfg.bins)
 
     def _confidence(self, rho: FloatArray) -> FloatArray:
         """Calibrated confidence: 0 at the background's similarity, 1 at the first frame's."""
         m = self._model
-        return np.clip((rho - m.rho_bg) / (m.rho_ref - m.rho_bg), 0.0, 1.0)
+        return np.minimum(np.maximum((rho - m.rho_bg) / (m.rho_ref - m.rho_bg), 0.0), 1.0)
 
     def _model_hist(self) -> FloatArray:
         a = self.config.anchor_weight
@@ -375,6 +377,10 @@ class AdaptiveTracker:
             cue=self._cue,
             particles=self.config.particles,
         )
+
+
+def _clamp(value: float, low: int, high: int) -> int:
+    return int(min(max(value, low), high))
 
 
 def feature_weights(feature_id: int) -> tuple[int, int, int]:

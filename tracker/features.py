@@ -84,7 +84,7 @@ def colour_feature_bins(
         span = values.max(axis=0) - low
         values = (values - low) * (bins / np.maximum(span * (1.0 + 1.0 / bins), 1e-3))
     out = values.astype(np.intp).T.reshape(len(ids), h, w)
-    np.clip(out, 0, bins - 1, out=out)
+    np.minimum(np.maximum(out, 0, out=out), bins - 1, out=out)
     return out
 
 

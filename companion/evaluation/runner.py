@@ -77,7 +77,7 @@ def run_frames(
     start = int(np.argmax(vis))
     first = sequence.truth[start]
     tracker.init(images[start], (first[0], first[1], first[2], first[3]))
-    boxes: list[Box | None] = [tuple(first)]  # type: ignore[list-item]
+    boxes: list[Box | None] = [(first[0], first[1], first[2], first[3])]
     conf = [1.0]
     times: list[float] = []
     last: TrackResult | None = None
