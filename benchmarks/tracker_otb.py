@@ -48,6 +48,10 @@ def _variants(ablation: bool) -> dict[str, TrackerConfig | None]:
     return out
 
 
+def _mean(runs: list, key: str) -> float:
+    return float(np.mean([getattr(r.scores, key) for r in runs]))
+
+
 def main() -> int:
     root = Path(__file__).resolve().parents[1]
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -87,13 +91,12 @@ def main() -> int:
                 )
                 runs.append(run_frames(tracker, name, seq, images))
             auc = [r.scores.success_auc for r in runs]
-            mean = lambda key: float(np.mean([getattr(r.scores, key) for r in runs]))  # noqa: E731
             ms = float(np.median([r.median_ms_per_update for r in runs]))
             print(
                 f"| {seq.name} ({size}) | {name} | {np.mean(auc):.3f} | {min(auc):.3f}-"
-                f"{max(auc):.3f} | {mean('precision_20px'):.3f} | "
-                f"{mean('mean_centre_error_px'):.1f} | {mean('mean_error_x_px'):.2f} / "
-                f"{mean('mean_error_y_px'):.2f} | {max(r.scores.frames_lost for r in runs)} | "
+                f"{max(auc):.3f} | {_mean(runs, 'precision_20px'):.3f} | "
+                f"{_mean(runs, 'mean_centre_error_px'):.1f} | {_mean(runs, 'mean_error_x_px'):.2f} / "
+                f"{_mean(runs, 'mean_error_y_px'):.2f} | {max(r.scores.frames_lost for r in runs)} | "
                 f"{ms:.2f} | {1e3 / ms:.0f} | {runs[0].particles} | {runs[0].cue} |",
                 flush=True,
             )

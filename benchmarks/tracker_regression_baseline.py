@@ -1,6 +1,8 @@
 """Rewrite the committed regression baseline (tests/tracker/regression_baseline.json).
 
-Run after an intended accuracy change:  PYTHONPATH=. python benchmarks/tracker_regression_baseline.py
+Run after an intended accuracy change:
+
+    PYTHONPATH=. python benchmarks/tracker_regression_baseline.py
 """
 
 from __future__ import annotations

@@ -137,7 +137,8 @@ class MeanShiftTracker(_FixedHistogramTracker):
         half = self._half(self._state[None, 2], window)
         for _ in range(cfg.mean_shift_iterations):
             p = kernel_histograms(planes, centre, half, cfg.sample_grid, self._bins)[0, 0]
-            ratio = np.sqrt(self._model[0] / np.maximum(p, 1e-12)).astype(np.float32)
+            ratio = np.where(p > 0, np.sqrt(self._model[0] / np.maximum(p, 1e-12)), 0.0)
+            ratio = ratio.astype(np.float32)  # pixels in bins the window never sampled: 0
             moved = mean_shift(integral_images(ratio[planes[0]]), centre, half, 1)
             step = float(np.abs(moved - centre).max())
             centre = moved
