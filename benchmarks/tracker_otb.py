@@ -95,8 +95,9 @@ def main() -> int:
             print(
                 f"| {seq.name} ({size}) | {name} | {np.mean(auc):.3f} | {min(auc):.3f}-"
                 f"{max(auc):.3f} | {_mean(runs, 'precision_20px'):.3f} | "
-                f"{_mean(runs, 'mean_centre_error_px'):.1f} | {_mean(runs, 'mean_error_x_px'):.2f} / "
-                f"{_mean(runs, 'mean_error_y_px'):.2f} | {max(r.scores.frames_lost for r in runs)} | "
+                f"{_mean(runs, 'mean_centre_error_px'):.1f} | "
+                f"{_mean(runs, 'mean_error_x_px'):.2f} / {_mean(runs, 'mean_error_y_px'):.2f} | "
+                f"{max(r.scores.frames_lost for r in runs)} | "
                 f"{ms:.2f} | {1e3 / ms:.0f} | {runs[0].particles} | {runs[0].cue} |",
                 flush=True,
             )
