@@ -16,8 +16,6 @@ import numpy.typing as npt
 from tracker.appearance import bhattacharyya, kernel_histograms, particle_likelihood
 from tracker.features import is_grayscale
 from tracker.particles import (
-    integral_images,
-    mean_shift,
     propagate,
     systematic_resample,
     weighted_estimate,
