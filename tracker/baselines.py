@@ -180,9 +180,9 @@ def _dense_kernel(
     ys = np.arange(y0, y1, dtype=np.float64)[:, None] + 0.5
     r2 = ((xs - centre[0]) / half[0]) ** 2 + ((ys - centre[1]) / half[1]) ** 2
     k = np.maximum(1.0 - r2, 0.0)  # eq. 3
-    hist = np.bincount(region.ravel(), k.ravel(), minlength=bins)
-    total = hist.sum()
-    hist = hist / total if total > 0 else np.full(bins, 1.0 / bins)
+    counts = np.bincount(region.ravel(), k.ravel(), minlength=bins).astype(np.float64)
+    total = float(counts.sum())
+    hist: FloatArray = counts / total if total > 0 else np.full(bins, 1.0 / bins)
     xs_full = np.broadcast_to(xs, region.shape)
     ys_full = np.broadcast_to(ys, region.shape)
     return hist, region, xs_full, ys_full, (k > 0).astype(np.float64)
