@@ -75,38 +75,54 @@ class ReferenceMatcher:
         check_image(image_bgr, "image_bgr")
         h, w = image_bgr.shape[:2]
         scale = min(1.0, self.config.reference_max_side_px / max(h, w))
-        small = cv2.resize(image_bgr, (max(1, round(w * scale)), max(1, round(h * scale))),
-                           interpolation=cv2.INTER_AREA) if scale < 1.0 else image_bgr
+        small = (
+            cv2.resize(
+                image_bgr,
+                (max(1, round(w * scale)), max(1, round(h * scale))),
+                interpolation=cv2.INTER_AREA,
+            )
+            if scale < 1.0
+            else image_bgr
+        )
         kps, desc = self._orb.detectAndCompute(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), None)
         if desc is None or len(kps) < self.config.min_inliers:
-            raise ValueError(f"image_bgr: the reference of {landmark_id!r} has "
-                             f"{0 if desc is None else len(kps)} keypoints; expected at least "
-                             f"{self.config.min_inliers} (too little texture to match)")
+            raise ValueError(
+                f"image_bgr: the reference of {landmark_id!r} has "
+                f"{0 if desc is None else len(kps)} keypoints; expected at least "
+                f"{self.config.min_inliers} (too little texture to match)"
+            )
         pts = np.array([kp.pt for kp in kps], np.float32) / np.float32(scale)
         gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
         ref = Reference(landmark_id, (w, h), pts, np.asarray(desc, np.uint8), gray)
         self.references[landmark_id] = ref
         return ref
 
-    def find(self, image_bgr: npt.NDArray[np.uint8],
-             landmark_ids: list[str] | None = None) -> list[Match]:
+    def find(
+        self, image_bgr: npt.NDArray[np.uint8], landmark_ids: list[str] | None = None
+    ) -> list[Match]:
         """Verified matches of the given references (all when None), best first."""
         check_image(image_bgr, "image_bgr")
-        kps, desc = self._orb.detectAndCompute(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY),
-                                               None)
+        kps, desc = self._orb.detectAndCompute(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY), None)
         if desc is None or len(kps) < self.config.min_inliers:
             return []
         frame_pts = np.array([kp.pt for kp in kps], np.float32)
         frame_gray = np.asarray(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY), np.uint8)
         ids = self.references if landmark_ids is None else landmark_ids
         frame_desc = np.asarray(desc, np.uint8)
-        found = [self._match_one(self.references[i], frame_pts, frame_desc, frame_gray)
-                 for i in ids if i in self.references]
+        found = [
+            self._match_one(self.references[i], frame_pts, frame_desc, frame_gray)
+            for i in ids
+            if i in self.references
+        ]
         return sorted((m for m in found if m is not None), key=lambda m: -m.inliers)
 
-    def _match_one(self, ref: Reference, frame_pts: npt.NDArray[np.float32],
-                   frame_desc: npt.NDArray[np.uint8],
-                   frame_gray: npt.NDArray[np.uint8]) -> Match | None:
+    def _match_one(
+        self,
+        ref: Reference,
+        frame_pts: npt.NDArray[np.float32],
+        frame_desc: npt.NDArray[np.uint8],
+        frame_gray: npt.NDArray[np.uint8],
+    ) -> Match | None:
         cfg = self.config
         pairs = self._matcher.knnMatch(ref.descriptors, frame_desc, k=2)
         good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < cfg.ratio * p[1].distance]
@@ -131,19 +147,20 @@ class ReferenceMatcher:
         if cfg.refine_ecc:
             hom = refine_ecc(ref, frame_gray, hom, cfg.ecc_iterations)
         corners_ref = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float64).reshape(-1, 1, 2)
-        corners = np.asarray(cv2.perspectiveTransform(corners_ref, hom).reshape(4, 2),
-                             np.float64)
+        corners = np.asarray(cv2.perspectiveTransform(corners_ref, hom).reshape(4, 2), np.float64)
         if not plausible_quad(corners, (w, h), cfg):
             return None
         x0, y0 = corners.min(axis=0)
         x1, y1 = corners.max(axis=0)
         box = (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
-        return Match(ref.landmark_id, corners, box, inliers, inliers / len(good),
-                     np.asarray(hom, np.float64))
+        return Match(
+            ref.landmark_id, corners, box, inliers, inliers / len(good), np.asarray(hom, np.float64)
+        )
 
 
-def refine_ecc(ref: Reference, frame_gray: npt.NDArray[np.uint8], hom: FloatArray,
-               iterations: int = 40) -> FloatArray:
+def refine_ecc(
+    ref: Reference, frame_gray: npt.NDArray[np.uint8], hom: FloatArray, iterations: int = 40
+) -> FloatArray:
     """Sub-pixel homography by ECC image alignment, started from the feature estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
@@ -153,8 +170,9 @@ def refine_ecc(ref: Reference, frame_gray: npt.NDArray[np.uint8], hom: FloatArra
     warp = (hom / hom[2, 2]).astype(np.float32)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
     try:
-        _, warp = cv2.findTransformECC(ref.gray, frame_gray.astype(np.float32), warp,
-                                       cv2.MOTION_HOMOGRAPHY, criteria)
+        _, warp = cv2.findTransformECC(
+            ref.gray, frame_gray.astype(np.float32), warp, cv2.MOTION_HOMOGRAPHY, criteria
+        )
     except cv2.error:
         return hom
     out = warp.astype(np.float64)
@@ -166,8 +184,10 @@ def plausible_quad(corners: FloatArray, ref_size: tuple[int, int], cfg: AcquireC
     if not np.all(np.isfinite(corners)):
         return False
     edges = np.roll(corners, -1, axis=0) - corners
-    cross = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(
-        edges, -1, axis=0)[:, 0]
+    cross = (
+        edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1]
+        - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
+    )
     if not np.all(cross > 0):  # image y points down: a clockwise-drawn quad has cross > 0
         return False
     sides = np.linalg.norm(edges, axis=1)

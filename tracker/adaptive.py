@@ -82,6 +82,7 @@ class AdaptiveTracker:
         self._candidates = GRAY_FEATURES if self._cue == "grayscale" else tuple(range(49))
         self._first = (window, self._state.copy())
         self._ref_mean = self._box_mean(window, self._state)
+        self._ref_frame_mean = _frame_mean(image)
         self._gain = np.ones(3)
         self._p_first: FloatArray | None = None
         self._model = self._rank(window, self._state)
@@ -143,9 +144,9 @@ class AdaptiveTracker:
         return cut_window(image, (state[0], state[1]), extent, factor)
 
     def _box_mean(self, window: Window, state: FloatArray) -> FloatArray:
-        """Mean BGR of the box ``state`` inside the window's patch."""
+        """Mean BGR of the central part (``gain_core_frac`` of the size) of the box ``state``."""
         c = window.to_patch(state[None, :2])[0]
-        half = self._half(state[2], window)[0]
+        half = self._half(state[2], window)[0] * self.config.gain_core_frac
         h, w = window.patch.shape[:2]
         x0, x1 = _clamp(c[0] - half[0], 0, w - 1), _clamp(c[0] + half[0], 1, w)
         y0, y1 = _clamp(c[1] - half[1], 0, h - 1), _clamp(c[1] + half[1], 1, h)
@@ -161,6 +162,14 @@ class AdaptiveTracker:
         gain = (1.0 + excess).astype(np.float32)  # a dead band keeps small drifts uncorrected
         patch = np.clip(window.patch * gain, 0, 255).astype(np.uint8)
         return Window(window.x0, window.y0, window.fx, window.fy, patch)
+
+    def _frame_gain(self, image: npt.NDArray[np.uint8]) -> None:
+        """gain <- (1-r) gain + r * (first frame's mean / this frame's mean), on a 1/8 grid."""
+        ratio = self._ref_frame_mean / _frame_mean(image)
+        if self.config.gain_mode == "grey":
+            ratio = np.full(3, float(self._ref_frame_mean.sum() / _frame_mean(image).sum()))
+        rate = self.config.gain_rate
+        self._gain = (1.0 - rate) * self._gain + rate * np.clip(ratio, 0.25, 4.0)
 
     def _update_gain(self, raw: Window, state: FloatArray) -> None:
         """gain <- (1-r) gain + r * (first-frame target mean / current target mean)."""
@@ -270,6 +279,8 @@ class AdaptiveTracker:
         if cfg.drift_gain > 0 and len(self._history) >= 2:  # CONDENSATION drift: mean velocity
             steps = np.diff(np.asarray(self._history), axis=0)
             particles[:, :2] += cfg.drift_gain * steps.mean(axis=0)
+        if cfg.gain_source == "frame":
+            self._frame_gain(image)
         raw = self._window(image, self._state, 2.0 * noise, 1.0)
         window = self._compensated(raw)
         planes, lik = self._likelihood(window)
@@ -298,7 +309,8 @@ class AdaptiveTracker:
         best = int(np.argmax(rhos))
         self._particles = particles[systematic_resample(kept, self.rng)]
         result = self._accept(window, candidates[best], cand_hists[best], float(rhos[best]))
-        if result.box is not None and result.confidence >= cfg.lost_below_confidence:
+        trusted = result.box is not None and result.confidence >= cfg.lost_below_confidence
+        if cfg.gain_source == "target" and trusted:
             self._update_gain(raw, candidates[best])
         return result
 
@@ -377,6 +389,11 @@ class AdaptiveTracker:
             cue=self._cue,
             particles=self.config.particles,
         )
+
+
+def _frame_mean(image: npt.NDArray[np.uint8]) -> FloatArray:
+    """Mean BGR of the frame sampled on every 8th row and column (cheap, robust to motion)."""
+    return np.maximum(image[::8, ::8].reshape(-1, 3).mean(axis=0), 1.0)
 
 
 def _clamp(value: float, low: int, high: int) -> int:

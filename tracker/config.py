@@ -25,6 +25,8 @@ class TrackerConfig:
     bins: int = field(default=16, metadata={"ge": 4, "le": 256})
     stretch_features: bool = False
     gain_compensation: bool = True
+    gain_source: Literal["frame", "target"] = "target"
+    gain_core_frac: float = field(default=1.0, metadata={"gt": 0.0, "le": 1.0})
     gain_mode: Literal["grey", "colour"] = "grey"
     gain_deadband: float = field(default=0.0, metadata={"ge": 0.0, "lt": 1.0})
     gain_rate: float = field(default=0.3, metadata={"gt": 0.0, "le": 1.0})
