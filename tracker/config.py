@@ -40,7 +40,7 @@ class TrackerConfig:
     model_update_rate: float = field(default=0.05, metadata={"ge": 0.0, "le": 1.0})
     ring_area_ratio: float = field(default=1.0, metadata={"gt": 0.0, "le": 8.0})
     loglik_floor: float = field(default=0.001, metadata={"gt": 0.0, "lt": 1.0})
-    llr_gain: float = field(default=0.0, metadata={"ge": 0.0})
+    llr_gain: float = field(default=1.5, metadata={"ge": 0.0})
     omega: float = field(default=50.0, metadata={"gt": 0.0})
     weight_threshold: float = field(default=0.02, metadata={"ge": 0.0, "lt": 1.0})
     motion_history_frames: int = field(default=5, metadata={"ge": 1})
