@@ -318,7 +318,7 @@ class AdaptiveTracker:
         self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
     ) -> FloatArray:
         """``exp(gain * (mean LLR in box - max over particles))``: the likelihood image's vote."""
-        table = cv2.integral(lik, sdepth=cv2.CV_64F)[None]  # (1, H+1, W+1)
+        table: FloatArray = np.asarray(cv2.integral(lik, sdepth=cv2.CV_64F), np.float64)[None]
         sums, area = window_sums(table, centres, halves)
         mean = sums[0] / np.maximum(area, 1.0)
         return np.exp(self.config.llr_gain * (mean - mean.max()))
