@@ -48,6 +48,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write report.md with a table and PNG plots into DIR",
     )
     parser.add_argument(
+        "--landmark",
+        metavar="ID",
+        help="landmark id to follow in recorded streams (default: the first in truth_boxes.csv)",
+    )
+    parser.add_argument(
         "--seed",
         type=int,
         default=0,
@@ -92,7 +97,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     """Evaluate; print the markdown table; optionally write JSON and the report."""
     names = _tracker_names(args.trackers)
     cv2.setNumThreads(1)  # per-target speed on one core, as the benchmarks report it
-    sequences = [load_sequence(folder) for folder in args.sequences]
+    sequences = [load_sequence(folder, args.landmark) for folder in args.sequences]
     progress = _Progress(sum(len(s.frames) - 1 for s in sequences) * len(names))
     results: list[RunResult] = []
     firsts = []

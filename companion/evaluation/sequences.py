@@ -66,6 +66,8 @@ def load_stream(folder: Path, landmark_id: str | None = None) -> Sequence:
         raise InputError(f"{folder}: has no truth_boxes.csv to evaluate against")
     if landmark_id is None:
         landmark_id = next(b.landmark_id for i in sorted(boxes) for b in boxes[i])
+    if not any(b.landmark_id == landmark_id for bs in boxes.values() for b in bs):
+        raise InputError(f"{folder}: truth_boxes.csv has no landmark {landmark_id!r}")
     truth = np.full((len(entries), 4), np.nan)
     for row, entry in enumerate(entries):
         for b in boxes.get(entry.index, []):
@@ -76,10 +78,13 @@ def load_stream(folder: Path, landmark_id: str | None = None) -> Sequence:
     )
 
 
-def load_sequence(folder: Path) -> Sequence:
-    """Load a folder in either layout (recorded stream if it has ``stream.toml``)."""
+def load_sequence(folder: Path, landmark_id: str | None = None) -> Sequence:
+    """Load a folder in either layout (recorded stream if it has ``stream.toml``).
+
+    ``landmark_id`` picks the target of a recorded stream (default: the first in the file).
+    """
     if (folder / "stream.toml").is_file():
-        return load_stream(folder)
+        return load_stream(folder, landmark_id)
     if (folder / "groundtruth_rect.txt").is_file():
         return load_otb(folder)
     raise InputError(

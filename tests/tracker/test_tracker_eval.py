@@ -76,3 +76,31 @@ def test_unknown_tracker_is_an_input_error(otb_folder: Path) -> None:
     args = parser.parse_args(["eval", str(otb_folder), "--trackers", "adaptive,kcf"])
     with pytest.raises(InputError, match="--trackers"):
         eval_cmd.run(args, Settings())
+
+
+@pytest.fixture(scope="module")
+def stream_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A short recorded stream written by the simulator (companion synth)."""
+    import dataclasses
+
+    from companion.sim.scenario import load_scenario
+    from companion.sim.simulator import Simulator
+    from companion.sim.synth import synth_stream
+
+    scenario = dataclasses.replace(load_scenario("hover"), seconds=0.3, fps=20.0)
+    out = tmp_path_factory.mktemp("stream") / "hover"
+    synth_stream(Simulator(scenario), out, image_format="jpg")
+    return out
+
+
+def test_recorded_stream_truth_follows_one_landmark(stream_folder: Path) -> None:
+    seq = load_sequence(stream_folder)
+    assert len(seq.frames) == 6 and seq.truth.shape == (6, 4)
+    landmark = seq.name.split(":")[1]
+    rows = [
+        line.split(",") for line in (stream_folder / "truth_boxes.csv").read_text().splitlines()[1:]
+    ]
+    first = next(r for r in rows if r[0] == "0" and r[1] == landmark)
+    assert np.allclose(seq.truth[0], [float(v) for v in first[2:6]])
+    with pytest.raises(InputError, match="no landmark 'nope'"):
+        load_sequence(stream_folder, "nope")
