@@ -157,7 +157,9 @@ class AdaptiveTracker:
         """The window with the illumination gain removed (per channel, clipped to 0..255)."""
         band = self.config.gain_deadband
         excess = np.sign(self._gain - 1.0) * np.maximum(np.abs(self._gain - 1.0) - band, 0.0)
-        if not self.config.gain_compensation or np.abs(excess).max() < 0.01:
+        mode = self.config.gain_compensation
+        off = mode == "never" or (mode == "colour" and self._cue != "colour")
+        if off or np.abs(excess).max() < 0.01:
             return window
         gain = (1.0 + excess).astype(np.float32)  # a dead band keeps small drifts uncorrected
         patch = np.clip(window.patch * gain, 0, 255).astype(np.uint8)
@@ -269,6 +271,7 @@ class AdaptiveTracker:
             cfg.motion_gain,
             cfg.motion_min_frac * side,
             cfg.motion_max_frac * side,
+            cfg.motion_initial_frac * side,
         )
 
     def _track(self, image: npt.NDArray[np.uint8]) -> TrackResult:

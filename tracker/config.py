@@ -24,7 +24,7 @@ class TrackerConfig:
     mean_shift_iterations: int = field(default=4, metadata={"ge": 0, "le": 50})
     bins: int = field(default=16, metadata={"ge": 4, "le": 256})
     stretch_features: bool = False
-    gain_compensation: bool = True
+    gain_compensation: Literal["colour", "always", "never"] = "colour"
     gain_source: Literal["frame", "target"] = "target"
     gain_core_frac: float = field(default=1.0, metadata={"gt": 0.0, "le": 1.0})
     gain_mode: Literal["grey", "colour"] = "grey"
@@ -47,6 +47,7 @@ class TrackerConfig:
     drift_gain: float = field(default=0.5, metadata={"ge": 0.0, "le": 2.0})
     motion_gain: float = field(default=1.0, metadata={"gt": 0.0})
     motion_min_frac: float = field(default=0.04, metadata={"ge": 0.0})
+    motion_initial_frac: float = field(default=0.5, metadata={"ge": 0.0})
     motion_max_frac: float = field(default=0.5, metadata={"gt": 0.0})
     scale_noise: float = field(default=0.01, metadata={"ge": 0.0, "le": 0.5})
     min_scale: float = field(default=0.3, metadata={"gt": 0.0})

@@ -13,14 +13,20 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def motion_noise(
-    centres: list[tuple[float, float]], frames: int, gain: float, low: float, high: float
+    centres: list[tuple[float, float]],
+    frames: int,
+    gain: float,
+    low: float,
+    high: float,
+    initial: float | None = None,
 ) -> float:
     """Eq. 1: ``lambda_t = gain * (1/n) sum_{i} |u_i - u_{i-1}|`` over the last n steps.
 
     ``centres`` are the estimated centres, oldest first; the result is clipped to [low, high].
+    With no step yet it is ``initial`` (default ``high``).
     """
     if len(centres) < 2:
-        return float(high)
+        return float(initial if initial is not None else high)
     recent = np.asarray(centres[-(frames + 1) :], dtype=np.float64)
     steps = np.linalg.norm(np.diff(recent, axis=0), axis=1)
     return float(min(max(gain * steps.mean(), low), high))
