@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp
-from companion.autopilot import BridgeSink, attitude_sample
+from companion.autopilot import AttitudeHistory, BridgeSink
 from companion.flightlog import FlightLogWriter
 from companion.monitoring.publisher import MonitorPublisher
 from companion.perception import Perception, SideSensors
@@ -77,7 +77,8 @@ def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarr
     """The practical map (NED) and appearance references of the simulated world."""
     landmarks, references = [], {}
     for lm in sim.world.landmarks:
-        landmarks.append(MapLandmark(lm.landmark_id, tuple(float(v) for v in lm.centre_ned),
+        c = lm.centre_ned
+        landmarks.append(MapLandmark(lm.landmark_id, (float(c[0]), float(c[1]), float(c[2])),
                                      lm.width_m, lm.height_m, lm.facing_deg, lm.category))
         if lm.quad.texture is not None:
             references[lm.landmark_id] = lm.quad.texture
@@ -92,8 +93,9 @@ def autopilot_truth(source: SimCameraSource) -> Callable[[float], AutopilotState
         t = 0.0 if t0 is None else max(0.0, (time.monotonic_ns() // 1000 - t0) / 1e6)
         s = source.sim.state_at(t)
         rng = source.sim.rangefinder.measure(s, np.random.default_rng(int(t * 1000)))
+        # a dropout reads as out of range (DISTANCE_SENSOR max_distance 40 m)
         return AutopilotState(t, s.position_ned_m, s.velocity_ned_m_s, s.attitude_rpy_rad,
-                              float(rng) if rng is not None else float("nan"))
+                              float(rng) if rng is not None else 40.0)
 
     return truth
 
@@ -116,10 +118,13 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     bridge = create_bridge(mav_cfg)
     await bridge.start()
     await bridge.wait_link(True, timeout_s=5.0)
+    attitude = AttitudeHistory(bridge)
+    attitude.start()
     perception = Perception(sim.scenario.camera, landmarks, references,
-                            sensors=lambda: SideSensors(attitude=attitude_sample(bridge)),
+                            sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
                             config=settings.perception, tracker_config=settings.tracker,
-                            pose_config=settings.pose, acquire_config=settings.acquire)
+                            pose_config=settings.pose, acquire_config=settings.acquire,
+                            gate_config=settings.fixgate)
     recorder = TruthRecorder(perception, source, {lm.landmark_id: lm for lm in landmarks})
     reporter = _reporter(settings, landmarks)
     app = CompanionApp(source, recorder, BridgeSink(bridge), reporter, settings.vehicle.id)
@@ -131,6 +136,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
         ticker.cancel()
         await asyncio.gather(ticker, return_exceptions=True)
         cpu1, wall1 = os.times(), time.monotonic()
+        await attitude.stop()
         await bridge.stop()
         await fake.stop()
         reporter.close()
@@ -196,6 +202,8 @@ def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result
         "latency_p99_ms": lat.summary()["p99"],
         "dropped_frames": app.dropped_frames + source.status.skipped,
         "cpu_cores_busy": round(cpu_cores_busy, 3),
+        "stage_ms": {"capture_to_worker": app.stats.queue_ms.summary(),
+                     "process": app.stats.process_ms.summary()},
         "no_fix_frames": app.counters.no_fix,
         "autopilot_rejections": fake.summary()["vision_reasons"],
         "bridge": {k: v for k, v in bridge.stats().items() if isinstance(v, int | float | str)},
