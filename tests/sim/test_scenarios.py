@@ -112,3 +112,17 @@ async def test_synth_writes_a_stream_that_replays_with_truth(tmp_path: Path) -> 
     _, pose = read_truth_pose(tmp_path / "s")[2]
     assert pose.east_m == pytest.approx(sim.state_at(2 / 6.0).position_ned_m[1], abs=1e-6)
     assert source.meta.origin is not None and source.meta.provenance["scenario"] == "occlusion"
+
+
+def test_autopilot_truth_matches_the_camera_truth() -> None:
+    sim = Simulator(load_scenario("survey"))
+    _, truth = sim.render(300)  # t = 10 s
+    ap = sim.autopilot_truth(10.0)
+    assert truth.pose is not None
+    assert ap.position_ned_m == (truth.pose.north_m, truth.pose.east_m, truth.pose.down_m)
+    assert ap.attitude_rpy_rad == (truth.pose.roll_rad, truth.pose.pitch_rad, truth.pose.yaw_rad)
+    assert ap.velocity_ned_m_s[0] == pytest.approx(1.6)
+    readings = [sim.autopilot_truth(10.0 + k / 1000).range_m for k in range(200)]
+    good = [r for r in readings if r <= sim.rangefinder.config.max_range_m]
+    assert 0 < len(readings) - len(good) < 20  # 2 % dropouts read out of range
+    assert np.mean(good) == pytest.approx(4.0 / np.cos(ap.attitude_rpy_rad[1]), abs=0.01)
