@@ -29,6 +29,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "config_cmd",
     "synth_cmd",
     "record_cmd",
+    "fake_autopilot_cmd",
+    "landmarks_cmd",
 )
 
 log = logging.getLogger("companion")
