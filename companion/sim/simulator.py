@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -16,23 +16,10 @@ from companion.sim.trajectory import Trajectory, VehicleState
 from companion.sim.world import World, load_landmark_map
 from companion.sources.base import ImageU8
 from companion.sources.stream_format import FrameTruth, StreamMeta
+from mavlink_bridge.vehicle import TruthFn
+from mavlink_bridge.vehicle import VehicleState as AutopilotState
 
 RANGE_STREAM = 7919  # keeps range-finder randomness apart from effect randomness
-
-
-@dataclass(frozen=True)
-class AutopilotTruth:
-    """The fake autopilot's view of the truth, field for field its ``VehicleState``.
-
-    ``range_m`` is the range finder's reading; a dropout or no return reads
-    ``max_range_m + 1`` (out of range, as a DISTANCE_SENSOR reports "no reading").
-    """
-
-    time_s: float
-    position_ned_m: tuple[float, float, float]
-    velocity_ned_m_s: tuple[float, float, float]
-    attitude_rpy_rad: tuple[float, float, float]
-    range_m: float
 
 
 class Simulator:
@@ -65,18 +52,25 @@ class Simulator:
         """The vehicle state at ``t_s`` scenario seconds (shared with the fake autopilot)."""
         return self.trajectory.state_at(t_s)
 
-    def autopilot_truth(self, t_s: float) -> AutopilotTruth:
-        """Truth for the fake autopilot at ``t_s`` (deterministic per millisecond and seed).
+    def autopilot_truth(self, t_s: float) -> AutopilotState:
+        """Truth for the fake autopilot at ``t_s``: hand ``simulator.autopilot_truth`` (a
+        ``mavlink_bridge.vehicle.TruthFn``) to ``FakeAutopilot(config, truth=...)``.
 
-        The app hands ``lambda t: mavlink_bridge.vehicle.VehicleState(**asdict(
-        sim.autopilot_truth(t)))`` to the fake autopilot.
+        ``range_m`` is the range finder's reading (deterministic per millisecond and seed);
+        a dropout or no return reads ``max_range_m + 1``: out of range, which is how a
+        DISTANCE_SENSOR says "no reading".
         """
         state = self.state_at(t_s)
         rng = np.random.default_rng([self.scenario.seed, round(t_s * 1000.0), RANGE_STREAM])
         reading = self.rangefinder.measure(state, rng)
         range_m = self.rangefinder.config.max_range_m + 1.0 if reading is None else reading
-        return AutopilotTruth(t_s, state.position_ned_m, state.velocity_ned_m_s,
+        return AutopilotState(t_s, state.position_ned_m, state.velocity_ned_m_s,
                               state.attitude_rpy_rad, range_m)
+
+    @property
+    def truth_fn(self) -> TruthFn:
+        """:meth:`autopilot_truth` typed as the fake autopilot's ``TruthFn``."""
+        return self.autopilot_truth
 
     def render(self, index: int, t_s: float | None = None) -> tuple[ImageU8, FrameTruth]:
         """Frame ``index`` at ``t_s`` (default ``index / fps``) and its truth."""
