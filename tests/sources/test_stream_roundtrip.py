@@ -78,6 +78,27 @@ async def test_png_round_trip_is_bit_exact(tmp_path: Path) -> None:
     assert source.status.delivered == 5 and source.status.skipped == 0
 
 
+async def test_ffv1_video_stream_round_trip_is_bit_exact(tmp_path: Path) -> None:
+    frames = make_frames(4, seed=2)
+    write_stream(tmp_path / "s", frames, fmt="ffv1")
+    assert (tmp_path / "s" / "frames.csv").read_text().splitlines()[2].endswith("frames.mkv#1")
+    source = RecordedStreamSource(tmp_path / "s", realtime=False, loop=True)
+    got = [await source.recv() for _ in range(6)]  # the loop reopens the video
+    source.close()
+    for a, b in zip(got, [*frames, *frames[:2]], strict=True):
+        assert np.array_equal(a.image, b.image)
+    assert got[5].index == 5
+
+
+async def test_missing_video_frames_are_skipped(tmp_path: Path) -> None:
+    write_stream(tmp_path / "s", make_frames(2), fmt="ffv1")
+    csv = tmp_path / "s" / "frames.csv"
+    csv.write_text(csv.read_text() + "2,2000000,frames.mkv#9\n3,3000000,gone.mkv#0\n")
+    source = RecordedStreamSource(tmp_path / "s", realtime=False)
+    assert len(await read_all(source)) == 2
+    assert source.status.skip_reasons == {"missing": 2}
+
+
 async def test_jpeg_round_trip_is_close(tmp_path: Path) -> None:
     frames = [Frame(i, i * 10, np.full((48, 64, 3), 40 * i, np.uint8)) for i in range(3)]
     write_stream(tmp_path / "s", frames, fmt="jpg")
