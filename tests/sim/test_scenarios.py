@@ -126,3 +126,11 @@ def test_autopilot_truth_matches_the_camera_truth() -> None:
     good = [r for r in readings if r <= sim.rangefinder.config.max_range_m]
     assert 0 < len(readings) - len(good) < 20  # 2 % dropouts read out of range
     assert np.mean(good) == pytest.approx(4.0 / np.cos(ap.attitude_rpy_rad[1]), abs=0.01)
+
+
+async def test_sim_source_that_falls_behind_drops_late_frames() -> None:
+    sim = Simulator(dataclasses.replace(load_scenario("hover"), seconds=10.0, fps=2000.0))
+    source = SimCameraSource(sim, realtime=True)
+    frames = [await source.recv() for _ in range(3)]
+    assert frames[2].index - frames[0].index > 2  # rendering takes longer than 0.5 ms
+    assert source.status.skip_reasons["late"] == frames[2].index - 2
