@@ -252,7 +252,8 @@ def open_csv(
 
 
 def _f(v: float, digits: int) -> str:
-    return f"{v:.{digits}f}"
+    text = f"{v:.{digits}f}"
+    return text[1:] if text.startswith("-") and not text.strip("-0.") else text  # no "-0.0"
 
 
 def box_row(index: int, box: TruthBox) -> list[str]:
