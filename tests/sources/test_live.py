@@ -129,6 +129,13 @@ async def test_real_missing_camera_device_is_a_source_error() -> None:
         await CameraSource.open("/dev/video-does-not-exist", open_timeout_s=5.0)
 
 
+async def test_gstreamer_pipeline_without_gstreamer_support_says_so() -> None:
+    if cv2.videoio_registry.hasBackend(cv2.CAP_GSTREAMER):
+        pytest.skip("this OpenCV has GStreamer")
+    with pytest.raises(SourceError, match="no GSTREAMER support"):
+        await CameraSource.open("videotestsrc ! appsink")
+
+
 def test_camera_targets() -> None:
     assert camera_target("2") == (2, cv2.CAP_ANY)
     assert camera_target("/dev/video1") == ("/dev/video1", cv2.CAP_V4L2)
