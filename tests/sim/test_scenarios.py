@@ -128,6 +128,21 @@ def test_autopilot_truth_matches_the_camera_truth() -> None:
     assert np.mean(good) == pytest.approx(4.0 / np.cos(ap.attitude_rpy_rad[1]), abs=0.01)
 
 
+async def test_sim_source_shares_a_given_clock() -> None:
+    from companion.sources.base import monotonic_us
+
+    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=60.0, fps=30.0))
+    t0 = monotonic_us() - 10_000_000  # e.g. the fake autopilot started 10 s ago
+    source = SimCameraSource(sim, realtime=True, t0_us=t0)
+    frame = await source.recv()
+    t_s = source.scenario_time_s(frame)
+    assert 10.0 <= t_s < 10.5 and frame.index == round(t_s * 30)
+    assert source.status.skipped == 0
+    truth = source.truth(frame.index)
+    assert truth is not None and truth.pose is not None
+    assert truth.pose.north_m == pytest.approx(sim.state_at(t_s).position_ned_m[0])
+
+
 async def test_sim_source_that_falls_behind_drops_late_frames() -> None:
     sim = Simulator(dataclasses.replace(load_scenario("hover"), seconds=10.0, fps=2000.0))
     source = SimCameraSource(sim, realtime=True)
