@@ -80,7 +80,11 @@ class Simulator:
         image = self.effects.apply(rendered.image, t, index, rendered.boxes)
         rng = np.random.default_rng([self.scenario.seed, index, RANGE_STREAM])
         range_m = self.rangefinder.measure(state, rng)
-        truth = FrameTruth(rendered.boxes, rendered.pose, rendered.camera, range_m)
+        boxes = tuple(
+            replace(b, occluded_frac=self.effects.occluded_frac(b.landmark_id, t))
+            for b in rendered.boxes
+        )
+        truth = FrameTruth(boxes, rendered.pose, rendered.camera, range_m)
         return image, truth
 
     def stream_meta(self, fps: float | None = None) -> StreamMeta:

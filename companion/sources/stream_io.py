@@ -118,10 +118,7 @@ class StreamWriter:
     def _write_truth(self, frame: Frame, truth: FrameTruth) -> None:
         boxes = self._open("truth_boxes.csv", BOXES_HEADER + CORNER_COLUMNS)
         for box in truth.boxes:
-            row = box_row(frame.index, box)
-            if box.corners_px is None:
-                row += [""] * len(CORNER_COLUMNS)
-            boxes.writerow(row)
+            boxes.writerow(box_row(frame.index, box))
         if truth.pose is not None:
             self._open("truth_pose.csv", POSE_HEADER).writerow(
                 pose_row(frame.index, frame.t_us, truth.pose)

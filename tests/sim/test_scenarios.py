@@ -114,6 +114,15 @@ async def test_synth_writes_a_stream_that_replays_with_truth(tmp_path: Path) -> 
     assert source.meta.origin is not None and source.meta.provenance["scenario"] == "occlusion"
 
 
+def test_occlusion_scenario_reports_the_covered_share() -> None:
+    sim = Simulator(load_scenario("occlusion"))
+    share = {t: next(b.occluded_frac for b in sim.render(0, t_s=t)[1].boxes
+                     if b.landmark_id == "wall-02") for t in (2.0, 7.0, 10.0, 13.0, 20.0)}
+    assert share[2.0] == 0.0 and share[20.0] == 0.0
+    assert share[7.0] == pytest.approx(0.4) and share[10.0] == pytest.approx(0.8)
+    assert share[13.0] == pytest.approx(0.4)
+
+
 def test_autopilot_truth_matches_the_camera_truth() -> None:
     sim = Simulator(load_scenario("survey"))
     _, truth = sim.render(300)  # t = 10 s

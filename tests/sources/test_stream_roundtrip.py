@@ -48,7 +48,8 @@ def write_stream(folder: Path, frames: list[Frame], fmt: str = "png") -> None:
         for f in frames:
             corners = np.array([[1.0, 2.0], [11.5, 2.0], [11.5, 9.25], [1.0, 9.25]])
             truth = FrameTruth(
-                boxes=(TruthBox("sign-1", 1.0, 2.0, 10.5, 7.25, corners, 0.75),),
+                boxes=(TruthBox("sign-1", 1.0, 2.0, 10.5, 7.25, corners, 0.75, 0.5),
+                       TruthBox("wall-2", 3.0, 4.0, 5.0, 6.0)),
                 pose=TruthPose(1.5, -2.25, -10.0, 0.01, -0.02, 1.5),
                 camera=TruthCamera((1.5, -2.25, -10.0), np.eye(3)),
                 range_m=None if f.index == 1 else 10.125,
@@ -118,7 +119,9 @@ def test_meta_and_truth_round_trip(tmp_path: Path) -> None:
     box = boxes[2][0]
     assert (box.landmark_id, box.x, box.y, box.w, box.h) == ("sign-1", 1.0, 2.0, 10.5, 7.25)
     assert box.corners_px is not None and box.corners_px[2].tolist() == [11.5, 9.25]
-    assert box.in_view_frac == 0.75
+    assert box.in_view_frac == 0.75 and box.occluded_frac == 0.5
+    plain = boxes[2][1]
+    assert plain.corners_px is None and (plain.x, plain.w, plain.in_view_frac) == (3.0, 5.0, 1.0)
     t_us, pose = read_truth_pose(tmp_path / "s")[1]
     assert t_us == 1_033_333 and pose == TruthPose(1.5, -2.25, -10.0, 0.01, -0.02, 1.5)
     assert np.array_equal(read_truth_camera(tmp_path / "s")[0].r_ned_cam, np.eye(3))
