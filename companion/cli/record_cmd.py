@@ -84,7 +84,9 @@ async def record(config: SourceConfig, out: Path, camera: CameraModel, *, second
                 meta = _meta(source, frame.size, config.fps, config.spec, camera,
                              config.camera_id)
                 writer = StreamWriter(out, meta, image_format, overwrite=overwrite)
-            truth = source.truth(frame.index) if isinstance(source, SimCameraSource) else None
+            truth = None
+            if isinstance(source, SimCameraSource | RecordedStreamSource):
+                truth = source.truth(frame.index)
             writer.write(frame, truth)
             count += 1
     finally:

@@ -14,7 +14,14 @@ import numpy as np
 from companion.errors import InputError
 from companion.sources.base import EndOfStream, Frame, ImageU8, Pacer, SourceStatus
 from companion.sources.images import ImageProblem, read_image
-from companion.sources.stream_format import FRAMES_HEADER, StreamMeta, open_csv, read_meta
+from companion.sources.stream_format import (
+    FRAMES_HEADER,
+    FrameTruth,
+    StreamMeta,
+    open_csv,
+    read_meta,
+)
+from companion.sources.stream_io import read_truth
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 
@@ -189,6 +196,17 @@ class RecordedStreamSource(FileSequenceSource):
         )
         for detail in status_skips:
             self.status.skip("bad_row", detail)
+        self._truth: dict[int, FrameTruth] | None = None
+
+    def truth(self, index: int) -> FrameTruth | None:
+        """The recorded truth of frame ``index`` (None when the stream has none for it).
+
+        Truth files are read on the first call.  In a looped replay, ``index`` is the
+        delivered index: it is mapped back to the recorded one.
+        """
+        if self._truth is None:
+            self._truth = read_truth(self.folder)
+        return self._truth.get(index % self._index_step if self.loop else index)
 
 
 def read_frame_list(folder: Path) -> tuple[list[str], list[Entry]]:

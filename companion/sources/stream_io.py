@@ -215,3 +215,16 @@ def read_truth_range(folder: Path) -> dict[int, float | None]:
         except (ValueError, IndexError):
             raise InputError(f"{path}:{n}: malformed row {row}") from None
     return out
+
+
+def read_truth(folder: Path) -> dict[int, FrameTruth]:
+    """All truth files of a stream as {frame index: FrameTruth} (empty without truth)."""
+    folder = Path(folder)
+    boxes, poses = read_truth_boxes(folder), read_truth_pose(folder)
+    cameras, ranges = read_truth_camera(folder), read_truth_range(folder)
+    out: dict[int, FrameTruth] = {}
+    for index in sorted(set(boxes) | set(poses) | set(cameras) | set(ranges)):
+        pose = poses.get(index)
+        out[index] = FrameTruth(tuple(boxes.get(index, ())), pose[1] if pose else None,
+                                cameras.get(index), ranges.get(index))
+    return out

@@ -126,6 +126,11 @@ def test_meta_and_truth_round_trip(tmp_path: Path) -> None:
     assert t_us == 1_033_333 and pose == TruthPose(1.5, -2.25, -10.0, 0.01, -0.02, 1.5)
     assert np.array_equal(read_truth_camera(tmp_path / "s")[0].r_ned_cam, np.eye(3))
     assert read_truth_range(tmp_path / "s") == {0: 10.125, 1: None, 2: 10.125}
+    source = RecordedStreamSource(tmp_path / "s", realtime=False, loop=True)
+    truth = source.truth(4)  # second pass: recorded frame 1
+    assert truth is not None and truth.range_m is None and truth.pose is not None
+    assert truth.boxes[0].landmark_id == "sign-1"
+    assert RecordedStreamSource(tmp_path / "s", realtime=False).truth(99) is None
 
 
 def test_csv_headers_are_exactly_the_documented_ones(tmp_path: Path) -> None:
