@@ -259,5 +259,8 @@ class CameraSource:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+            if self._thread.is_alive():  # stuck in a driver read: releasing now could crash
+                log.warning("camera %s: capture thread still blocked; not releasing", self.spec)
+                return
         if self._cap is not None:
             self._cap.release()
