@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.errors import ConfigError
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
 from companion.sim.synth import synth_stream
+from companion.sim.trajectory import VehicleState
 from companion.sources.base import EndOfStream
 from companion.sources.files import RecordedStreamSource
 from companion.sources.stream_io import read_truth_boxes, read_truth_pose
@@ -158,3 +162,25 @@ async def test_sim_source_that_falls_behind_drops_late_frames() -> None:
     frames = [await source.recv() for _ in range(3)]
     assert frames[2].index - frames[0].index > 2  # rendering takes longer than 0.5 ms
     assert source.status.skip_reasons["late"] == frames[2].index - 2
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(
+    pos=st.tuples(st.floats(-60, 60), st.floats(-60, 60), st.floats(-80, 2)),
+    att=st.tuples(st.floats(-3.2, 3.2), st.floats(-1.6, 1.6), st.floats(-3.2, 3.2)),
+)
+def test_any_pose_renders_without_error(
+    pos: tuple[float, float, float], att: tuple[float, float, float]
+) -> None:
+    """Looking anywhere from anywhere (even underground) gives a frame and sane truth."""
+    sim = _distorted_sim()
+    out = sim.renderer.render(VehicleState(0.0, pos, (0, 0, 0), att))
+    assert out.image.shape == (480, 640, 3) and out.image.dtype == np.uint8
+    for box in out.boxes:
+        assert 0 <= box.x <= 639 and 0 <= box.y <= 479 and 0 < box.in_view_frac <= 1
+        assert box.x + box.w <= 639 + 1e-6 and box.y + box.h <= 479 + 1e-6
+
+
+@functools.cache
+def _distorted_sim() -> Simulator:
+    return Simulator(load_scenario("survey_distorted"))
