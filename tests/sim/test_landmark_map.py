@@ -42,14 +42,14 @@ def test_position_facing_and_corners(tmp_path: Path) -> None:
 
 
 def test_appearance_file_and_data_uri(tmp_path: Path) -> None:
-    img = np.zeros((20, 30, 3), np.uint8)
-    img[:, :, 2] = 200
-    cv2.imwrite(str(tmp_path / "red.png"), img)
+    img = np.random.default_rng(0).integers(0, 256, (20, 32, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "ref.png"), img)
     uri = "data:image/png;base64," + base64.b64encode(cv2.imencode(".png", img)[1]).decode()
-    lms = load_landmark_map(write_map(tmp_path / "m.geojson", feature("f", appearance="red.png"),
-                                      feature("u", appearance=uri)), ORIGIN)
-    for lm in lms:
-        assert lm.quad.texture is not None and np.array_equal(lm.quad.texture, img)
+    boxed = feature("f", appearance="ref.png", appearance_box=[2, 3, 10, 8])
+    central = feature("u", appearance=uri)  # no box: the face is the central half
+    f, u = load_landmark_map(write_map(tmp_path / "m.geojson", boxed, central), ORIGIN)
+    assert np.array_equal(f.quad.texture, img[3:11, 2:12])
+    assert np.array_equal(u.quad.texture, img[5:15, 8:24])
 
 
 def test_generated_textures_are_deterministic_per_seed_and_id(tmp_path: Path) -> None:
@@ -80,12 +80,14 @@ def test_world_adds_a_facade_per_plane_and_poles(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("mutate", "message"),
     [
-        (lambda f: f.pop("id"), "missing Feature id"),
-        (lambda f: f["properties"].update(category="tree"), "category must be one of"),
-        (lambda f: f["properties"].update(width_m="big"), "'width_m' must be a number"),
-        (lambda f: f["properties"].update(height_m=0), "must be > 0"),
-        (lambda f: f["geometry"].update(type="Polygon"), "geometry must be a Point"),
-        (lambda f: f["properties"].update(appearance="nope.png"), "not a readable image"),
+        (lambda f: f.pop("id"), "id: required"),
+        (lambda f: f["properties"].update(category="tree"), "category: expected one of"),
+        (lambda f: f["properties"].update(width_m="big"), "width_m: expected a number"),
+        (lambda f: f["properties"].update(height_m=0), "height_m: expected a number > 0"),
+        (lambda f: f["geometry"].update(type="Polygon"), "expected a Point geometry"),
+        (lambda f: f["properties"].update(appearance="nope.png"), "cannot read"),
+        (lambda f: f["properties"].update(appearance="data:image/png;base64,aGk="),
+         "appearance is not a readable image"),
     ],
 )
 def test_bad_map_is_one_line_error(tmp_path: Path, mutate: Any, message: str) -> None:
@@ -102,5 +104,5 @@ def test_missing_or_invalid_map(tmp_path: Path) -> None:
     (tmp_path / "x.geojson").write_text("{")
     with pytest.raises(InputError, match="not valid JSON"):
         load_landmark_map(tmp_path / "x.geojson", ORIGIN)
-    with pytest.raises(InputError, match="ids must be unique"):
+    with pytest.raises(InputError, match="duplicate id"):
         load_landmark_map(write_map(tmp_path / "d.geojson", feature("a"), feature("a")), ORIGIN)
