@@ -21,6 +21,11 @@ class SimCameraSource:
     frames come as fast as they render with ``t0_us = 0`` (the scenario clock).  Either
     way ``(t_us - t0_us) / 1e6`` is the scenario time to give to ``state_at``.
     ``seconds`` (default: the scenario's) ends the stream; ``loop`` replays it instead.
+
+    ``t0_us`` anchors scenario time 0 to a given monotonic time (realtime only), so that the
+    camera and the fake autopilot share one clock: pass the autopilot's start time
+    (``FakeAutopilot._start_ns // 1000`` or the app's equivalent).  The first frame is then
+    the one due now.
     """
 
     def __init__(
@@ -30,6 +35,7 @@ class SimCameraSource:
         realtime: bool = True,
         loop: bool = False,
         seconds: float | None = None,
+        t0_us: int | None = None,
     ) -> None:
         self.sim = simulator
         self.realtime = realtime
@@ -37,7 +43,7 @@ class SimCameraSource:
         self.seconds = simulator.scenario.seconds if seconds is None else seconds
         self.camera_id = simulator.scenario.camera_id
         self.status = SourceStatus()
-        self.t0_us: int | None = None if realtime else 0
+        self.t0_us: int | None = t0_us if realtime else 0
         self._next = 0
         self._frames_per_pass = max(1, round(self.seconds * simulator.fps))
         self._truth: OrderedDict[int, FrameTruth] = OrderedDict()
@@ -102,6 +108,8 @@ class SimCameraSource:
         period_us = 1e6 / self.sim.fps
         if not deliver:
             current = int((now - self.t0_us) // period_us)
+            if self.status.delivered == 0 and self.status.skipped == 0:
+                return max(index, current)  # the first frame is the one due now
             if current > index:  # behind: drop the frames whose time has passed
                 for _ in range(index, current):
                     self.status.skip("late", f"rendering fell behind at frame {index}")
