@@ -36,11 +36,16 @@ async def test_heartbeat_identifies_an_onboard_controller_with_the_autopilots_sy
 
 
 async def test_heartbeat_status_follows_application_health() -> None:
-    """ok -> ACTIVE (4); degraded -> CRITICAL (5); no report for health_timeout_s -> CRITICAL."""
+    """ok -> ACTIVE 4, standby -> STANDBY 3, degraded -> CRITICAL 5, failed -> EMERGENCY 6;
+    no report for health_timeout_s -> CRITICAL."""
     async with wired(bridge_kw={"health_timeout_s": 0.5}) as (ap, bridge):
         assert await wait_for(lambda: bool(ap.heartbeats) and ap.heartbeats[-1].system_status == 4)
+        bridge.report_health("standby")
+        assert await wait_for(lambda: ap.heartbeats[-1].system_status == 3)
         bridge.report_health("degraded")
         assert await wait_for(lambda: ap.heartbeats[-1].system_status == 5)
+        bridge.report_health("failed")
+        assert await wait_for(lambda: ap.heartbeats[-1].system_status == 6)
         bridge.report_health("ok")
         assert await wait_for(lambda: ap.heartbeats[-1].system_status == 4)
         # stop reporting: the heartbeat must turn critical and say so
