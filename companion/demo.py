@@ -36,7 +36,6 @@ from companion.sim.source import SimCameraSource
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
-from mavlink_bridge.vehicle import VehicleState as AutopilotState
 from tracker.pose.types import MapLandmark, PoseFix
 
 log = logging.getLogger(__name__)
@@ -85,32 +84,18 @@ def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarr
     return landmarks, references
 
 
-def autopilot_truth(source: SimCameraSource) -> Callable[[float], AutopilotState]:
-    """The fake autopilot flies what the camera sees: the scenario clock of the source."""
-
-    def truth(_time_s: float) -> AutopilotState:
-        t0 = source.t0_us
-        t = 0.0 if t0 is None else max(0.0, (time.monotonic_ns() // 1000 - t0) / 1e6)
-        s = source.sim.state_at(t)
-        rng = source.sim.rangefinder.measure(s, np.random.default_rng(int(t * 1000)))
-        # a dropout reads as out of range (DISTANCE_SENSOR max_distance 40 m)
-        return AutopilotState(t, s.position_ned_m, s.velocity_ned_m_s, s.attitude_rpy_rad,
-                              float(rng) if rng is not None else 40.0)
-
-    return truth
-
-
 async def run_demo(settings: Settings, scenario: str, seconds: float,
                    progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Run the embedded demo and return its summary (see :func:`summary`)."""
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
-    source = SimCameraSource(sim, realtime=True, seconds=seconds)
     landmarks, references = map_landmarks(sim)
     origin = sim.scenario.origin
+    # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                             endpoint="udpin:127.0.0.1:0"),
-                         truth=autopilot_truth(source))
+                                             endpoint="udpin:127.0.0.1:0"), truth=sim.truth_fn)
     await fake.start()
+    source = SimCameraSource(sim, realtime=True, seconds=seconds,
+                             t0_us=fake.start_ns // 1000)
     mav_cfg = dataclasses.replace(
         settings.mavlink, profile=settings.vehicle.profile,
         endpoint=f"udpout:127.0.0.1:{fake.local_port}", origin_lat_deg=origin.lat,
