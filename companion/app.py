@@ -85,6 +85,12 @@ class Reporter(Protocol):
     """Where status, poses, tracks and events go (monitoring and the flight log)."""
 
     def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None: ...
+    def preview_due(self) -> bool: ...
+    def preview(self, jpeg: bytes) -> None: ...
+
+
+#: Draws a frame's preview: (frame, result) -> JPEG bytes.
+PreviewFn = Callable[["Frame", "FrameResult"], bytes]
 
 
 @dataclass
@@ -118,7 +124,8 @@ class CompanionApp:
     def __init__(self, source: FrameSource, processor: FrameProcessor, sink: FixSink,
                  reporter: Reporter, vehicle_id: str, status_period_s: float = 1.0,
                  policy: HealthPolicy | None = None,
-                 clock_s: Callable[[], float] = time.monotonic) -> None:
+                 clock_s: Callable[[], float] = time.monotonic,
+                 preview: PreviewFn | None = None) -> None:
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -127,6 +134,7 @@ class CompanionApp:
         self.status_period_s = status_period_s
         self.policy = policy or HealthPolicy()
         self.clock_s = clock_s
+        self.preview = preview
         self.counters = Counters()
         self.stats = AppStats()
         self.state: State = "starting"
@@ -201,6 +209,10 @@ class CompanionApp:
                                                     frame)
                 self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
                 await self._handle(result)
+                if self.preview is not None and self.reporter.preview_due():
+                    jpeg = await loop.run_in_executor(self._executor, self.preview, frame,
+                                                      result)
+                    self.reporter.preview(jpeg)
         except (SlotClosedError, asyncio.CancelledError):
             pass
 

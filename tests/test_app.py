@@ -84,6 +84,12 @@ class Recorder:
     def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None:
         self.items.append((topic, data))
 
+    def preview_due(self) -> bool:
+        return True
+
+    def preview(self, jpeg: bytes) -> None:
+        self.items.append(("preview", {"bytes": len(jpeg)}))
+
     def topic(self, name: str) -> list[dict[str, Any]]:
         return [d for t, d in self.items if t == name]
 
