@@ -79,6 +79,7 @@ class FixSink(Protocol):
     def set_health(self, state: State) -> None: ...
     async def send_fix(self, fix: Any) -> bool: ...
     async def statustext(self, text: str) -> None: ...
+    def autopilot_position_ned(self) -> list[float] | None: ...
 
 
 class Reporter(Protocol):
@@ -237,7 +238,9 @@ class CompanionApp:
             self._last_fix_s = now_s
             self.stats.capture_to_wire_ms.add((now_us() - result.capture_t_us) / 1000.0)
             if result.pose_json is not None:
-                self.reporter.report("pose", result.capture_t_us, result.pose_json)
+                own = self.sink.autopilot_position_ned()  # to plot the fix against it
+                extra = {} if own is None else {"autopilot_position_ned_m": own}
+                self.reporter.report("pose", result.capture_t_us, {**result.pose_json, **extra})
         else:
             self.counters.fixes_refused += 1
         self._update_health()

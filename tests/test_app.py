@@ -76,6 +76,9 @@ class Sink:
     async def statustext(self, text: str) -> None:
         self.texts.append(text)
 
+    def autopilot_position_ned(self) -> list[float] | None:
+        return [1.0, 2.0, -3.0]
+
 
 class Recorder:
     def __init__(self) -> None:
@@ -110,6 +113,7 @@ async def test_every_frame_processed_when_the_worker_keeps_up() -> None:
     events = [e["event"] for e in rec.topic("events")]
     assert events[-2:] == ["source-ended", "stopped"] or events[-1] == "stopped"
     assert rec.topic("status")[-1]["counters"]["frames"] == 10
+    assert rec.topic("pose")[-1]["autopilot_position_ned_m"] == [1.0, 2.0, -3.0]
 
 
 async def test_a_slow_worker_sees_the_newest_frames_and_drops_are_counted() -> None:
