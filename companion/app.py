@@ -66,9 +66,14 @@ class FrameResult:
 
 
 class FrameProcessor(Protocol):
-    """Synchronous per-frame work (tracking and pose); runs in the worker thread."""
+    """Synchronous per-frame work (tracking and pose); runs in the worker thread.
+
+    ``housekeeping`` runs after the frame's fix was sent: work that must not add latency
+    (looking for new landmarks).
+    """
 
     def process(self, frame: Frame) -> FrameResult: ...
+    def housekeeping(self, frame: Frame) -> None: ...
 
 
 class FixSink(Protocol):
@@ -210,6 +215,7 @@ class CompanionApp:
                                                     frame)
                 self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
                 await self._handle(result)
+                await loop.run_in_executor(self._executor, self.processor.housekeeping, frame)
                 if self.preview is not None and self.reporter.preview_due():
                     jpeg = await loop.run_in_executor(self._executor, self.preview, frame,
                                                       result)

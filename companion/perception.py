@@ -144,13 +144,19 @@ class Perception:
                 self.unmatchable[lid] = str(err)
         self.tracks: dict[str, Track] = {}
         self.gate = FixGate(gate_config or FixGateConfig())
+        self._events_next: list[dict[str, Any]] = []
+        self._last_fix: PoseFix | None = None
         self._seed = seed
         self._frames = 0
 
     def process(self, frame: Frame) -> FrameResult:
-        """Track, acquire, solve: one frame in, tracks and maybe a fix out."""
+        """Track and solve: one frame in, tracks and maybe a fix out.
+
+        Acquisition of new landmarks waits for :meth:`housekeeping`, after the fix is on
+        the wire, so it never adds to the capture -> fix latency.
+        """
         image = frame.image
-        events: list[dict[str, Any]] = []
+        events, self._events_next = self._events_next, []
         if image.shape[:2] != (self.camera.height, self.camera.width):
             return FrameResult(frame.index, frame.t_us, bad_frame=True,
                                no_fix_reason=f"frame {image.shape[1]}x{image.shape[0]} is "
@@ -160,10 +166,19 @@ class Perception:
             if not self._update_track(self.tracks[lid], image, gray):
                 del self.tracks[lid]
                 events.append({"event": "lost", "landmark": lid})
-        if self._should_acquire():
-            events += self._acquire(image)
         self._frames += 1
+        self._last_fix = None
         return self._solve(frame, events)
+
+    def housekeeping(self, frame: Frame) -> None:
+        """Look for untracked landmarks (feature matching now and then; prediction from
+        this frame's fix); what is found is tracked from the next frame on."""
+        if frame.image.shape[:2] != (self.camera.height, self.camera.width):
+            return
+        if self._should_acquire():
+            self._events_next += self._acquire(frame.image)
+        if self._last_fix is not None:
+            self._events_next += self._predict_acquire(frame.image, self._last_fix)
 
     # -- tracking ---------------------------------------------------------------------
 
@@ -331,7 +346,7 @@ class Perception:
         if not self.gate.admit(fix):
             return FrameResult(frame.index, frame.t_us, tracks, None,
                                "held back: inconsistent with recent fixes", tuple(events))
-        events += self._predict_acquire(frame.image, fix)
+        self._last_fix = fix
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
                            pose_json=pose_json(fix))
 

@@ -44,6 +44,10 @@ class Processor:
         self.track_from = track_from
         self.seen: list[int] = []
         self.thread_names: set[str] = set()
+        self.housekept: list[int] = []
+
+    def housekeeping(self, frame: Any) -> None:
+        self.housekept.append(frame.index)
 
     def process(self, frame: Any) -> FrameResult:
         time.sleep(self.delay_s)
@@ -103,6 +107,7 @@ async def test_every_frame_processed_when_the_worker_keeps_up() -> None:
                        status_period_s=0.05)
     await asyncio.wait_for(app.run(), timeout=10)
     assert proc.seen == list(range(1, 11))
+    assert proc.housekept == proc.seen  # after every frame, once its fix is out
     assert app.counters.frames == 10
     assert app.counters.fixes_sent == 8
     assert [f["n"] for f in sink.fixes] == list(range(3, 11))
