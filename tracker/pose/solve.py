@@ -93,11 +93,17 @@ class _Context:
     altitude: AltitudeSample | None
     laser: RangeSample | None
 
+    @property
+    def distorted(self) -> bool:
+        """Does the camera have any distortion to undo?"""
+        return bool(np.any(self.dist))
+
 
 @dataclass(frozen=True)
 class _Solved:
     solver: str
     refined: Refined
+    points: PointSet
 
 
 @dataclass(frozen=True)
@@ -168,29 +174,28 @@ def _make_groups(
     best: dict[str, tuple[int, MapLandmark]] = {}
     for i, lm in named:
         prev = best.get(lm.landmark_id)
+        if prev is not None:
+            notes.append(f"landmark {lm.landmark_id!r} seen twice: kept the more confident")
         if prev is None or observations[i].confidence > observations[prev[0]].confidence:
-            if prev is not None:
-                notes.append(f"landmark {lm.landmark_id!r} seen twice: kept the more confident")
             best[lm.landmark_id] = (i, lm)
     cfg = ctx.config
+    centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
     groups = []
     for i, lm in best.values():
         obs = observations[i]
         if obs.corners_px is not None:
-            pts, px, sig = landmark_corners_ned(lm), np.asarray(obs.corners_px), cfg.pixel_sigma_px
+            pts, sig = landmark_corners_ned(lm), cfg.pixel_sigma_px
+            px = np.array(obs.corners_px, dtype=np.float64)
         else:
-            pts = np.asarray([lm.position_ned_m], dtype=np.float64)
-            px = np.asarray([obs.centre_px], dtype=np.float64)
-            sig = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
-        px = px.astype(np.float64)
-        groups.append(_Group(lm, obs, pts, px, _undistort(ctx, px), sig))
+            pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma
+            px = np.array([obs.centre_px], dtype=np.float64)
+        ideal = _undistort(ctx, px) if ctx.distorted else px
+        groups.append(_Group(lm, obs, pts, px, ideal, sig))
     return groups
 
 
 def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
     """Distorted -> ideal pinhole pixels (same K)."""
-    if not np.any(ctx.dist):
-        return px
     out = cv2.undistortPoints(px.reshape(-1, 1, 2), ctx.k, ctx.dist, P=ctx.k)
     return np.asarray(out.reshape(-1, 2), dtype=np.float64)
 
@@ -309,7 +314,7 @@ def _refine(ctx: _Context, pts: PointSet, priors: Priors, x0: FloatArray) -> Ref
 def _as_outcome(solver: str, ref: Refined, pts: PointSet) -> _Solved | _Failure:
     """Map a failed refinement (e.g. a point behind the camera) to the landmark to drop."""
     if not ref.reason:
-        return _Solved(solver, ref)
+        return _Solved(solver, ref, pts)
     bad = int(pts.landmark_index[ref.bad_point]) if ref.bad_point >= 0 else -1
     return _Failure(ref.reason if bad < 0 else f"landmark {bad}: {ref.reason}", bad)
 
@@ -430,7 +435,7 @@ def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
                 f"planar ambiguity: both IPPE solutions fit landmark {lm.landmark_id!r} "
                 "(no attitude or range to tell them apart)"
             )
-    return _Solved(solver, ok[0])
+    return _Solved(solver, ok[0], pts)
 
 
 def _make_fix(
@@ -452,7 +457,7 @@ def _make_fix(
         return NoFix(time_us, f"position 1-sigma {sigma_max:.1f} m is too large", tuple(notes))
     inlier_ratio = len(groups) / (len(groups) + dropped)
     quality = 100.0 * inlier_ratio * 2.0 ** (-sigma_max / ctx.config.quality_sigma_ref_m)
-    pts = _point_set(groups)
+    pts = out.points
     rms = math.sqrt(float(np.mean(ref.point_errors * pts.sigma_px**2)) / 2.0)
     p, a = ref.position_ned_m, ref.attitude_rpy_rad
     return PoseFix(
