@@ -240,6 +240,29 @@ def _finish(
     return Refined(x[:3].copy(), x[3:].copy(), cov, errs, cost=float(r @ r))
 
 
+def arc_correction(cov: FloatArray, position: FloatArray, points_ned: FloatArray) -> FloatArray:
+    """Second-order term for the curved valley of bearing-only geometry (returns a new 6x6).
+
+    Seen from afar, the landmarks fix the direction to them well but let the vehicle slide
+    on a sphere of radius ``d`` about them.  Linearisation replaces the arc by its tangent;
+    the arc departs from it along the line of sight by ``d phi^2 / 2`` for an angular error
+    ``phi ~ N(0, s^2)``, whose second moment is ``3 d^2 s^4 / 4`` (cf. the debiased converted
+    measurements of Lerro & Bar-Shalom, 1993).  With ``s_i^2 = lambda_i / d^2`` for the two
+    position variances ``lambda_i`` across the line of sight ``u``:
+    ``P_pos += 3/4 (lambda_1^2 + lambda_2^2) / d^2 u u^T``.
+    """
+    rel = points_ned.mean(axis=0) - position
+    d = float(np.linalg.norm(rel))
+    if d <= 0:
+        return cov
+    u = rel / d
+    proj = np.eye(3) - np.outer(u, u)
+    lam = np.linalg.eigvalsh(proj @ cov[:3, :3] @ proj)[1:]  # the two across the sight line
+    out = cov.copy()
+    out[:3, :3] += 0.75 * float(np.sum(lam**2)) / d**2 * np.outer(u, u)
+    return out
+
+
 def _failed(x: FloatArray, reason: str, index: int = -1) -> Refined:
     """A failed refinement carrying the reason (and the offending point index, if any)."""
     nan6 = np.full((6, 6), np.nan)

@@ -59,6 +59,7 @@ class ScenarioResult:
     mean_distance_multi_m: float
     nees_inside: float  # share of fixes with NEES inside the 95 % bounds
     nees_mean: float
+    predicted_rms_m: float  # sqrt(mean trace P_pos): what the covariances promised
     solvers: dict[str, int]
     no_fix_reasons: dict[str, int]
 
@@ -119,6 +120,7 @@ def run_scenario(
     cfg = solver_config(scenario, config)
     frames = fly(scenario, rng)
     errs, dists, nees, multi, solvers, reasons = [], [], [], [], Counter[str](), Counter[str]()
+    traces: list[float] = []
     for frame in frames:
         fix = solve_frame(scenario, frame, cfg)
         if not isinstance(fix, PoseFix):
@@ -128,9 +130,12 @@ def run_scenario(
         e = np.asarray(fix.position_ned_m) - frame.true_position_ned_m
         errs.append(e)
         nees.append(float(e @ np.linalg.solve(fix.covariance[:3, :3], e)))
+        traces.append(float(np.trace(fix.covariance[:3, :3])))
         dists.append(_mean_distance(scenario.landmarks, fix, frame.true_position_ned_m))
         multi.append(len(fix.landmark_ids) >= 2)
-    return _summarise(scenario.name, len(frames), errs, dists, nees, multi, solvers, reasons)
+    result = _summarise(scenario.name, len(frames), errs, dists, nees, multi, solvers, reasons)
+    predicted = float(np.sqrt(np.mean(traces))) if traces else float("nan")
+    return replace(result, predicted_rms_m=predicted)
 
 
 def _mean_distance(landmarks: tuple[MapLandmark, ...], fix: PoseFix, p: FloatArray) -> float:
@@ -168,6 +173,7 @@ def _summarise(
         mean_distance_multi_m=float(d[m].mean()) if m.any() else float("nan"),
         nees_inside=float(inside.mean()) if len(ne) else float("nan"),
         nees_mean=float(ne.mean()) if len(ne) else float("nan"),
+        predicted_rms_m=float("nan"),
         solvers=dict(solvers),
         no_fix_reasons=dict(reasons),
     )
@@ -202,20 +208,20 @@ def _survey(t: float) -> tuple[FloatArray, tuple[float, float, float]]:
 
 
 def _approach(t: float) -> tuple[FloatArray, tuple[float, float, float]]:
-    """Flying north towards a wall sign from 25 m to 6 m away, gently weaving."""
-    p = np.array([-25.0 + 1.0 * t, 1.0 * np.sin(0.4 * t), -3.0 + 0.3 * np.sin(0.3 * t)])
-    return p, (0.02 * np.sin(t), 0.02 * np.cos(0.8 * t), 0.04 * np.sin(0.4 * t))
+    """Flying north towards a wall image from 25 m to 6 m away, gently weaving."""
+    p = np.array([-25.0 + 1.0 * t, 0.3 * np.sin(0.4 * t), -3.0 + 0.2 * np.sin(0.3 * t)])
+    return p, (0.02 * np.sin(t), 0.02 * np.cos(0.8 * t), 0.015 * np.sin(0.4 * t))
 
 
 def _pair(t: float) -> tuple[FloatArray, tuple[float, float, float]]:
-    """Slow crossing 15 m from two wall signs 12 m apart."""
-    p = np.array([-15.0 + 0.5 * np.sin(0.2 * t), -2.0 + 0.2 * t, -4.0])
+    """Slow crossing 15 m from two wall signs 10 m apart."""
+    p = np.array([-15.0 + 0.5 * np.sin(0.2 * t), -1.5 + 0.1 * t, -4.0])
     return p, (0.03 * np.sin(0.9 * t), 0.02 * np.sin(0.7 * t), 0.05 * np.sin(0.25 * t))
 
 
-def scenarios(make: Callable[..., Scenario] = Scenario) -> list[Scenario]:
-    """The four reference scenarios: hover, survey, single + laser, two + attitude."""
-    wall = tuple(
+def _wall_signs() -> tuple[MapLandmark, ...]:
+    """Four signs on one flat wall 20 m north, facing south (seen head-on)."""
+    return tuple(
         _sign(f"W{i}", 20.0, e, d, 180.0, w, h)
         for i, (e, d, w, h) in enumerate(
             [
@@ -226,36 +232,46 @@ def scenarios(make: Callable[..., Scenario] = Scenario) -> list[Scenario]:
             ]
         )
     )
+
+
+def _street_signs() -> tuple[MapLandmark, ...]:
+    """Shop signs on both sides of a 12 m street at 12-28 m, and a facade logo ahead."""
+    left = [(12.0, -6.0), (20.0, -6.0), (28.0, -6.0)]  # west side, facing east
+    right = [(15.0, 6.0), (24.0, 6.0)]  # east side, facing west
+    out = [_sign(f"L{i}", n, e, -4.0 - i, 90.0, 1.5, 1.0) for i, (n, e) in enumerate(left)]
+    out += [_sign(f"R{i}", n, e, -3.0 - 2 * i, 270.0, 1.5, 1.0) for i, (n, e) in enumerate(right)]
+    out.append(_sign("F0", 35.0, 0.0, -8.0, 180.0, 2.0, 2.0))
+    return tuple(out)
+
+
+def scenarios(make: Callable[..., Scenario] = Scenario) -> list[Scenario]:
+    """The reference scenarios (see docs/pose.md)."""
     field_ = tuple(
         _sign(f"G{i}{j}", n, e, 0.0, None, 2.0, 2.0)
         for i, n in enumerate(range(-45, 46, 15))
         for j, e in enumerate(range(-30, 31, 15))
     )
-    one = (_sign("S0", 0.0, 0.0, -3.0, 180.0, 1.0, 1.0),)
+    one = (_sign("S0", 0.0, 0.0, -3.0, 180.0, 2.0, 1.5),)
     two = (
-        _sign("P0", 0.0, -8.0, -4.0, 180.0, 1.0, 1.0),
-        _sign("P1", 0.0, 4.0, -5.0, 180.0, 1.0, 1.0),
+        _sign("P0", 0.0, -5.0, -4.0, 180.0, 1.0, 1.0),
+        _sign("P1", 0.0, 5.0, -5.0, 180.0, 1.0, 1.0),
     )
+    fwd = FORWARD_CAMERA
     return [
-        make("hover", wall, FORWARD_CAMERA, _hover, 30.0),
+        make("hover_wall", _wall_signs(), fwd, _hover, 30.0),
+        make("hover_wall_attitude", _wall_signs(), fwd, _hover, 30.0, use_attitude=True),
+        make("hover_street", _street_signs(), fwd, _hover, 30.0),
         make("survey", field_, DOWN_CAMERA, _survey, 72.0, use_attitude=True),
         make(
             "single_landmark_laser",
             one,
-            FORWARD_CAMERA,
+            fwd,
             _approach,
             19.0,
             use_corners=False,
             use_attitude=True,
             laser_axis_body=(1.0, 0.0, 0.0),
         ),
-        make(
-            "two_landmarks_attitude",
-            two,
-            FORWARD_CAMERA,
-            _pair,
-            30.0,
-            use_corners=False,
-            use_attitude=True,
-        ),
+        make("two_landmarks_attitude", two, fwd, _pair, 30.0, use_corners=False, use_attitude=True),
+        make("two_landmarks_attitude_corners", two, fwd, _pair, 30.0, use_attitude=True),
     ]

@@ -41,6 +41,7 @@ from tracker.pose.refine import (
     Priors,
     RangePrior,
     Refined,
+    arc_correction,
     initial_cost,
     refine_pose,
 )
@@ -449,10 +450,11 @@ def _make_fix(
 ) -> PoseFix | NoFix:
     """The fix with quality ``100 * inlier ratio * 2^(-sigma_max / sigma_ref)``."""
     ref = out.refined
-    values = np.concatenate([ref.position_ned_m, ref.attitude_rpy_rad, ref.covariance.ravel()])
+    cov = arc_correction(ref.covariance, ref.position_ned_m, out.points.points_ned)
+    values = np.concatenate([ref.position_ned_m, ref.attitude_rpy_rad, cov.ravel()])
     if not np.all(np.isfinite(values)):
         return NoFix(time_us, "the solution is not finite", tuple(notes))
-    sigma_max = float(np.sqrt(np.max(np.diag(ref.covariance)[:3])))
+    sigma_max = float(np.sqrt(np.max(np.diag(cov)[:3])))
     if sigma_max > ctx.config.max_position_sigma_m:
         return NoFix(time_us, f"position 1-sigma {sigma_max:.1f} m is too large", tuple(notes))
     inlier_ratio = len(groups) / (len(groups) + dropped)
@@ -464,7 +466,7 @@ def _make_fix(
         time_us=time_us,
         position_ned_m=(float(p[0]), float(p[1]), float(p[2])),
         attitude_rpy_rad=(float(a[0]), float(a[1]), float(a[2])),
-        covariance=ref.covariance,
+        covariance=cov,
         quality=max(1, min(100, round(quality))),
         landmark_ids=tuple(g.landmark.landmark_id for g in groups),
         solver=out.solver,
