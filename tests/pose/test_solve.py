@@ -240,3 +240,35 @@ def test_covariance_is_symmetric_positive_definite_and_ordered(camera: CameraMod
     # looking north at a wall: depth (north) is known worse than... the angles are radians
     assert np.all(np.sqrt(np.diag(c)[3:]) < 0.1)
     assert 1 <= fix.quality <= 100
+
+
+def test_distance_sensor_orientations_map_to_body_axes() -> None:
+    from tracker.pose import laser_axis_from_mav_orientation as axis
+
+    assert axis(0) == (1.0, 0.0, 0.0)
+    assert axis(2) == (0.0, 1.0, 0.0)  # YAW_90: right
+    assert axis(25) == (0.0, 0.0, 1.0)  # PITCH_270: down
+    assert axis(24) == (0.0, 0.0, -1.0)
+    with pytest.raises(ValueError, match="orientation"):
+        axis(100)
+
+
+def test_downward_laser_over_a_flat_landmark_fixes_height(camera: CameraModel) -> None:
+    cam = CameraModel(mount_rpy_deg=(0.0, -90.0, 0.0))
+    lm = MapLandmark("G", (0.0, 0.0, 0.0), 3.0, 3.0, None)
+    p, rpy = np.array([0.3, -0.2, -12.0]), (0.01, 0.02, 1.0)
+    d = cast_laser([lm], p, rpy, (0.0, 0.0, 1.0))
+    assert d is not None
+    obs = _centres_only(see((lm,), cam, p, rpy))
+    fix = _fix(
+        solve_pose(
+            obs,
+            [lm],
+            cam,
+            T_US,
+            attitude=AttitudeSample(T_US, *rpy),
+            laser=RangeSample(T_US, d, (0.0, 0.0, 1.0)),
+        )
+    )
+    assert fix.solver == "range_bearing"
+    assert_exact(fix, p, rpy)

@@ -92,6 +92,25 @@ class RangeSample:
     sigma_m: float = 0.05
 
 
+def laser_axis_from_mav_orientation(orientation: int) -> tuple[float, float, float]:
+    """Beam direction in body FRD for a DISTANCE_SENSOR ``orientation`` (MAV_SENSOR_ORIENTATION).
+
+    Supported: 0..7 (``MAV_SENSOR_ROTATION_YAW_45*k``: forward, then clockwise seen from
+    above), 24 (``PITCH_90``: up) and 25 (``PITCH_270``: down).  The forward unit vector
+    rotated by the named rotation.
+    """
+    if 0 <= orientation <= 7:
+        yaw = np.deg2rad(45.0 * orientation)
+        return (round(float(np.cos(yaw)), 12), round(float(np.sin(yaw)), 12), 0.0)
+    if orientation == 24:
+        return (0.0, 0.0, -1.0)
+    if orientation == 25:
+        return (0.0, 0.0, 1.0)
+    raise ValueError(
+        f"orientation: expected a MAV_SENSOR_ORIENTATION of 0..7, 24 or 25, got {orientation}"
+    )
+
+
 @dataclass(frozen=True)
 class PosePrior:
     """A predicted vehicle pose (e.g. last fix propagated) used to associate detections."""
