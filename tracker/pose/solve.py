@@ -138,18 +138,16 @@ def solve_pose(
             return NoFix(time_us, f"observation {i}: {problem}")
     notes: list[str] = []
     attitude, altitude, laser = fresh_samples(time_us, attitude, altitude, laser, cfg, notes)
-    usable = [o for o in observations if o.confidence >= cfg.min_confidence]
-    if len(usable) < len(observations):
-        notes.append(f"{len(observations) - len(usable)} observation(s) below min_confidence")
-    if prior is None and attitude is not None and any(o.landmark_id is None for o in usable):
-        notes.append("no predicted pose: unlabelled observations cannot be named")
-    assoc = associate(usable, landmarks, camera, prior, cfg)
+    assoc = associate(observations, landmarks, camera, prior, cfg)
     notes += list(assoc.notes)
     notes += [f"observation {a.observation_index} ambiguous: {a.reason}" for a in assoc.ambiguities]
     ctx = _Context(camera, *_camera_arrays(camera), cfg, attitude, altitude, laser)
     by_id = {lm.landmark_id: lm for lm in landmarks}
     groups = _make_groups(
-        ctx, usable, [(m.observation_index, by_id[m.landmark_id]) for m in assoc.matches], notes
+        ctx,
+        observations,
+        [(m.observation_index, by_id[m.landmark_id]) for m in assoc.matches],
+        notes,
     )
     if not groups:
         return NoFix(time_us, "no identified landmark in view", tuple(notes))
