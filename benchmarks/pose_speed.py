@@ -11,9 +11,11 @@ solving, refinement and covariance.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 
+import cv2
 import numpy as np
 
 from tracker.camera import CameraModel
@@ -38,8 +40,8 @@ def landmarks(n: int) -> tuple[MapLandmark, ...]:
     return tuple(out)
 
 
-def time_fixes(n: int, use_attitude: bool, repeats: int) -> tuple[float, str]:
-    """Median microseconds per fix and the solver used."""
+def time_fixes(n: int, use_attitude: bool, repeats: int) -> tuple[float, float, str]:
+    """Median wall and CPU microseconds per fix, and the solver used."""
     lms = landmarks(n)
     rng = np.random.default_rng(0)
     obs = [observe_landmark(lm, CAMERA, P, RPY, rng, SensorNoise()) for lm in lms]
@@ -48,23 +50,38 @@ def time_fixes(n: int, use_attitude: bool, repeats: int) -> tuple[float, str]:
     att = AttitudeSample(0, *RPY) if use_attitude else None
     fix = solve_pose(seen, lms, CAMERA, 0, attitude=att)
     assert isinstance(fix, PoseFix), fix
-    times = []
+    wall, cpu = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter_ns(), time.process_time_ns()
         solve_pose(seen, lms, CAMERA, 0, attitude=att)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times) * 1e6, fix.solver
+        cpu.append(time.process_time_ns() - c0)
+        wall.append(time.perf_counter_ns() - t0)
+    return statistics.median(wall) / 1e3, statistics.median(cpu) / 1e3, fix.solver
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=300)
+    parser.add_argument("--repeats", type=int, default=1000)
+    parser.add_argument("--cv-threads", type=int, default=1, help="cv2.setNumThreads")
     args = parser.parse_args()
-    print("landmarks  no attitude (us, solver)      attitude (us, solver)")
+    cv2.setNumThreads(args.cv_threads)
+    load = os.getloadavg()[0]
+    print(
+        f"median per fix over {args.repeats} runs (OpenCV threads: {cv2.getNumThreads()}, "
+        f"{os.cpu_count()} CPUs, 1-min load average {load:.1f} at start)"
+    )
+    print(
+        "| landmarks | no attitude: solver | wall us | CPU us "
+        "| attitude: solver | wall us | CPU us |"
+    )
+    print("|---|---|---|---|---|---|---|")
     for n in (1, 2, 4, 8):
-        a_us, a_solver = time_fixes(n, False, args.repeats)
-        b_us, b_solver = time_fixes(n, True, args.repeats)
-        print(f"{n:9d}  {a_us:8.0f}  {a_solver:18s}  {b_us:8.0f}  {b_solver}")
+        a_wall, a_cpu, a_solver = time_fixes(n, False, args.repeats)
+        b_wall, b_cpu, b_solver = time_fixes(n, True, args.repeats)
+        print(
+            f"| {n} | {a_solver} | {a_wall:.0f} | {a_cpu:.0f} | {b_solver} | {b_wall:.0f} "
+            f"| {b_cpu:.0f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -200,8 +200,10 @@ def refine_pose(
             dx = -np.linalg.solve(h, g)
         except np.linalg.LinAlgError:
             return _failed(x, "degenerate geometry: singular normal matrix")
-        # converged when the step is far below the uncertainty: dx^T H dx = -g^T dx (sigma^2)
-        if float(-g @ dx) < 1e-6:
+        # nearly converged when the step is well below the uncertainty (dx^T H dx = -g^T dx,
+        # in sigma^2): take it without re-linearising; what is left is second order
+        if float(-g @ dx) < 1e-2:
+            x = x + dx
             break
         accepted = False
         for step in (1.0, 0.5, 0.25, 0.125):  # step halving keeps the cost decreasing

@@ -224,10 +224,12 @@ def _solve_robust(
 
 def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int, str]:
     """Index of the landmark to drop with the reason, or (-1, "") when all fit."""
-    for gi, g in enumerate(groups):
-        c = np.asarray(g.landmark.position_ned_m)
-        if float(landmark_normal_ned(g.landmark) @ (ref.position_ned_m - c)) <= 0.0:
-            return gi, f"landmark {g.landmark.landmark_id!r}: the camera is behind its face"
+    normals = np.array([landmark_normal_ned(g.landmark) for g in groups])
+    centres = np.array([g.landmark.position_ned_m for g in groups])
+    front = np.einsum("ij,ij->i", normals, ref.position_ned_m - centres)
+    if np.any(front <= 0.0):
+        gi = int(np.argmin(front))
+        return gi, f"landmark {groups[gi].landmark.landmark_id!r}: the camera is behind its face"
     counts = np.array([g.points_ned.shape[0] for g in groups])
     idx = np.repeat(np.arange(len(groups)), counts)
     per_point = np.bincount(idx, weights=ref.point_errors, minlength=len(groups)) / counts
