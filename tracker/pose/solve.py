@@ -49,6 +49,7 @@ from tracker.pose.solvers import (
     bearing_least_squares,
     bearings_ned,
     ippe_candidates,
+    pnp_all_points,
     pnp_ransac,
 )
 from tracker.pose.types import (
@@ -369,7 +370,7 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
 def _solve_without_attitude(
     ctx: _Context, groups: list[_Group], pts: PointSet
 ) -> _Solved | _Failure:
-    """PnP with RANSAC on every point, then MAP refinement."""
+    """SQPnP on every point, refined; if a landmark does not fit, RANSAC PnP instead."""
     n = pts.points_ned.shape[0]
     if len(groups) == 1:
         return _Failure("one landmark without corners and no attitude: pose unobservable")
@@ -380,6 +381,12 @@ def _solve_without_attitude(
         return _Failure("degenerate geometry: the landmark points are collinear")
     cfg = ctx.config
     dist_px = np.vstack([g.pixels_distorted for g in groups])
+    direct = pnp_all_points(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam)
+    if direct is not None:  # all-inlier hypothesis first; RANSAC only when it fails
+        priors = _priors(ctx, _laser_for(ctx, groups, direct.x0))
+        ref = _refine(ctx, pts, priors, direct.x0)
+        if not ref.reason and _worst_group(ctx, groups, ref)[0] < 0:
+            return _Solved("pnp", ref, pts)
     res = pnp_ransac(
         pts.points_ned,
         dist_px,

@@ -62,9 +62,12 @@ def ippe_candidates(
     ``face_points`` are the 4 corners in the face frame in the IPPE_SQUARE order.
     """
     flags = cv2.SOLVEPNP_IPPE_SQUARE if square else cv2.SOLVEPNP_IPPE
-    n, rvecs, tvecs, errs = cv2.solvePnPGeneric(
-        face_points.reshape(-1, 1, 3), pixels_distorted.reshape(-1, 1, 2), k, dist, flags=flags
-    )
+    try:
+        n, rvecs, tvecs, errs = cv2.solvePnPGeneric(
+            face_points.reshape(-1, 1, 3), pixels_distorted.reshape(-1, 1, 2), k, dist, flags=flags
+        )
+    except cv2.error:
+        return []
     out = []
     for i in range(int(n)):
         r_nc, cam = _camera_from_opencv(rvecs[i], tvecs[i], r_ned_face, centre_ned)
@@ -86,22 +89,47 @@ def pnp_ransac(
     """RANSAC PnP on NED points (centred for conditioning); returns the pose and inlier mask."""
     origin = points_ned.mean(axis=0)
     obj = (points_ned - origin).reshape(-1, 1, 3)
-    ok, rvec, tvec, inliers = cv2.solvePnPRansac(
-        obj,
-        pixels_distorted.reshape(-1, 1, 2),
-        k,
-        dist,
-        iterationsCount=iterations,
-        reprojectionError=threshold_px,
-        confidence=confidence,
-        flags=cv2.SOLVEPNP_SQPNP,
-    )
+    try:
+        ok, rvec, tvec, inliers = cv2.solvePnPRansac(
+            obj,
+            pixels_distorted.reshape(-1, 1, 2),
+            k,
+            dist,
+            iterationsCount=iterations,
+            reprojectionError=threshold_px,
+            confidence=confidence,
+            flags=cv2.SOLVEPNP_SQPNP,
+        )
+    except cv2.error:
+        return None
     if not ok or inliers is None:
         return None
     mask = np.zeros(points_ned.shape[0], dtype=bool)
     mask[np.asarray(inliers).reshape(-1)] = True
     r_nc, cam = _camera_from_opencv(rvec, tvec, np.eye(3), origin)
     return Candidate(state_from_camera(r_nc, cam, r_body_cam), 0.0), mask
+
+
+def pnp_all_points(
+    points_ned: FloatArray,
+    pixels_distorted: FloatArray,
+    k: FloatArray,
+    dist: FloatArray,
+    r_body_cam: FloatArray,
+) -> Candidate | None:
+    """SQPnP (globally optimal for its algebraic cost) on every point, no outlier rejection."""
+    origin = points_ned.mean(axis=0)
+    obj = (points_ned - origin).reshape(-1, 1, 3)
+    try:
+        ok, rvec, tvec = cv2.solvePnP(
+            obj, pixels_distorted.reshape(-1, 1, 2), k, dist, flags=cv2.SOLVEPNP_SQPNP
+        )
+    except cv2.error:
+        return None
+    if not ok:
+        return None
+    r_nc, cam = _camera_from_opencv(rvec, tvec, np.eye(3), origin)
+    return Candidate(state_from_camera(r_nc, cam, r_body_cam), 0.0)
 
 
 def bearings_ned(pixels_ideal: FloatArray, k: FloatArray, r_ned_cam: FloatArray) -> FloatArray:
