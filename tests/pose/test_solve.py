@@ -273,3 +273,16 @@ def test_downward_laser_over_a_flat_landmark_fixes_height(camera: CameraModel) -
     )
     assert fix.solver == "range_bearing"
     assert_exact(fix, p, rpy)
+
+
+def test_with_attitude_a_gross_misassociation_is_found_by_landmark_consensus(
+    camera: CameraModel,
+) -> None:
+    lms = wall()
+    obs = _centres_only(see(lms, camera, noise=SensorNoise(), seed=5))
+    elsewhere = MapLandmark("E", (30.0, 12.0, -1.0), 1.2, 1.2, 180.0)
+    obs[2] = replace(obs[2], landmark_id="E")  # C seen, but named E (far to the right)
+    fix = _fix(solve_pose(obs, (*lms, elsewhere), camera, T_US, attitude=ATT))
+    assert fix.landmark_ids == ("A", "B", "D")
+    assert any("'E': disagrees with the other landmarks' consensus" in n for n in fix.notes)
+    assert np.linalg.norm(np.asarray(fix.position_ned_m) - TRUE_P) < 4 * max(fix.position_sigma_m)

@@ -46,6 +46,7 @@ from tracker.pose.refine import (
     refine_pose,
 )
 from tracker.pose.solvers import (
+    bearing_consensus,
     bearing_least_squares,
     bearings_ned,
     ippe_candidates,
@@ -353,6 +354,9 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
         )
     ahead = np.einsum("ij,ij->i", pts.points_ned - p0, b)
     if np.any(ahead <= 0):
+        suspect = _consensus_outlier(ctx, pts, b, r_nb)
+        if suspect >= 0:
+            return _outlier_failure(groups, suspect)
         gi = int(pts.landmark_index[int(np.argmin(ahead))])
         lid = groups[gi].landmark.landmark_id
         return _Failure(f"landmark {lid!r} would be behind the camera", gi)
@@ -364,7 +368,32 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
     if not single:
         rng = _laser_for(ctx, groups, x0)
     solver = "bearing_ls" if not single else ("range_bearing" if rng else "altitude_bearing")
-    return _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts)
+    out = _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts)
+    if not single and (isinstance(out, _Failure) or _worst_group(ctx, groups, out.refined)[0] >= 0):
+        suspect = _consensus_outlier(ctx, pts, b, r_nb)  # the all-inlier hypothesis failed
+        if suspect >= 0:
+            return _outlier_failure(groups, suspect)
+    return out
+
+
+def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray, r_nb: FloatArray) -> int:
+    """The landmark the best pair of landmarks disagrees with most, or -1 (attitude known)."""
+    assert ctx.attitude is not None
+    a = ctx.attitude
+    # the threshold covers the RANSAC pixel gate and 3 sigma of the attitude prior
+    thr = ctx.config.ransac_threshold_px / float(ctx.k[0, 0]) + 3.0 * max(
+        a.roll_pitch_sigma_rad, a.yaw_sigma_rad
+    )
+    per_group = bearing_consensus(pts.points_ned, b, r_nb, pts.landmark_index, thr)
+    if per_group is None:
+        return -1
+    worst = int(np.argmax(per_group))
+    return worst if per_group[worst] >= thr else -1
+
+
+def _outlier_failure(groups: list[_Group], gi: int) -> _Failure:
+    lid = groups[gi].landmark.landmark_id
+    return _Failure(f"landmark {lid!r}: disagrees with the other landmarks' consensus", gi)
 
 
 def _solve_without_attitude(

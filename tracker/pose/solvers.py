@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import cv2
@@ -184,3 +185,38 @@ def bearing_least_squares(
     if rank < 3 or sv[-1] < min_singular * sv[0]:
         return None
     return np.asarray(sol, dtype=np.float64)
+
+
+def bearing_consensus(
+    points_ned: FloatArray,
+    bearings: FloatArray,
+    r_ned_body: FloatArray,
+    landmark_index: npt.NDArray[np.int64],
+    threshold_rad: float,
+) -> FloatArray | None:
+    """Per-landmark mean angular error (rad) under the best two-landmark hypothesis.
+
+    RANSAC over landmark pairs with a known rotation: every pair gives a position by
+    :func:`bearing_least_squares`; the pair whose position leaves the most landmarks within
+    ``threshold_rad`` (ties: the smallest summed error) wins.  ``None`` with fewer than
+    three landmarks (no majority to consult).
+    """
+    n_groups = int(landmark_index.max()) + 1
+    if n_groups < 3:
+        return None
+    counts = np.bincount(landmark_index, minlength=n_groups)
+    best: tuple[tuple[int, float], FloatArray] | None = None
+    for i, j in itertools.combinations(range(n_groups), 2):
+        sel = (landmark_index == i) | (landmark_index == j)
+        p = bearing_least_squares(points_ned[sel], bearings[sel], r_ned_body)
+        if p is None:
+            continue
+        rel = points_ned - p
+        cos = np.einsum("ij,ij->i", rel, bearings) / np.linalg.norm(rel, axis=1)
+        ang = np.arccos(np.clip(cos, -1.0, 1.0))
+        per_group = np.bincount(landmark_index, weights=ang, minlength=n_groups) / counts
+        inl = per_group < threshold_rad
+        score = (int(inl.sum()), -float(per_group[inl].sum()))
+        if best is None or score > best[0]:
+            best = (score, per_group)
+    return None if best is None else best[1]

@@ -13,7 +13,15 @@ import numpy as np
 from tracker.geometry import FloatArray
 
 #: Solvers the pose module may choose (``PoseFix.solver``).
-SOLVERS = ("ippe", "ippe_square", "pnp_ransac", "bearing_ls", "range_bearing", "altitude_bearing")
+SOLVERS = (
+    "ippe",
+    "ippe_square",
+    "pnp",
+    "pnp_ransac",
+    "bearing_ls",
+    "range_bearing",
+    "altitude_bearing",
+)
 
 
 @dataclass(frozen=True)
