@@ -6,14 +6,16 @@ Solver choice (automatic, see ``docs/pose.md``):
 what is in view                           autopilot attitude      solver
 ========================================  =====================  ==================
 one landmark with four corners            optional (picks flip)   ``ippe[_square]``
-four or more points, two+ landmarks       absent                  ``pnp_ransac``
+four or more points, two+ landmarks       absent                  ``pnp`` / ``pnp_ransac``
 two or more landmarks (centres/corners)   present                 ``bearing_ls``
 one landmark centre + laser range         present                 ``range_bearing``
 one landmark centre + altitude            present                 ``altitude_bearing``
 ========================================  =====================  ==================
 
 Every initial estimate is refined by the same MAP Gauss-Newton (:mod:`tracker.pose.refine`)
-that also yields the 6x6 covariance; landmarks that do not fit are dropped one at a time.
+that also yields the 6x6 covariance.  The all-landmarks-right hypothesis is tried first; when
+a landmark does not fit, RANSAC (PnP, or over landmark pairs when the attitude is known)
+names it, it is dropped and the rest is solved again.
 """
 
 from __future__ import annotations
