@@ -316,12 +316,17 @@ def _refine(ctx: _Context, pts: PointSet, priors: Priors, x0: FloatArray) -> Ref
     )
 
 
-def _as_outcome(solver: str, ref: Refined, pts: PointSet) -> _Solved | _Failure:
+def _as_outcome(
+    solver: str, ref: Refined, pts: PointSet, groups: list[_Group]
+) -> _Solved | _Failure:
     """Map a failed refinement (e.g. a point behind the camera) to the landmark to drop."""
     if not ref.reason:
         return _Solved(solver, ref, pts)
-    bad = int(pts.landmark_index[ref.bad_point]) if ref.bad_point >= 0 else -1
-    return _Failure(ref.reason if bad < 0 else f"landmark {bad}: {ref.reason}", bad)
+    if ref.bad_point < 0:
+        return _Failure(ref.reason)
+    bad = int(pts.landmark_index[ref.bad_point])
+    lid = groups[bad].landmark.landmark_id
+    return _Failure(f"landmark {lid!r}: {ref.reason}", bad)
 
 
 def _solve_once(ctx: _Context, groups: list[_Group]) -> _Solved | _Failure:
@@ -370,7 +375,7 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
     if not single:
         rng = _laser_for(ctx, groups, x0)
     solver = "bearing_ls" if not single else ("range_bearing" if rng else "altitude_bearing")
-    out = _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts)
+    out = _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts, groups)
     if not single and (isinstance(out, _Failure) or _worst_group(ctx, groups, out.refined)[0] >= 0):
         suspect = _consensus_outlier(ctx, pts, b, r_nb)  # the all-inlier hypothesis failed
         if suspect >= 0:
@@ -436,7 +441,7 @@ def _solve_without_attitude(
         gi = int(np.argmax(outliers))
         return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: RANSAC outlier", gi)
     priors = _priors(ctx, _laser_for(ctx, groups, cand.x0))
-    return _as_outcome("pnp_ransac", _refine(ctx, pts, priors, cand.x0), pts)
+    return _as_outcome("pnp_ransac", _refine(ctx, pts, priors, cand.x0), pts, groups)
 
 
 def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
