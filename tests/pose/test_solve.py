@@ -286,3 +286,13 @@ def test_with_attitude_a_gross_misassociation_is_found_by_landmark_consensus(
     assert fix.landmark_ids == ("A", "B", "D")
     assert any("'E': disagrees with the other landmarks' consensus" in n for n in fix.notes)
     assert np.linalg.norm(np.asarray(fix.position_ned_m) - TRUE_P) < 4 * max(fix.position_sigma_m)
+
+
+def test_a_landmark_whose_back_the_camera_would_see_is_dropped(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    # the map says A faces north (away from the camera): it cannot be what was seen
+    turned = (replace(lms[0], facing_deg=0.0), *lms[1:])
+    fix = _fix(solve_pose(_centres_only(obs), turned, camera, T_US, attitude=ATT))
+    assert "A" not in fix.landmark_ids
+    assert any("'A': the camera is behind its face" in n for n in fix.notes)
