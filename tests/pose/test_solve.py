@@ -296,3 +296,18 @@ def test_a_landmark_whose_back_the_camera_would_see_is_dropped(camera: CameraMod
     fix = _fix(solve_pose(_centres_only(obs), turned, camera, T_US, attitude=ATT))
     assert "A" not in fix.landmark_ids
     assert any("'A': the camera is behind its face" in n for n in fix.notes)
+
+
+def test_nan_side_samples_are_ignored_not_propagated(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    bad_att = replace(ATT, yaw_rad=float("nan"))
+    bad_alt = AltitudeSample(T_US, float("inf"))
+    bad_laser = RangeSample(T_US, float("nan"))
+    fix = _fix(
+        solve_pose(obs, lms, camera, T_US, attitude=bad_att, altitude=bad_alt, laser=bad_laser)
+    )
+    assert fix.solver == "pnp"  # solved as if no attitude had come
+    for name in ("attitude", "altitude", "laser"):
+        assert any(f"{name} sample ignored: not finite" in n for n in fix.notes)
+    assert np.all(np.isfinite(fix.covariance))
