@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import cv2
@@ -97,11 +97,7 @@ class _Context:
     attitude: AttitudeSample | None
     altitude: AltitudeSample | None
     laser: RangeSample | None
-
-    @property
-    def distorted(self) -> bool:
-        """Does the camera have any distortion to undo?"""
-        return bool(np.any(self.dist))
+    distorted: bool  # does the camera have any distortion to undo?
 
 
 @dataclass(frozen=True)
@@ -109,6 +105,7 @@ class _Solved:
     solver: str
     refined: Refined
     points: PointSet
+    all_fit: bool = False  # already checked by _worst_group
 
 
 @dataclass(frozen=True)
@@ -145,7 +142,8 @@ def solve_pose(
     assoc = associate(observations, landmarks, camera, prior, cfg)
     notes += list(assoc.notes)
     notes += [f"observation {a.observation_index} ambiguous: {a.reason}" for a in assoc.ambiguities]
-    ctx = _Context(camera, *_camera_arrays(camera), cfg, attitude, altitude, laser)
+    k, dist, r_body_cam = _camera_arrays(camera)
+    ctx = _Context(camera, k, dist, r_body_cam, cfg, attitude, altitude, laser, bool(np.any(dist)))
     by_id = {lm.landmark_id: lm for lm in landmarks}
     groups = _make_groups(
         ctx,
@@ -216,7 +214,7 @@ def _solve_robust(
                 return NoFix(time_us, out.reason, tuple(notes))
             bad, why = out.bad_group, out.reason
         else:
-            bad, why = _worst_group(ctx, active, out.refined)
+            bad, why = (-1, "") if out.all_fit else _worst_group(ctx, active, out.refined)
             if bad < 0:
                 return _make_fix(ctx, active, out, time_us, reset_counter, dropped, notes)
             if len(active) == 1:
@@ -376,11 +374,12 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
         rng = _laser_for(ctx, groups, x0)
     solver = "bearing_ls" if not single else ("range_bearing" if rng else "altitude_bearing")
     out = _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts, groups)
-    if not single and (isinstance(out, _Failure) or _worst_group(ctx, groups, out.refined)[0] >= 0):
-        suspect = _consensus_outlier(ctx, pts, b, r_nb)  # the all-inlier hypothesis failed
-        if suspect >= 0:
-            return _outlier_failure(groups, suspect)
-    return out
+    if single:
+        return out
+    if isinstance(out, _Solved) and _worst_group(ctx, groups, out.refined)[0] < 0:
+        return replace(out, all_fit=True)
+    suspect = _consensus_outlier(ctx, pts, b, r_nb)  # the all-inlier hypothesis failed
+    return _outlier_failure(groups, suspect) if suspect >= 0 else out
 
 
 def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray, r_nb: FloatArray) -> int:
@@ -422,7 +421,7 @@ def _solve_without_attitude(
         priors = _priors(ctx, _laser_for(ctx, groups, direct.x0))
         ref = _refine(ctx, pts, priors, direct.x0)
         if not ref.reason and _worst_group(ctx, groups, ref)[0] < 0:
-            return _Solved("pnp", ref, pts)
+            return _Solved("pnp", ref, pts, all_fit=True)
     res = pnp_ransac(
         pts.points_ned,
         dist_px,
