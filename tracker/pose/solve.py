@@ -359,7 +359,7 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
         )
     ahead = np.einsum("ij,ij->i", pts.points_ned - p0, b)
     if np.any(ahead <= 0):
-        suspect = _consensus_outlier(ctx, pts, b, r_nb)
+        suspect = _consensus_outlier(ctx, pts, b)
         if suspect >= 0:
             return _outlier_failure(groups, suspect)
         gi = int(pts.landmark_index[int(np.argmin(ahead))])
@@ -378,11 +378,11 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
         return out
     if isinstance(out, _Solved) and _worst_group(ctx, groups, out.refined)[0] < 0:
         return replace(out, all_fit=True)
-    suspect = _consensus_outlier(ctx, pts, b, r_nb)  # the all-inlier hypothesis failed
+    suspect = _consensus_outlier(ctx, pts, b)  # the all-inlier hypothesis failed
     return _outlier_failure(groups, suspect) if suspect >= 0 else out
 
 
-def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray, r_nb: FloatArray) -> int:
+def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray) -> int:
     """The landmark the best pair of landmarks disagrees with most, or -1 (attitude known)."""
     assert ctx.attitude is not None
     a = ctx.attitude
@@ -390,7 +390,7 @@ def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray, r_nb: FloatA
     thr = ctx.config.ransac_threshold_px / float(ctx.k[0, 0]) + 3.0 * max(
         a.roll_pitch_sigma_rad, a.yaw_sigma_rad
     )
-    per_group = bearing_consensus(pts.points_ned, b, r_nb, pts.landmark_index, thr)
+    per_group = bearing_consensus(pts.points_ned, b, pts.landmark_index, thr)
     if per_group is None:
         return -1
     worst = int(np.argmax(per_group))

@@ -9,7 +9,6 @@
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import cv2
@@ -190,33 +189,41 @@ def bearing_least_squares(
 def bearing_consensus(
     points_ned: FloatArray,
     bearings: FloatArray,
-    r_ned_body: FloatArray,
     landmark_index: npt.NDArray[np.int64],
     threshold_rad: float,
 ) -> FloatArray | None:
-    """Per-landmark mean angular error (rad) under the best two-landmark hypothesis.
+    """Per-landmark angular error (rad) under the best two-landmark hypothesis.
 
-    RANSAC over landmark pairs with a known rotation: every pair gives a position by
-    :func:`bearing_least_squares`; the pair whose position leaves the most landmarks within
-    ``threshold_rad`` (ties: the smallest summed error) wins.  ``None`` with fewer than
-    three landmarks (no majority to consult).
+    RANSAC over all landmark pairs with a known rotation, vectorised: each landmark is
+    reduced to its mean point ``C_g`` and mean bearing ``u_g``; a pair's position is the
+    midpoint of the shortest segment between the rays ``C_i - s u_i`` and ``C_j - t u_j``;
+    the pair leaving the most landmarks within ``threshold_rad`` (ties: the smallest summed
+    error) wins.  ``None`` with fewer than three landmarks (no majority to consult).
     """
     n_groups = int(landmark_index.max()) + 1
     if n_groups < 3:
         return None
-    counts = np.bincount(landmark_index, minlength=n_groups)
-    best: tuple[tuple[int, float], FloatArray] | None = None
-    for i, j in itertools.combinations(range(n_groups), 2):
-        sel = (landmark_index == i) | (landmark_index == j)
-        p = bearing_least_squares(points_ned[sel], bearings[sel], r_ned_body)
-        if p is None:
-            continue
-        rel = points_ned - p
-        cos = np.einsum("ij,ij->i", rel, bearings) / np.linalg.norm(rel, axis=1)
-        ang = np.arccos(np.clip(cos, -1.0, 1.0))
-        per_group = np.bincount(landmark_index, weights=ang, minlength=n_groups) / counts
-        inl = per_group < threshold_rad
-        score = (int(inl.sum()), -float(per_group[inl].sum()))
-        if best is None or score > best[0]:
-            best = (score, per_group)
-    return None if best is None else best[1]
+    counts = np.bincount(landmark_index, minlength=n_groups).astype(np.float64)[:, None]
+    sums = [np.bincount(landmark_index, v, n_groups) for v in (*points_ned.T, *bearings.T)]
+    c = np.stack(sums[:3], axis=1) / counts  # mean point per landmark
+    u = np.stack(sums[3:], axis=1)
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)  # mean bearing per landmark
+    i, j = np.triu_indices(n_groups, 1)
+    # closest points of X = C_i - s u_i and X = C_j - t u_j (unit directions, b = u_i.u_j)
+    w0 = c[i] - c[j]
+    b = np.einsum("pk,pk->p", u[i], u[j])
+    d = -np.einsum("pk,pk->p", u[i], w0)
+    e = -np.einsum("pk,pk->p", u[j], w0)
+    denom = 1.0 - b * b
+    ok = denom > 1e-9
+    denom = np.where(ok, denom, 1.0)
+    s = (b * e - d) / denom
+    t = (e - b * d) / denom
+    pos = 0.5 * ((c[i] - s[:, None] * u[i]) + (c[j] - t[:, None] * u[j]))  # pairs x 3
+    rel = c[None, :, :] - pos[:, None, :]  # pairs x groups x 3
+    cos = np.einsum("pgk,gk->pg", rel, u) / np.linalg.norm(rel, axis=2)
+    err = np.arccos(np.clip(cos, -1.0, 1.0))
+    err[~ok] = np.pi
+    inl = err < threshold_rad
+    score = inl.sum(axis=1) * 1e3 - np.where(inl, err, 0.0).sum(axis=1)  # count, then error
+    return np.asarray(err[int(np.argmax(score))])
