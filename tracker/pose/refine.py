@@ -180,6 +180,15 @@ def initial_cost(
     return float(r @ r)
 
 
+def point_errors_px(
+    k: FloatArray, r_body_cam: FloatArray, pts: PointSet, x: FloatArray
+) -> FloatArray:
+    """Reprojection error magnitude (px, ideal pixels) of every point at ``x``."""
+    r, _, _ = _residuals(np.asarray(x, dtype=np.float64), k, r_body_cam, pts, Priors())
+    n = pts.points_ned.shape[0]
+    return np.asarray(np.sqrt(np.sum(r.reshape(n, 2) ** 2, axis=1)) * pts.sigma_px)
+
+
 def refine_pose(
     k: FloatArray,
     r_body_cam: FloatArray,

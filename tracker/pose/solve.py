@@ -45,6 +45,7 @@ from tracker.pose.refine import (
     Refined,
     arc_correction,
     initial_cost,
+    point_errors_px,
     refine_pose,
 )
 from tracker.pose.solvers import (
@@ -357,11 +358,14 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
             if single
             else "degenerate geometry: bearings do not fix the position"
         )
-    ahead = np.einsum("ij,ij->i", pts.points_ned - p0, b)
-    if np.any(ahead <= 0):
+    rel = pts.points_ned - p0
+    ahead = np.einsum("ij,ij->i", rel, b)
+    worst_angle = float(np.max(np.arccos(np.clip(ahead / np.linalg.norm(rel, axis=1), -1, 1))))
+    if not single and worst_angle > _consensus_threshold(ctx):  # cheap all-inlier test
         suspect = _consensus_outlier(ctx, pts, b)
         if suspect >= 0:
             return _outlier_failure(groups, suspect)
+    if np.any(ahead <= 0):
         gi = int(pts.landmark_index[int(np.argmin(ahead))])
         lid = groups[gi].landmark.landmark_id
         return _Failure(f"landmark {lid!r} would be behind the camera", gi)
@@ -382,14 +386,17 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
     return _outlier_failure(groups, suspect) if suspect >= 0 else out
 
 
-def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray) -> int:
-    """The landmark the best pair of landmarks disagrees with most, or -1 (attitude known)."""
+def _consensus_threshold(ctx: _Context) -> float:
+    """Angular inlier gate: the RANSAC pixel gate plus 3 sigma of the attitude prior."""
     assert ctx.attitude is not None
     a = ctx.attitude
-    # the threshold covers the RANSAC pixel gate and 3 sigma of the attitude prior
-    thr = ctx.config.ransac_threshold_px / float(ctx.k[0, 0]) + 3.0 * max(
-        a.roll_pitch_sigma_rad, a.yaw_sigma_rad
-    )
+    sigma = max(a.roll_pitch_sigma_rad, a.yaw_sigma_rad)
+    return ctx.config.ransac_threshold_px / float(ctx.k[0, 0]) + 3.0 * sigma
+
+
+def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray) -> int:
+    """The landmark the best pair of landmarks disagrees with most, or -1 (attitude known)."""
+    thr = _consensus_threshold(ctx)
     per_group = bearing_consensus(pts.points_ned, b, pts.landmark_index, thr)
     if per_group is None:
         return -1
@@ -417,7 +424,8 @@ def _solve_without_attitude(
     cfg = ctx.config
     dist_px = np.vstack([g.pixels_distorted for g in groups])
     direct = pnp_all_points(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam)
-    if direct is not None:  # all-inlier hypothesis first; RANSAC only when it fails
+    if direct is not None and _fits_within(ctx, pts, direct.x0, cfg.ransac_threshold_px):
+        # the all-inlier hypothesis first; RANSAC only when it fails
         priors = _priors(ctx, _laser_for(ctx, groups, direct.x0))
         ref = _refine(ctx, pts, priors, direct.x0)
         if not ref.reason and _worst_group(ctx, groups, ref)[0] < 0:
@@ -441,6 +449,12 @@ def _solve_without_attitude(
         return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: RANSAC outlier", gi)
     priors = _priors(ctx, _laser_for(ctx, groups, cand.x0))
     return _as_outcome("pnp_ransac", _refine(ctx, pts, priors, cand.x0), pts, groups)
+
+
+def _fits_within(ctx: _Context, pts: PointSet, x: FloatArray, threshold_px: float) -> bool:
+    """Do all points reproject within ``threshold_px`` at pose ``x``?"""
+    err = point_errors_px(ctx.k, ctx.r_body_cam, pts, x)
+    return bool(np.all(err <= threshold_px))
 
 
 def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
