@@ -311,3 +311,25 @@ def test_nan_side_samples_are_ignored_not_propagated(camera: CameraModel) -> Non
     for name in ("attitude", "altitude", "laser"):
         assert any(f"{name} sample ignored: not finite" in n for n in fix.notes)
     assert np.all(np.isfinite(fix.covariance))
+
+
+def test_three_landmarks_with_one_misnamed_give_no_fix_rather_than_a_guess(
+    camera: CameraModel,
+) -> None:
+    lms = wall()[:3]
+    obs = see(lms, camera)
+    elsewhere = MapLandmark("E", (15.0, 9.0, -2.0), 1.2, 1.2, 180.0)
+    obs[2] = replace(obs[2], landmark_id="E")
+    for att in (None, ATT):
+        result = solve_pose(obs, (*lms, elsewhere), camera, T_US, attitude=att)
+        assert isinstance(result, NoFix)
+        assert "disagree" in result.reason or "no three landmarks agree" in result.reason
+
+
+def test_two_detections_claiming_one_landmark_are_both_left_out(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    obs[3] = replace(obs[3], landmark_id="A")  # D's detection also named A
+    fix = _fix(solve_pose(obs, lms, camera, T_US))
+    assert fix.landmark_ids == ("B", "C")
+    assert any("'A' claimed by observations [0, 3]" in n for n in fix.notes)

@@ -22,7 +22,7 @@ from tracker.geometry import FloatArray
 from tracker.pose.config import PoseConfig
 from tracker.pose.simulate import SensorNoise, SimFrame, Trajectory, simulate_frame
 from tracker.pose.solve import solve_pose
-from tracker.pose.types import MapLandmark, NoFix, PoseFix
+from tracker.pose.types import MapLandmark, NoFix, Observation, PoseFix
 
 NEES_LOW_3DOF = 0.2158  # chi2.ppf(0.025, 3)
 NEES_HIGH_3DOF = 9.348  # chi2.ppf(0.975, 3)
@@ -43,6 +43,8 @@ class Scenario:
     use_attitude: bool = False
     use_altitude: bool = False
     laser_axis_body: tuple[float, float, float] | None = None
+    #: share of detections given a wrong landmark id (misassociation outliers)
+    misname_rate: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,7 @@ class ScenarioResult:
     predicted_rms_m: float  # sqrt(mean trace P_pos): what the covariances promised
     solvers: dict[str, int]
     no_fix_reasons: dict[str, int]
+    dropped: int = 0  # landmarks dropped as outliers, summed over the frames
 
     @property
     def rmse_multi_pct(self) -> float:
@@ -97,10 +100,11 @@ def solve_frame(scenario: Scenario, frame: SimFrame, config: PoseConfig) -> Pose
 
 
 def fly(scenario: Scenario, rng: np.random.Generator) -> list[SimFrame]:
-    """Every simulated frame of ``scenario``."""
+    """Every simulated frame of ``scenario`` (with misnamed detections if it asks)."""
     n_frames = int(scenario.duration_s * scenario.rate_hz)
-    return [
-        simulate_frame(
+    frames = []
+    for i in range(n_frames):
+        frame = simulate_frame(
             scenario.landmarks,
             scenario.camera,
             scenario.trajectory,
@@ -109,8 +113,23 @@ def fly(scenario: Scenario, rng: np.random.Generator) -> list[SimFrame]:
             scenario.noise,
             scenario.laser_axis_body,
         )
-        for i in range(n_frames)
-    ]
+        if scenario.misname_rate > 0:
+            frame = replace(frame, observations=_misname(frame, scenario, rng))
+        frames.append(frame)
+    return frames
+
+
+def _misname(
+    frame: SimFrame, scenario: Scenario, rng: np.random.Generator
+) -> tuple[Observation, ...]:
+    """Give each detection, with probability ``misname_rate``, another landmark's id."""
+    ids = [lm.landmark_id for lm in scenario.landmarks]
+    out = []
+    for o in frame.observations:
+        if rng.random() < scenario.misname_rate:
+            o = replace(o, landmark_id=str(rng.choice([i for i in ids if i != o.landmark_id])))
+        out.append(o)
+    return tuple(out)
 
 
 def run_scenario(
@@ -121,8 +140,10 @@ def run_scenario(
     frames = fly(scenario, rng)
     errs, dists, nees, multi, solvers, reasons = [], [], [], [], Counter[str](), Counter[str]()
     traces: list[float] = []
+    dropped = 0
     for frame in frames:
         fix = solve_frame(scenario, frame, cfg)
+        dropped += sum(n.startswith("dropped") for n in fix.notes)
         if not isinstance(fix, PoseFix):
             reasons[fix.reason.split(":")[0]] += 1
             continue
@@ -135,7 +156,7 @@ def run_scenario(
         multi.append(len(fix.landmark_ids) >= 2)
     result = _summarise(scenario.name, len(frames), errs, dists, nees, multi, solvers, reasons)
     predicted = float(np.sqrt(np.mean(traces))) if traces else float("nan")
-    return replace(result, predicted_rms_m=predicted)
+    return replace(result, predicted_rms_m=predicted, dropped=dropped)
 
 
 def _mean_distance(landmarks: tuple[MapLandmark, ...], fix: PoseFix, p: FloatArray) -> float:
@@ -274,4 +295,14 @@ def scenarios(make: Callable[..., Scenario] = Scenario) -> list[Scenario]:
         ),
         make("two_landmarks_attitude", two, fwd, _pair, 30.0, use_corners=False, use_attitude=True),
         make("two_landmarks_attitude_corners", two, fwd, _pair, 30.0, use_attitude=True),
+        make("hover_street_misnamed", _street_signs(), fwd, _hover, 30.0, misname_rate=0.1),
+        make(
+            "survey_misnamed",
+            field_,
+            DOWN_CAMERA,
+            _survey,
+            72.0,
+            use_attitude=True,
+            misname_rate=0.1,
+        ),
     ]

@@ -70,6 +70,8 @@ from tracker.pose.validate import check_observation, fresh_samples
 
 #: Chi-square difference below which both planar (IPPE) solutions explain the corners.
 _FLIP_CHI2 = 4.0
+#: A landmark is dropped as an outlier only when this many are in play (3 stay to outvote it).
+_MIN_TO_DROP = 4
 #: A second IPPE solution starting this much (chi-square) worse is not refined.
 _SKIP_CHI2 = 25.0
 
@@ -173,13 +175,16 @@ def _make_groups(
     notes: list[str],
 ) -> list[_Group]:
     """Image points per landmark (corners when known, else the centre); one per landmark."""
+    claims: dict[str, list[int]] = {}
+    for i, lm in named:
+        claims.setdefault(lm.landmark_id, []).append(i)
     best: dict[str, tuple[int, MapLandmark]] = {}
     for i, lm in named:
-        prev = best.get(lm.landmark_id)
-        if prev is not None:
-            notes.append(f"landmark {lm.landmark_id!r} seen twice: kept the more confident")
-        if prev is None or observations[i].confidence > observations[prev[0]].confidence:
+        who = claims[lm.landmark_id]
+        if len(who) == 1:
             best[lm.landmark_id] = (i, lm)
+        elif i == who[0]:  # one landmark, several detections: at least one is misnamed
+            notes.append(f"landmark {lm.landmark_id!r} claimed by observations {who}: not used")
     cfg = ctx.config
     centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
     groups = []
@@ -205,7 +210,11 @@ def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
 def _solve_robust(
     ctx: _Context, groups: list[_Group], time_us: int, reset_counter: int, notes: list[str]
 ) -> PoseFix | NoFix:
-    """Solve; while a landmark does not fit, drop the worst one and solve again."""
+    """Solve; while a landmark does not fit, drop it and solve again.
+
+    A landmark is dropped only while at least three others remain to outvote it: two
+    landmarks always agree with each other, so a pair left after a drop proves nothing.
+    """
     active = list(groups)
     dropped = 0
     while True:
@@ -218,8 +227,10 @@ def _solve_robust(
             bad, why = (-1, "") if out.all_fit else _worst_group(ctx, active, out.refined)
             if bad < 0:
                 return _make_fix(ctx, active, out, time_us, reset_counter, dropped, notes)
-            if len(active) == 1:
-                return NoFix(time_us, why, tuple(notes))
+        if len(active) < _MIN_TO_DROP:  # too few left to outvote a wrong one
+            ids = ", ".join(repr(g.landmark.landmark_id) for g in active)
+            why = why if len(active) == 1 else f"landmarks {ids} disagree ({why})"
+            return NoFix(time_us, why, tuple(notes))
         notes.append(f"dropped {why}")
         del active[bad]
         dropped += 1
@@ -444,6 +455,8 @@ def _solve_without_attitude(
         return _Failure("PnP RANSAC found no consistent pose")
     cand, inlier = res
     outliers = np.bincount(pts.landmark_index[~inlier], minlength=len(groups))
+    if int(np.sum(outliers == 0)) < 3:  # one landmark's own corners always agree
+        return _Failure("PnP RANSAC: no three landmarks agree on a pose")
     if outliers.max() > 0:
         gi = int(np.argmax(outliers))
         return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: RANSAC outlier", gi)

@@ -198,7 +198,7 @@ def bearing_consensus(
     reduced to its mean point ``C_g`` and mean bearing ``u_g``; a pair's position is the
     midpoint of the shortest segment between the rays ``C_i - s u_i`` and ``C_j - t u_j``;
     the pair leaving the most landmarks within ``threshold_rad`` (ties: the smallest summed
-    error) wins.  ``None`` with fewer than three landmarks (no majority to consult).
+    error) wins.  ``None`` when no pair is joined by a third landmark (no majority).
     """
     n_groups = int(landmark_index.max()) + 1
     if n_groups < 3:
@@ -225,5 +225,8 @@ def bearing_consensus(
     err = np.arccos(np.clip(cos, -1.0, 1.0))
     err[~ok] = np.pi
     inl = err < threshold_rad
-    score = inl.sum(axis=1) * 1e3 - np.where(inl, err, 0.0).sum(axis=1)  # count, then error
-    return np.asarray(err[int(np.argmax(score))])
+    count = inl.sum(axis=1)
+    score = count * 1e3 - np.where(inl, err, 0.0).sum(axis=1)  # count, then error
+    best = int(np.argmax(score))
+    # a pair always fits itself: only a third landmark agreeing makes a consensus
+    return np.asarray(err[best]) if count[best] >= 3 else None
