@@ -31,7 +31,9 @@ BASELINE: dict[str, tuple[float | None, float]] = {
     "two_landmarks_attitude": (None, 0.9),
     "two_landmarks_attitude_corners": (None, 0.9),
     "two_landmarks_attitude_yaw0.25": (None, 0.9),
-    "hover_street_misnamed": (0.8, 0.9),
+    "hover_street_unlabelled": (0.5, 0.9),
+    "survey_unlabelled": (0.5, 0.9),
+    "hover_street_misnamed": (1.0, 0.9),
     "survey_misnamed": (0.5, 0.9),
 }
 

@@ -21,12 +21,20 @@ def _scenario(name: str, duration_s: float) -> Scenario:
     return replace(sc, duration_s=duration_s)
 
 
-@pytest.mark.parametrize(("name", "duration_s"), [("hover_street", 12.0), ("survey", 24.0)])
+@pytest.mark.parametrize(
+    ("name", "duration_s"),
+    [
+        ("hover_street", 12.0),
+        ("survey", 24.0),
+        ("survey_unlabelled", 24.0),  # detections named by association from the last fix
+        ("survey_misnamed", 24.0),  # 10 % of the detections carry a wrong id
+    ],
+)
 def test_multi_landmark_rmse_is_within_half_a_percent_of_distance(
     name: str, duration_s: float
 ) -> None:
     r = run_scenario(_scenario(name, duration_s), np.random.default_rng(11))
-    assert r.fixes == r.frames and r.fixes_multi == r.fixes
+    assert r.fixes >= 0.85 * r.frames and r.fixes_multi == r.fixes
     assert r.rmse_multi_pct <= 0.5
     assert r.nees_inside >= 0.9
 
@@ -59,3 +67,9 @@ def test_laser_ray_cast_hits_the_face_and_misses_beside_it() -> None:
     centre = np.array([0.0, 0.0, -2.0])
     tilted = cast_laser([lm], centre, (0.0, 0.0, np.deg2rad(3.0)), (1.0, 0.0, 0.0))
     assert tilted == pytest.approx(10.0 / np.cos(np.deg2rad(3.0)))
+
+
+def test_misnamed_detections_are_dropped_not_believed() -> None:
+    r = run_scenario(_scenario("survey_misnamed", 24.0), np.random.default_rng(13))
+    assert r.dropped > 0
+    assert r.rmse_m <= 1.25 * r.predicted_rms_m and r.nees_mean < 4.0

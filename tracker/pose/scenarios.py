@@ -22,7 +22,7 @@ from tracker.geometry import FloatArray
 from tracker.pose.config import PoseConfig
 from tracker.pose.simulate import SensorNoise, SimFrame, Trajectory, simulate_frame
 from tracker.pose.solve import solve_pose
-from tracker.pose.types import MapLandmark, NoFix, Observation, PoseFix
+from tracker.pose.types import MapLandmark, NoFix, Observation, PoseFix, PosePrior
 
 NEES_LOW_3DOF = 0.2158  # chi2.ppf(0.025, 3)
 NEES_HIGH_3DOF = 9.348  # chi2.ppf(0.975, 3)
@@ -45,6 +45,8 @@ class Scenario:
     laser_axis_body: tuple[float, float, float] | None = None
     #: share of detections given a wrong landmark id (misassociation outliers)
     misname_rate: float = 0.0
+    #: detections carry only a category: association from the last fix names them
+    unlabelled: bool = False
 
 
 @dataclass(frozen=True)
@@ -82,11 +84,15 @@ def solver_config(scenario: Scenario, base: PoseConfig | None = None) -> PoseCon
     return replace(cfg, pixel_sigma_px=n.pixel_sigma_px, centre_sigma_px=extra)
 
 
-def solve_frame(scenario: Scenario, frame: SimFrame, config: PoseConfig) -> PoseFix | NoFix:
+def solve_frame(
+    scenario: Scenario, frame: SimFrame, config: PoseConfig, prior: PosePrior | None = None
+) -> PoseFix | NoFix:
     """Solve one simulated frame with the inputs the scenario grants the solver."""
     obs = frame.observations
     if not scenario.use_corners:
         obs = tuple(replace(o, corners_px=None) for o in obs)
+    if scenario.unlabelled:
+        obs = tuple(replace(o, landmark_id=None) for o in obs)
     return solve_pose(
         obs,
         scenario.landmarks,
@@ -95,7 +101,25 @@ def solve_frame(scenario: Scenario, frame: SimFrame, config: PoseConfig) -> Pose
         attitude=frame.attitude if scenario.use_attitude else None,
         altitude=frame.altitude if scenario.use_altitude else None,
         laser=frame.laser,
+        prior=prior,
         config=config,
+    )
+
+
+def next_prior(fix: PoseFix | NoFix, last: PosePrior, motion_sigma_m: float) -> PosePrior:
+    """The predicted pose for the next frame: the last fix, loosened by the motion allowance.
+
+    Without a fix the previous prediction is kept and loosened further.
+    """
+    if not isinstance(fix, PoseFix):
+        return replace(last, position_sigma_m=last.position_sigma_m + motion_sigma_m)
+    sigma = float(np.sqrt(np.max(np.diag(fix.covariance)[:3])))
+    att_sigma = float(np.sqrt(np.max(np.diag(fix.covariance)[3:])))
+    return PosePrior(
+        fix.position_ned_m,
+        fix.attitude_rpy_rad,
+        sigma + motion_sigma_m,
+        att_sigma + float(np.deg2rad(2.0)),
     )
 
 
@@ -141,8 +165,19 @@ def run_scenario(
     errs, dists, nees, multi, solvers, reasons = [], [], [], [], Counter[str](), Counter[str]()
     traces: list[float] = []
     dropped = 0
+    p0, rpy0 = scenario.trajectory(0.0)  # the first prediction: truth known to ~1 m
+    start = p0 + rng.normal(0.0, 1.0, 3)
+    prior = PosePrior((float(start[0]), float(start[1]), float(start[2])), rpy0, 1.5, 0.05)
     for frame in frames:
-        fix = solve_frame(scenario, frame, cfg)
+        if scenario.use_attitude:  # predict with the autopilot's current attitude
+            a = frame.attitude
+            prior = replace(
+                prior,
+                attitude_rpy_rad=(a.roll_rad, a.pitch_rad, a.yaw_rad),
+                attitude_sigma_rad=max(a.roll_pitch_sigma_rad, a.yaw_sigma_rad),
+            )
+        fix = solve_frame(scenario, frame, cfg, prior if scenario.unlabelled else None)
+        prior = next_prior(fix, prior, motion_sigma_m=0.5)
         dropped += sum(n.startswith("dropped") for n in fix.notes)
         if not isinstance(fix, PoseFix):
             reasons[fix.reason.split(":")[0]] += 1
@@ -219,13 +254,26 @@ def _hover(t: float) -> tuple[FloatArray, tuple[float, float, float]]:
 
 
 def _survey(t: float) -> tuple[FloatArray, tuple[float, float, float]]:
-    """Lawnmower legs at 30 m over a field, 5 m/s, 20 m leg spacing."""
-    leg = int(t // 12.0)
-    s = (t % 12.0) * 5.0 - 30.0
-    north = s if leg % 2 == 0 else -s
-    p = np.array([north, -20.0 + 20.0 * (leg % 3), -30.0])
-    yaw = 0.0 if leg % 2 == 0 else np.pi
-    return p, (0.02 * np.sin(2.0 * t), -0.08, yaw)
+    """Lawnmower at 30 m and 5 m/s: three 60 m legs north/south, 20 m apart, joined by
+    half-circle turns of 10 m radius; yaw follows the track, slight nose-down pitch."""
+    v, leg_s, radius = 5.0, 12.0, 10.0
+    turn_s = np.pi * radius / v
+    period = leg_s + turn_s
+    k = min(int(t // period), 2)
+    tau = t - k * period
+    east0 = -20.0 + 20.0 * k
+    sign = 1.0 if k % 2 == 0 else -1.0  # leg 0 and 2 fly north, leg 1 south
+    if tau <= leg_s or k == 2:
+        north = sign * (-30.0 + v * tau)
+        yaw = 0.0 if sign > 0 else np.pi
+        p = np.array([north, east0, -30.0])
+    else:  # turn about (sign * 30, east0 + 10)
+        a = (tau - leg_s) / turn_s * np.pi
+        p = np.array(
+            [sign * (30.0 + radius * np.sin(a)), east0 + radius - radius * np.cos(a), -30.0]
+        )
+        yaw = a if sign > 0 else np.pi - a  # heading turns towards east either way
+    return p, (0.02 * np.sin(2.0 * t), -0.08, float((yaw + np.pi) % (2 * np.pi) - np.pi))
 
 
 def _approach(t: float) -> tuple[FloatArray, tuple[float, float, float]]:
@@ -282,7 +330,7 @@ def scenarios(make: Callable[..., Scenario] = Scenario) -> list[Scenario]:
         make("hover_wall", _wall_signs(), fwd, _hover, 30.0),
         make("hover_wall_attitude", _wall_signs(), fwd, _hover, 30.0, use_attitude=True),
         make("hover_street", _street_signs(), fwd, _hover, 30.0),
-        make("survey", field_, DOWN_CAMERA, _survey, 72.0, use_attitude=True),
+        make("survey", field_, DOWN_CAMERA, _survey, 48.0, use_attitude=True),
         make(
             "single_landmark_laser",
             one,
@@ -295,13 +343,23 @@ def scenarios(make: Callable[..., Scenario] = Scenario) -> list[Scenario]:
         ),
         make("two_landmarks_attitude", two, fwd, _pair, 30.0, use_corners=False, use_attitude=True),
         make("two_landmarks_attitude_corners", two, fwd, _pair, 30.0, use_attitude=True),
+        make("hover_street_unlabelled", _street_signs(), fwd, _hover, 30.0, unlabelled=True),
+        make(
+            "survey_unlabelled",
+            field_,
+            DOWN_CAMERA,
+            _survey,
+            48.0,
+            use_attitude=True,
+            unlabelled=True,
+        ),
         make("hover_street_misnamed", _street_signs(), fwd, _hover, 30.0, misname_rate=0.1),
         make(
             "survey_misnamed",
             field_,
             DOWN_CAMERA,
             _survey,
-            72.0,
+            48.0,
             use_attitude=True,
             misname_rate=0.1,
         ),
