@@ -115,3 +115,15 @@ def test_arc_correction_adds_variance_along_the_line_of_sight_only() -> None:
     np.testing.assert_allclose(extra, 0.0, atol=1e-15)
     tight = np.diag([1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6])
     np.testing.assert_allclose(arc_correction(tight, np.zeros(3), pts), tight, rtol=1e-6)
+
+
+def test_covariance_upper_triangle_is_row_major_for_mavlink(camera: CameraModel) -> None:
+    lms = wall()
+    fix = solve_pose(see(lms, camera), lms, camera, 0)
+    assert isinstance(fix, PoseFix)
+    urt = fix.covariance_urt
+    c = fix.covariance
+    assert len(urt) == 21
+    # ArduPilot reads c0, c6, c11 (x y z) and c15, c18, c20 (roll pitch yaw)
+    assert urt[0] == c[0, 0] and urt[5] == c[0, 5] and urt[6] == c[1, 1] and urt[11] == c[2, 2]
+    assert urt[15] == c[3, 3] and urt[18] == c[4, 4] and urt[20] == c[5, 5]

@@ -150,6 +150,13 @@ class PoseFix:
     notes: tuple[str, ...] = field(default=())
 
     @property
+    def covariance_urt(self) -> tuple[float, ...]:
+        """The 21 upper-right-triangle entries, row-major, as MAVLink VISION_POSITION_ESTIMATE
+        and ODOMETRY expect them (first row 6 entries, then 5, ...; x y z roll pitch yaw)."""
+        rows, cols = np.triu_indices(6)
+        return tuple(float(v) for v in self.covariance[rows, cols])
+
+    @property
     def position_sigma_m(self) -> tuple[float, float, float]:
         """1-sigma of north, east, down from the covariance diagonal."""
         d = np.sqrt(np.diag(self.covariance)[:3])
