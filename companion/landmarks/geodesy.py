@@ -1,0 +1,130 @@
+"""Landmark name <-> WGS84 <-> local NED (paper sec. 2.3, the name/coordinate table).
+
+All conversions go through pymap3d (WGS84 ellipsoid); nothing here is hand-written
+geodesy.  The local frame is NED about a configured origin, as everywhere in the project
+(tracker/geometry.py).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pymap3d
+
+from companion.errors import InputError
+from companion.landmarks.record import Landmark
+from companion.landmarks.repository import LandmarkRepository
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LocalFrame:
+    """Local NED frame whose origin is a WGS84 point (degrees, metres above the ellipsoid)."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (-90.0 <= self.lat_deg <= 90.0 and -180.0 <= self.lon_deg <= 180.0):
+            raise ValueError(f"origin: expected lat in [-90, 90] and lon in [-180, 180], "
+                             f"got ({self.lat_deg}, {self.lon_deg})")
+
+    def to_ned(self, lat_deg: npt.ArrayLike, lon_deg: npt.ArrayLike,
+               alt_m: npt.ArrayLike) -> FloatArray:
+        """WGS84 -> NED metres; shape (3,) for scalars, (N, 3) for arrays."""
+        n, e, d = pymap3d.geodetic2ned(lat_deg, lon_deg, alt_m,
+                                       self.lat_deg, self.lon_deg, self.alt_m)
+        return np.stack([np.asarray(n), np.asarray(e), np.asarray(d)], axis=-1).astype(np.float64)
+
+    def to_wgs84(self, north_m: npt.ArrayLike, east_m: npt.ArrayLike, down_m: npt.ArrayLike
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """NED metres -> (lat_deg, lon_deg, alt_m)."""
+        lat, lon, alt = pymap3d.ned2geodetic(north_m, east_m, down_m,
+                                             self.lat_deg, self.lon_deg, self.alt_m)
+        return np.asarray(lat), np.asarray(lon), np.asarray(alt)
+
+
+def facing_normal_ned(facing_deg: float | None) -> FloatArray:
+    """Unit outward normal of the landmark face in NED.
+
+    A vertical face with azimuth ``a`` (from north, clockwise) has normal
+    ``(cos a, sin a, 0)``; a landmark lying flat (``None``) faces up: ``(0, 0, -1)``.
+    """
+    if facing_deg is None:
+        return np.array([0.0, 0.0, -1.0])
+    a = math.radians(facing_deg)
+    return np.array([math.cos(a), math.sin(a), 0.0])
+
+
+def corners_ned(lm: Landmark, frame: LocalFrame) -> FloatArray:
+    """The face's corners in NED, (4, 3): top-left, top-right, bottom-right, bottom-left as
+    seen by a viewer in front of the face (for a flat landmark: seen from above, north up).
+
+    The viewer's right is ``(sin a, -cos a, 0)`` and up is ``(0, 0, -1)`` for a vertical
+    face; east and north for a flat one.
+    """
+    centre = frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m)
+    if lm.facing_deg is None:
+        right, up = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
+    else:
+        a = math.radians(lm.facing_deg)
+        right, up = np.array([math.sin(a), -math.cos(a), 0.0]), np.array([0.0, 0.0, -1.0])
+    half_w, half_h = right * (lm.width_m / 2.0), up * (lm.height_m / 2.0)
+    return np.stack([centre - half_w + half_h, centre + half_w + half_h,
+                     centre + half_w - half_h, centre - half_w - half_h])
+
+
+class NameTable:
+    """The mapping table between landmark names (or ids) and coordinates."""
+
+    def __init__(self, landmarks: Iterable[Landmark], frame: LocalFrame) -> None:
+        self.frame = frame
+        self._by_id: dict[str, Landmark] = {}
+        self._by_name: dict[str, list[Landmark]] = {}
+        for lm in landmarks:
+            self._by_id[lm.id] = lm
+            self._by_name.setdefault(lm.name, []).append(lm)
+
+    @classmethod
+    def from_repository(cls, repo: LandmarkRepository, frame: LocalFrame) -> NameTable:
+        return cls(repo.iter_all(with_appearance=False), frame)
+
+    def lookup(self, key: str) -> Landmark:
+        """The landmark with this id, else the one landmark with this name."""
+        if key in self._by_id:
+            return self._by_id[key]
+        found = self._by_name.get(key, [])
+        if len(found) == 1:
+            return found[0]
+        if not found:
+            raise InputError(f"landmark {key!r}: no landmark has this id or name")
+        ids = ", ".join(lm.id for lm in found[:5])
+        raise InputError(f"landmark {key!r}: {len(found)} landmarks share this name "
+                         f"({ids}...); use an id")
+
+    def wgs84(self, key: str) -> tuple[float, float, float]:
+        lm = self.lookup(key)
+        return lm.lat_deg, lm.lon_deg, lm.alt_m
+
+    def ned(self, key: str) -> FloatArray:
+        lm = self.lookup(key)
+        return self.frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m)
+
+    def nearest(self, north_m: float, east_m: float, down_m: float = 0.0
+                ) -> tuple[Landmark, float]:
+        """The landmark nearest to a NED point, and its 3-D distance in metres."""
+        if not self._by_id:
+            raise InputError("landmark table is empty")
+        lms = list(self._by_id.values())
+        pos = self.frame.to_ned(np.array([lm.lat_deg for lm in lms]),
+                                np.array([lm.lon_deg for lm in lms]),
+                                np.array([lm.alt_m for lm in lms]))
+        dist = np.linalg.norm(pos - np.array([north_m, east_m, down_m]), axis=1)
+        k = int(np.argmin(dist))
+        return lms[k], float(dist[k])

@@ -1,0 +1,208 @@
+"""The city-scale cloud repository: the same interface over PostgreSQL + PostGIS.
+
+``geom`` is a generated ``geometry(Point, 4326)`` column with a GiST index; area queries
+use the index (``&&`` with an envelope) and then re-check exact coordinates, like the
+SQLite store.  Imports use ``COPY`` inside one transaction (all or nothing).  The schema
+version lives in ``landmark_schema``; migrations run under an advisory lock.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Iterator, Sequence
+from types import TracebackType
+from typing import Any
+
+import psycopg
+
+from companion.errors import InputError
+from companion.landmarks.record import Area, Landmark, filter_area
+from companion.landmarks.repository import (
+    APPEARANCE_COLUMNS,
+    COLUMNS,
+    Progress,
+    ScoreUpdate,
+    appearance_to_row,
+    check_new_ids,
+    landmark_to_row,
+    row_to_landmark,
+)
+
+MIGRATIONS: tuple[tuple[str, ...], ...] = (
+    (  # 0 -> 1
+        "CREATE EXTENSION IF NOT EXISTS postgis",
+        """CREATE TABLE landmarks (
+            id text PRIMARY KEY,
+            name text NOT NULL,
+            category text NOT NULL
+                CHECK (category IN ('signpost', 'wall_image', 'logo', 'other')),
+            lat_deg double precision NOT NULL CHECK (lat_deg BETWEEN -90 AND 90),
+            lon_deg double precision NOT NULL CHECK (lon_deg BETWEEN -180 AND 180),
+            alt_m double precision NOT NULL,
+            width_m double precision NOT NULL CHECK (width_m > 0),
+            height_m double precision NOT NULL CHECK (height_m > 0),
+            facing_deg double precision CHECK (facing_deg >= 0 AND facing_deg < 360),
+            status text NOT NULL DEFAULT 'candidate'
+                CHECK (status IN ('candidate', 'approved', 'rejected')),
+            status_reason text NOT NULL DEFAULT '',
+            distinctiveness double precision, flatness double precision,
+            static double precision, impact double precision,
+            points_json text, sightings_json text,
+            geom geometry(Point, 4326) GENERATED ALWAYS AS
+                (ST_SetSRID(ST_MakePoint(lon_deg, lat_deg), 4326)) STORED
+        )""",
+        "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)",
+        "CREATE INDEX landmarks_name ON landmarks (name)",
+        """CREATE TABLE appearances (
+            id text PRIMARY KEY REFERENCES landmarks (id) ON DELETE CASCADE,
+            media_type text NOT NULL,
+            data bytea NOT NULL,
+            box_x integer, box_y integer, box_w integer, box_h integer
+        )""",
+    ),
+)
+SCHEMA_VERSION = len(MIGRATIONS)
+_LOCK_KEY = 0x4C4D4B53  # advisory lock id for migrations ("LMKS")
+
+_COLS = ", ".join(f"l.{c}" for c in COLUMNS)
+_APP_COLS = ", ".join(f"a.{c}" for c in APPEARANCE_COLUMNS)
+
+
+def redact(url: str) -> str:
+    """The URL without its password, for messages."""
+    return re.sub(r"(//[^:/@]+):[^@]*@", r"\1:***@", url)
+
+
+def migrate(conn: psycopg.Connection[Any]) -> int:
+    """Bring the schema to ``SCHEMA_VERSION``; return the version before."""
+    with conn.transaction():
+        conn.execute("SELECT pg_advisory_xact_lock(%s)", (_LOCK_KEY,))
+        conn.execute("CREATE TABLE IF NOT EXISTS landmark_schema (version integer NOT NULL)")
+        row = conn.execute("SELECT max(version) FROM landmark_schema").fetchone()
+        version = int(row[0]) if row and row[0] is not None else 0
+        if version > SCHEMA_VERSION:
+            raise InputError(f"landmark repository schema version {version} is newer than "
+                             f"this program supports ({SCHEMA_VERSION})")
+        for step in range(version, SCHEMA_VERSION):
+            for sql in MIGRATIONS[step]:
+                conn.execute(sql)
+        if version < SCHEMA_VERSION:
+            conn.execute("DELETE FROM landmark_schema")
+            conn.execute("INSERT INTO landmark_schema VALUES (%s)", (SCHEMA_VERSION,))
+    return version
+
+
+class PostgisLandmarkRepository:
+    """:class:`~companion.landmarks.repository.LandmarkRepository` over PostGIS."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        try:
+            self._conn: psycopg.Connection[Any] = psycopg.connect(url)
+        except psycopg.Error as err:
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            raise InputError(f"{redact(url)}: cannot connect to the landmark repository "
+                             f"({first})") from None
+        try:
+            migrate(self._conn)
+        except psycopg.Error as err:
+            self._conn.close()
+            raise InputError(f"{redact(url)}: cannot prepare the landmark schema "
+                             f"({str(err).strip().splitlines()[0]})") from None
+        self._conn.autocommit = True
+
+    def __enter__(self) -> PostgisLandmarkRepository:
+        return self
+
+    def __exit__(self, t: type[BaseException] | None, e: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def schema_version(self) -> int:
+        row = self._conn.execute("SELECT max(version) FROM landmark_schema").fetchone()
+        return int(row[0]) if row and row[0] is not None else 0
+
+    def count(self) -> int:
+        row = self._conn.execute("SELECT count(*) FROM landmarks").fetchone()
+        return int(row[0]) if row else 0
+
+    def _existing(self, ids: list[str]) -> set[str]:
+        return {r[0] for r in self._conn.execute(
+            "SELECT id FROM landmarks WHERE id = ANY(%s)", (ids,))}
+
+    def import_landmarks(self, landmarks: Sequence[Landmark], *, replace: bool = False,
+                         source: str = "input", progress: Progress | None = None) -> int:
+        """``COPY`` every record in one transaction (``replace`` overwrites equal ids)."""
+        conn = self._conn
+        try:
+            with conn.transaction():
+                if replace:
+                    conn.execute("DELETE FROM landmarks WHERE id = ANY(%s)",
+                                 ([lm.id for lm in landmarks],))
+                elif self.count():
+                    check_new_ids(landmarks, self._existing, source, chunk=5000)
+                self._copy(landmarks, progress)
+        except psycopg.errors.IntegrityError as err:
+            check_new_ids(landmarks, lambda ids: set(), source)  # names a repeated id
+            first = str(err).strip().splitlines()[0]
+            raise InputError(f"{source}: rejected by the database ({first})") from None
+        return len(landmarks)
+
+    def _copy(self, landmarks: Sequence[Landmark], progress: Progress | None) -> None:
+        with self._conn.cursor() as cur:
+            with cur.copy(f"COPY landmarks ({', '.join(COLUMNS)}) FROM STDIN") as copy:
+                for k, lm in enumerate(landmarks, 1):
+                    copy.write_row(landmark_to_row(lm))
+                    if progress is not None and k % 20_000 == 0:
+                        progress(k)
+            apps = [(lm.id, *appearance_to_row(lm.appearance))
+                    for lm in landmarks if lm.appearance is not None]
+            if apps:
+                with cur.copy(f"COPY appearances (id, {', '.join(APPEARANCE_COLUMNS)}) "
+                              "FROM STDIN") as copy:
+                    for row in apps:
+                        copy.write_row(row)
+        if progress is not None:
+            progress(len(landmarks))
+
+    def _select(self, where: str, params: Sequence[object], with_appearance: bool
+                ) -> Iterator[Landmark]:
+        n = len(COLUMNS)
+        if with_appearance:
+            q = (f"SELECT {_COLS}, {_APP_COLS} FROM landmarks l "
+                 f"LEFT JOIN appearances a ON a.id = l.id WHERE {where}")
+        else:
+            q = f"SELECT {_COLS} FROM landmarks l WHERE {where}"
+        with self._conn.cursor() as cur:
+            cur.execute(q, params)
+            for row in cur:
+                yield row_to_landmark(row[:n], row[n:] if with_appearance else None)
+
+    def get(self, landmark_id: str) -> Landmark | None:
+        return next(self._select("l.id = %s", (landmark_id,), True), None)
+
+    def find_by_name(self, name: str) -> list[Landmark]:
+        return list(self._select("l.name = %s ORDER BY l.id", (name,), True))
+
+    def query_area(self, area: Area, *, with_appearance: bool = False) -> list[Landmark]:
+        b = area.bbox()
+        where = ("l.geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326) "
+                 "AND l.lon_deg BETWEEN %s AND %s AND l.lat_deg BETWEEN %s AND %s ORDER BY l.id")
+        params = (b.min_lon_deg, b.min_lat_deg, b.max_lon_deg, b.max_lat_deg,
+                  b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)
+        return filter_area(list(self._select(where, params, with_appearance)), area)
+
+    def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]:
+        return self._select("true ORDER BY l.id", (), with_appearance)
+
+    def update_scores(self, updates: Iterable[ScoreUpdate]) -> int:
+        rows = [(u.scores.distinctiveness, u.scores.flatness, u.scores.static, u.scores.impact,
+                 u.status, u.status_reason, u.id) for u in updates]
+        with self._conn.transaction(), self._conn.cursor() as cur:
+            cur.executemany(
+                "UPDATE landmarks SET distinctiveness = %s, flatness = %s, static = %s, "
+                "impact = %s, status = %s, status_reason = %s WHERE id = %s", rows)
+        return len(rows)

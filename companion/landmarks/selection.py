@@ -1,0 +1,185 @@
+"""The practical map (paper sec. 2.2): for one area, pick landmarks that maximise the total
+impact score under a minimum spacing and a maximum count, away from busy zones, and say
+why every other candidate was left out.
+
+Picking the heaviest set of points with no two closer than ``min_spacing_m`` is a
+maximum-weight independent set in a unit-disk graph (NP-hard); we take the classic greedy
+answer: best impact first, keep a landmark if it is far enough from all kept ones, stop at
+``max_count``.  Every rejection therefore names the better landmark that displaced it.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pymap3d
+
+from companion.errors import InputError
+from companion.landmarks.config import BusyZone, LandmarksConfig
+from companion.landmarks.record import Landmark
+
+
+@dataclass(frozen=True)
+class ZonePolygon:
+    """A busy zone: rings of ``(lon, lat)`` vertices (outer ring, then holes)."""
+
+    name: str
+    rings: tuple[npt.NDArray[np.float64], ...]
+
+    def contains(self, lon_deg: npt.NDArray[np.float64], lat_deg: npt.NDArray[np.float64]
+                 ) -> npt.NDArray[np.bool_]:
+        """Even-odd rule over all rings (so holes are outside)."""
+        inside = np.zeros(lon_deg.shape, dtype=bool)
+        for ring in self.rings:
+            x0, y0 = ring[:, 0], ring[:, 1]
+            x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+            for ax, ay, bx, by in zip(x0, y0, x1, y1, strict=True):
+                # edge (a, b) crosses the horizontal ray to the right of the point
+                crosses = (ay > lat_deg) != (by > lat_deg)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    x_cross = ax + (lat_deg - ay) * (bx - ax) / (by - ay)
+                inside ^= crosses & (lon_deg < x_cross)
+        return inside
+
+
+@dataclass(frozen=True)
+class LeftOut:
+    """A candidate not in the practical map, and why."""
+
+    id: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The practical map for one area."""
+
+    selected: tuple[Landmark, ...]
+    left_out: tuple[LeftOut, ...]
+
+    @property
+    def total_impact(self) -> float:
+        return float(sum(lm.scores.impact or 0.0 for lm in self.selected))
+
+
+def zones_from_config(zones: Sequence[BusyZone]) -> list[ZonePolygon]:
+    """Config busy zones (flat lon/lat pairs) as polygons."""
+    out = []
+    for z in zones:
+        ring = np.asarray(z.lon_lat_deg, dtype=np.float64)
+        if ring.size % 2 or ring.size < 6:
+            raise InputError(f"busy zone {z.name!r}: lon_lat_deg needs >= 3 lon, lat pairs")
+        out.append(ZonePolygon(z.name, (ring.reshape(-1, 2),)))
+    return out
+
+
+def read_busy_zones(path: str | Path) -> list[ZonePolygon]:
+    """Polygon / MultiPolygon features of a GeoJSON file (name from ``properties.name``)."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+        features = doc["features"] if doc.get("type") == "FeatureCollection" else [doc]
+    except (OSError, ValueError, AttributeError, KeyError, TypeError) as err:
+        raise InputError(f"{p}: not a readable GeoJSON FeatureCollection ({err})") from None
+    out: list[ZonePolygon] = []
+    for i, feat in enumerate(features):
+        try:
+            geom = feat["geometry"]
+            polys = {"Polygon": [geom["coordinates"]],
+                     "MultiPolygon": geom["coordinates"]}[geom["type"]]
+            name = str((feat.get("properties") or {}).get("name", f"zone {i}"))
+            for rings in polys:
+                arrays = tuple(np.asarray(r, dtype=np.float64)[:, :2] for r in rings)
+                if not arrays or any(a.shape[0] < 3 for a in arrays):
+                    raise ValueError("a ring has fewer than 3 vertices")
+                out.append(ZonePolygon(name, arrays))
+        except (KeyError, TypeError, ValueError, IndexError) as err:
+            raise InputError(f"{p}: feature {i}: geometry: expected a Polygon or "
+                             f"MultiPolygon ({err})") from None
+    return out
+
+
+def busy_zones(config: LandmarksConfig) -> list[ZonePolygon]:
+    """All busy zones of the configuration (inline ones, then the file's)."""
+    zones = zones_from_config(config.busy_zones)
+    if config.busy_zones_path:
+        zones += read_busy_zones(config.busy_zones_path)
+    return zones
+
+
+def _eligible(lm: Landmark, include_candidates: bool) -> str | None:
+    """Why a landmark may not be used at all (None: it may)."""
+    if lm.status == "rejected":
+        return "status rejected" + (f" ({lm.status_reason})" if lm.status_reason else "")
+    if lm.status == "candidate" and not include_candidates:
+        return "status candidate: not admitted yet (run 'companion landmarks score')"
+    return None
+
+
+def select_practical_map(candidates: Sequence[Landmark], *, min_spacing_m: float,
+                         max_count: int, zones: Sequence[ZonePolygon] = (),
+                         include_candidates: bool = False, unknown_score: float = 0.5
+                         ) -> Selection:
+    """Greedy selection (module docstring); ``candidates`` are the landmarks of the area.
+
+    Ranking: impact (``unknown_score`` if not scored) descending, then id.  Distances are
+    horizontal, on the local tangent plane at the candidates' mean position.
+    """
+    if not candidates:
+        return Selection((), ())
+    lat = np.array([lm.lat_deg for lm in candidates])
+    lon = np.array([lm.lon_deg for lm in candidates])
+    n_m, e_m, _ = pymap3d.geodetic2ned(lat, lon, 0.0, float(lat.mean()), float(lon.mean()), 0.0)
+    zone_of: list[str | None] = [None] * len(candidates)
+    for z in zones:
+        for idx in np.flatnonzero(z.contains(lon, lat)).tolist():
+            zone_of[idx] = zone_of[idx] or z.name
+    impact = [unknown_score if lm.scores.impact is None else lm.scores.impact
+              for lm in candidates]
+    order = sorted(range(len(candidates)), key=lambda k: (-impact[k], candidates[k].id))
+    cell = max(min_spacing_m, 1e-9)
+    grid: dict[tuple[int, int], list[int]] = {}
+    kept: list[int] = []
+    left: list[LeftOut] = []
+    for k in order:
+        lm = candidates[k]
+        why = _eligible(lm, include_candidates)
+        if why is None and zone_of[k] is not None:
+            why = f"inside busy zone {zone_of[k]!r}"
+        if why is None:
+            why = _too_close(k, n_m, e_m, grid, cell, min_spacing_m, candidates, impact)
+        if why is None and len(kept) >= max_count:
+            why = f"max count {max_count} reached (impact {impact[k]:.2f} ranks lower)"
+        if why is not None:
+            left.append(LeftOut(lm.id, why))
+            continue
+        kept.append(k)
+        key = (int(np.floor(n_m[k] / cell)), int(np.floor(e_m[k] / cell)))
+        grid.setdefault(key, []).append(k)
+    return Selection(tuple(candidates[k] for k in kept), tuple(left))
+
+
+def _too_close(k: int, n_m: npt.NDArray[np.float64], e_m: npt.NDArray[np.float64],
+               grid: dict[tuple[int, int], list[int]], cell: float, min_spacing_m: float,
+               candidates: Sequence[Landmark], impact: Sequence[float]) -> str | None:
+    """Reason naming the nearest kept landmark closer than ``min_spacing_m``, if any."""
+    if min_spacing_m <= 0.0:
+        return None
+    ci, cj = int(np.floor(n_m[k] / cell)), int(np.floor(e_m[k] / cell))
+    best: tuple[float, int] | None = None
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            for j in grid.get((ci + di, cj + dj), ()):
+                d = float(np.hypot(n_m[k] - n_m[j], e_m[k] - e_m[j]))
+                if d < min_spacing_m and (best is None or d < best[0]):
+                    best = (d, j)
+    if best is None:
+        return None
+    d, j = best
+    return (f"{d:.1f} m from selected {candidates[j].id!r} (min spacing {min_spacing_m:g} m; "
+            f"impact {impact[k]:.2f} <= {impact[j]:.2f})")

@@ -1,0 +1,223 @@
+"""The on-board landmark store: SQLite with WAL, foreign keys, a versioned schema with
+migrations (``PRAGMA user_version``) and an R*Tree spatial index.
+
+Positions are indexed in ``landmarks_rtree`` (``rid, min_lon, max_lon, min_lat,
+max_lat``; a point is a zero-size box).  The R*Tree stores 32-bit floats rounded
+outwards, so every area query re-checks the exact coordinates in ``landmarks``.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Iterable, Iterator, Sequence
+from pathlib import Path
+from types import TracebackType
+
+from companion.errors import InputError
+from companion.landmarks.record import Area, Landmark, filter_area
+from companion.landmarks.repository import (
+    APPEARANCE_COLUMNS,
+    COLUMNS,
+    Progress,
+    ScoreUpdate,
+    appearance_to_row,
+    check_new_ids,
+    landmark_to_row,
+    row_to_landmark,
+)
+
+#: MIGRATIONS[k] brings a database from schema version k to k + 1.
+MIGRATIONS: tuple[tuple[str, ...], ...] = (
+    (  # 0 -> 1: landmarks and their spatial index
+        """CREATE TABLE landmarks (
+            rid INTEGER PRIMARY KEY,
+            id TEXT NOT NULL UNIQUE,
+            name TEXT NOT NULL,
+            category TEXT NOT NULL
+                CHECK (category IN ('signpost', 'wall_image', 'logo', 'other')),
+            lat_deg REAL NOT NULL CHECK (lat_deg BETWEEN -90 AND 90),
+            lon_deg REAL NOT NULL CHECK (lon_deg BETWEEN -180 AND 180),
+            alt_m REAL NOT NULL,
+            width_m REAL NOT NULL CHECK (width_m > 0),
+            height_m REAL NOT NULL CHECK (height_m > 0),
+            facing_deg REAL CHECK (facing_deg >= 0 AND facing_deg < 360),
+            status TEXT NOT NULL DEFAULT 'candidate'
+                CHECK (status IN ('candidate', 'approved', 'rejected')),
+            status_reason TEXT NOT NULL DEFAULT '',
+            distinctiveness REAL, flatness REAL, static REAL, impact REAL
+        )""",
+        "CREATE VIRTUAL TABLE landmarks_rtree USING rtree(rid, min_lon, max_lon, min_lat, max_lat)",
+    ),
+    (  # 1 -> 2: appearance images in the database, 3-D points and sightings, name index
+        "ALTER TABLE landmarks ADD COLUMN points_json TEXT",
+        "ALTER TABLE landmarks ADD COLUMN sightings_json TEXT",
+        "CREATE INDEX landmarks_name ON landmarks (name)",
+        """CREATE TABLE appearances (
+            rid INTEGER PRIMARY KEY REFERENCES landmarks (rid) ON DELETE CASCADE,
+            media_type TEXT NOT NULL,
+            data BLOB NOT NULL,
+            box_x INTEGER, box_y INTEGER, box_w INTEGER, box_h INTEGER
+        )""",
+    ),
+)
+SCHEMA_VERSION = len(MIGRATIONS)
+
+_COLS = ", ".join(f"l.{c}" for c in COLUMNS)
+_APP_COLS = ", ".join(f"a.{c}" for c in APPEARANCE_COLUMNS)
+_CHUNK = 20_000
+
+
+def migrate(conn: sqlite3.Connection, target: int = SCHEMA_VERSION) -> int:
+    """Bring the schema to ``target`` in one transaction; return the version before."""
+    (version,) = conn.execute("PRAGMA user_version").fetchone()
+    if version > SCHEMA_VERSION:
+        raise InputError(f"landmark database schema version {version} is newer than this "
+                         f"program supports ({SCHEMA_VERSION}); upgrade landmark-companion")
+    if version >= target:
+        return int(version)
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        for step in range(version, target):
+            for sql in MIGRATIONS[step]:
+                conn.execute(sql)
+        conn.execute(f"PRAGMA user_version = {int(target)}")
+        conn.execute("COMMIT")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    return int(version)
+
+
+class SqliteLandmarkRepository:
+    """:class:`~companion.landmarks.repository.LandmarkRepository` over one SQLite file."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = str(path)
+        try:
+            self._conn = sqlite3.connect(self.path, isolation_level=None)
+            self._conn.execute("PRAGMA busy_timeout = 5000")
+            self._conn.execute("PRAGMA journal_mode = WAL")
+            self._conn.execute("PRAGMA synchronous = NORMAL")
+            self._conn.execute("PRAGMA foreign_keys = ON")
+            migrate(self._conn)
+        except sqlite3.DatabaseError as err:
+            raise InputError(f"{self.path}: cannot open landmark database ({err})") from None
+
+    def __enter__(self) -> SqliteLandmarkRepository:
+        return self
+
+    def __exit__(self, t: type[BaseException] | None, e: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def schema_version(self) -> int:
+        return int(self._conn.execute("PRAGMA user_version").fetchone()[0])
+
+    def count(self) -> int:
+        return int(self._conn.execute("SELECT count(*) FROM landmarks").fetchone()[0])
+
+    def _existing(self, ids: list[str]) -> set[str]:
+        q = f"SELECT id FROM landmarks WHERE id IN ({','.join('?' * len(ids))})"
+        return {r[0] for r in self._conn.execute(q, ids)}
+
+    def import_landmarks(self, landmarks: Sequence[Landmark], *, replace: bool = False,
+                         source: str = "input", progress: Progress | None = None) -> int:
+        """Insert all records in one transaction (``replace`` overwrites equal ids)."""
+        conn = self._conn
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            if replace:
+                self._delete_ids([lm.id for lm in landmarks])
+            elif self.count():
+                check_new_ids(landmarks, self._existing, source)
+            (rid0,) = conn.execute("SELECT coalesce(max(rid), 0) FROM landmarks").fetchone()
+            for start in range(0, len(landmarks), _CHUNK):
+                self._insert_chunk(landmarks[start:start + _CHUNK], rid0 + start + 1)
+                if progress is not None:
+                    progress(min(start + _CHUNK, len(landmarks)))
+            conn.execute("COMMIT")
+        except sqlite3.IntegrityError as err:
+            conn.execute("ROLLBACK")
+            check_new_ids(landmarks, lambda ids: set(), source)  # names a repeated id
+            raise InputError(f"{source}: rejected by the database ({err})") from None
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+        return len(landmarks)
+
+    def _insert_chunk(self, chunk: Sequence[Landmark], rid0: int) -> None:
+        marks = ",".join("?" * (len(COLUMNS) + 1))
+        self._conn.executemany(
+            f"INSERT INTO landmarks (rid, {', '.join(COLUMNS)}) VALUES ({marks})",
+            [(rid0 + k, *landmark_to_row(lm)) for k, lm in enumerate(chunk)],
+        )
+        self._conn.executemany(
+            "INSERT INTO landmarks_rtree VALUES (?, ?, ?, ?, ?)",
+            [(rid0 + k, lm.lon_deg, lm.lon_deg, lm.lat_deg, lm.lat_deg)
+             for k, lm in enumerate(chunk)],
+        )
+        apps = [(rid0 + k, *appearance_to_row(lm.appearance))
+                for k, lm in enumerate(chunk) if lm.appearance is not None]
+        if apps:
+            self._conn.executemany(
+                f"INSERT INTO appearances (rid, {', '.join(APPEARANCE_COLUMNS)}) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?)", apps)
+
+    def _delete_ids(self, ids: list[str]) -> None:
+        for start in range(0, len(ids), 500):
+            part = ids[start:start + 500]
+            marks = ",".join("?" * len(part))
+            rids = [r[0] for r in self._conn.execute(
+                f"SELECT rid FROM landmarks WHERE id IN ({marks})", part)]
+            if rids:
+                rm = ",".join("?" * len(rids))
+                self._conn.execute(f"DELETE FROM landmarks_rtree WHERE rid IN ({rm})", rids)
+                self._conn.execute(f"DELETE FROM landmarks WHERE rid IN ({rm})", rids)
+
+    def _select(self, where: str, params: Sequence[object], with_appearance: bool,
+                rtree: bool = False) -> Iterator[Landmark]:
+        frm = "landmarks_rtree r JOIN landmarks l ON l.rid = r.rid" if rtree else "landmarks l"
+        if with_appearance:
+            q = (f"SELECT {_COLS}, {_APP_COLS} FROM {frm} "
+                 f"LEFT JOIN appearances a ON a.rid = l.rid WHERE {where}")
+            n = len(COLUMNS)
+            for row in self._conn.execute(q, params):
+                yield row_to_landmark(row[:n], row[n:])
+        else:
+            for row in self._conn.execute(f"SELECT {_COLS} FROM {frm} WHERE {where}", params):
+                yield row_to_landmark(row)
+
+    def get(self, landmark_id: str) -> Landmark | None:
+        return next(self._select("l.id = ?", (landmark_id,), True), None)
+
+    def find_by_name(self, name: str) -> list[Landmark]:
+        return list(self._select("l.name = ? ORDER BY l.id", (name,), True))
+
+    def query_area(self, area: Area, *, with_appearance: bool = False) -> list[Landmark]:
+        b = area.bbox()
+        where = ("r.min_lon <= ? AND r.max_lon >= ? AND r.min_lat <= ? AND r.max_lat >= ? "
+                 "AND l.lon_deg BETWEEN ? AND ? AND l.lat_deg BETWEEN ? AND ? ORDER BY l.id")
+        params = (b.max_lon_deg, b.min_lon_deg, b.max_lat_deg, b.min_lat_deg,
+                  b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)
+        return filter_area(list(self._select(where, params, with_appearance, rtree=True)), area)
+
+    def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]:
+        return self._select("1 ORDER BY l.id", (), with_appearance)
+
+    def update_scores(self, updates: Iterable[ScoreUpdate]) -> int:
+        rows = [(u.scores.distinctiveness, u.scores.flatness, u.scores.static, u.scores.impact,
+                 u.status, u.status_reason, u.id) for u in updates]
+        conn = self._conn
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            conn.executemany(
+                "UPDATE landmarks SET distinctiveness = ?, flatness = ?, static = ?, impact = ?, "
+                "status = ?, status_reason = ? WHERE id = ?", rows)
+            conn.execute("COMMIT")
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+        return len(rows)

@@ -1,0 +1,57 @@
+"""Open a repository by location, and pull a practical map from one store into another
+(``companion landmarks sync``: city-scale PostGIS -> on-board SQLite)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from companion.landmarks.config import LandmarksConfig
+from companion.landmarks.record import Area
+from companion.landmarks.repository import LandmarkRepository
+from companion.landmarks.selection import Selection, ZonePolygon, select_practical_map
+from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
+
+POSTGRES_SCHEMES = ("postgresql://", "postgres://")
+
+
+def open_repository(location: str | Path) -> LandmarkRepository:
+    """A PostGIS repository for a ``postgresql://`` URL, else a SQLite file."""
+    text = str(location)
+    if text.startswith(POSTGRES_SCHEMES):
+        from companion.landmarks.postgis_repo import PostgisLandmarkRepository
+
+        return PostgisLandmarkRepository(text)
+    return SqliteLandmarkRepository(text)
+
+
+def select_area(repo: LandmarkRepository, area: Area, config: LandmarksConfig,
+                zones: Sequence[ZonePolygon], *, min_spacing_m: float | None = None,
+                max_count: int | None = None, include_candidates: bool | None = None
+                ) -> Selection:
+    """The practical map of ``area`` from ``repo`` (arguments override the config)."""
+    return select_practical_map(
+        repo.query_area(area),
+        min_spacing_m=config.min_spacing_m if min_spacing_m is None else min_spacing_m,
+        max_count=config.max_count if max_count is None else max_count,
+        zones=zones,
+        include_candidates=(config.include_candidates if include_candidates is None
+                            else include_candidates),
+        unknown_score=config.unknown_score,
+    )
+
+
+def sync_practical_map(source: LandmarkRepository, dest: LandmarkRepository, area: Area,
+                       config: LandmarksConfig, zones: Sequence[ZonePolygon], *,
+                       min_spacing_m: float | None = None, max_count: int | None = None,
+                       include_candidates: bool | None = None) -> Selection:
+    """Select in ``source`` and store the selection (with appearance images) in ``dest``.
+
+    The destination gets the selected records in one transaction, replacing equal ids;
+    nothing else in it changes.
+    """
+    selection = select_area(source, area, config, zones, min_spacing_m=min_spacing_m,
+                            max_count=max_count, include_candidates=include_candidates)
+    full = [source.get(lm.id) or lm for lm in selection.selected]
+    dest.import_landmarks(full, replace=True, source=f"sync from {type(source).__name__}")
+    return selection

@@ -1,0 +1,247 @@
+"""GeoJSON validation, import/export and the SQLite repository."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pymap3d
+import pytest
+
+from companion.errors import InputError
+from companion.landmarks.geojson_io import import_map, read_map, write_map
+from companion.landmarks.record import BBox, Circle, Landmark, parse_area
+from companion.landmarks.sqlite_repo import MIGRATIONS, SCHEMA_VERSION, SqliteLandmarkRepository
+from tests.landmarks.helpers import (
+    ORIGIN_LAT,
+    ORIGIN_LON,
+    collection,
+    feature,
+    grid_features,
+    write_json,
+)
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def _dump(db: Path) -> str:
+    conn = sqlite3.connect(db)
+    try:
+        return "\n".join(conn.iterdump())
+    finally:
+        conn.close()
+
+
+def _bad(feats: list[dict[str, Any]], index: int, path: list[str], value: Any) -> list[Any]:
+    target = feats[index]
+    for key in path[:-1]:
+        target = target[key]
+    if value is KeyError:
+        del target[path[-1]]
+    else:
+        target[path[-1]] = value
+    return feats
+
+
+@pytest.mark.parametrize(
+    ("index", "path", "value", "expected"),
+    [
+        (2, ["geometry", "coordinates"], [2.35, 91.0, 0.0],
+         "feature 2: geometry.coordinates[1] (latitude): expected a number >= -90 and <= 90"),
+        (1, ["geometry", "coordinates"], [2.35, 48.0],
+         "feature 1: geometry.coordinates: expected [lon, lat, alt_m]"),
+        (4, ["properties", "name"], KeyError,
+         "feature 4: properties.name: required property is missing"),
+        (0, ["properties", "width_m"], KeyError,
+         "feature 0: properties.width_m: required property is missing"),
+        (3, ["properties", "height_m"], 0,
+         "feature 3: properties.height_m: expected a number > 0"),
+        (3, ["properties", "category"], "tree",
+         'feature 3: properties.category: expected one of signpost, wall_image, logo, other, '
+         'got "tree"'),
+        (1, ["properties", "facing_deg"], 360,
+         "feature 1: properties.facing_deg: expected a number >= 0 and < 360"),
+        (2, ["properties", "status"], "maybe", "feature 2: properties.status: expected one of"),
+        (2, ["properties", "scores"], {"flatness": 1.5},
+         "feature 2: properties.scores.flatness: expected a number >= 0 and <= 1"),
+        (1, ["id"], KeyError, "feature 1: id: required"),
+        (4, ["id"], "lm0001", "feature 4: id: duplicate id 'lm0001' (already used by feature 1)"),
+        (0, ["properties", "appearance"], "missing.png",
+         "feature 0: properties.appearance: cannot read"),
+        (0, ["properties", "points_m"], [[0, 0]], "feature 0: properties.points_m[0]: expected"),
+        (3, ["geometry"], {"type": "LineString", "coordinates": []},
+         "feature 3: geometry: expected a Point geometry"),
+    ],
+)
+def test_bad_feature_is_one_line_naming_index_and_field(
+    tmp_path: Path, index: int, path: list[str], value: Any, expected: str
+) -> None:
+    map_path = write_json(tmp_path / "bad.geojson",
+                          collection(_bad(grid_features(6), index, path, value)))
+    with pytest.raises(InputError) as err:
+        read_map(map_path)
+    message = str(err.value)
+    assert message.startswith(f"{map_path}: ")
+    assert expected in message
+    assert "\n" not in message
+
+
+def test_invalid_json_and_non_collection_are_rejected(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.geojson"
+    bad.write_text('{"type": "FeatureCollection", "features": [')
+    with pytest.raises(InputError, match="not valid JSON"):
+        read_map(bad)
+    with pytest.raises(InputError, match="not a GeoJSON FeatureCollection"):
+        read_map(write_json(tmp_path / "f.geojson", feature("a", 1.0, 2.0)))
+
+
+def test_export_then_import_round_trips_every_field(sample_map: Path, tmp_path: Path) -> None:
+    original = read_map(sample_map)
+    with SqliteLandmarkRepository(tmp_path / "a.db") as repo:
+        import_map(repo, sample_map)
+        out = tmp_path / "out" / "exported.geojson"
+        out.parent.mkdir()
+        assert write_map(out, repo.iter_all()) == len(original)
+    assert (out.parent / "exported.appearance").is_dir()
+    again = read_map(out)
+    assert sorted(again, key=lambda lm: lm.id) == sorted(original, key=lambda lm: lm.id)
+    by_id = {lm.id: lm for lm in again}
+    assert by_id["lm0004"].appearance is not None
+    assert by_id["lm0004"].appearance.data == b"\xff\xd8jpegbytes"
+    assert by_id["lm0004"].appearance.box_px == (1, 2, 3, 4)
+    assert by_id["lm0005"].facing_deg is None
+    embedded = tmp_path / "embedded.geojson"
+    write_map(embedded, original, embed_appearance=True)
+    assert json.loads(embedded.read_text())["features"][4]["properties"]["appearance"].startswith(
+        "data:image/jpeg;base64,")
+    assert read_map(embedded) == original
+
+
+def test_database_uses_wal_foreign_keys_and_current_schema(tmp_path: Path) -> None:
+    with SqliteLandmarkRepository(tmp_path / "a.db") as repo:
+        assert repo.schema_version() == SCHEMA_VERSION
+        conn = repo._conn
+        assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+        assert conn.execute("PRAGMA foreign_keys").fetchone()[0] == 1
+
+
+def test_old_schema_is_migrated_keeping_rows(tmp_path: Path) -> None:
+    db = tmp_path / "old.db"
+    conn = sqlite3.connect(db)
+    for sql in MIGRATIONS[0]:
+        conn.execute(sql)
+    conn.execute("PRAGMA user_version = 1")
+    conn.execute("INSERT INTO landmarks (rid, id, name, category, lat_deg, lon_deg, alt_m, "
+                 "width_m, height_m) VALUES (1, 'old', 'Old sign', 'logo', 10, 20, 5, 1, 1)")
+    conn.execute("INSERT INTO landmarks_rtree VALUES (1, 20, 20, 10, 10)")
+    conn.commit()
+    conn.close()
+    with SqliteLandmarkRepository(db) as repo:
+        assert repo.schema_version() == SCHEMA_VERSION
+        old = repo.get("old")
+        assert old is not None and old.name == "Old sign" and old.points_m == ()
+        assert [lm.id for lm in repo.query_area(BBox(19.9, 9.9, 20.1, 10.1))] == ["old"]
+        assert [lm.id for lm in repo.find_by_name("Old sign")] == ["old"]
+
+
+def test_newer_schema_is_refused(tmp_path: Path) -> None:
+    db = tmp_path / "new.db"
+    conn = sqlite3.connect(db)
+    conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    conn.close()
+    with pytest.raises(InputError, match="newer than this program supports"):
+        SqliteLandmarkRepository(db)
+
+
+def test_duplicate_of_stored_id_fails_and_replace_overwrites(sample_map: Path,
+                                                              tmp_path: Path) -> None:
+    with SqliteLandmarkRepository(tmp_path / "a.db") as repo:
+        import_map(repo, sample_map)
+        before = _dump(tmp_path / "a.db")
+        newer = write_json(tmp_path / "new.geojson", collection(
+            [feature("zz", 1.0, 1.0), feature("lm0003", 2.0, 2.0, name="moved")]))
+        with pytest.raises(InputError, match=r"feature 1: id: 'lm0003' already exists"):
+            import_map(repo, newer)
+        assert _dump(tmp_path / "a.db") == before
+        import_map(repo, newer, replace=True)
+        moved = repo.get("lm0003")
+        assert moved is not None and moved.name == "moved" and moved.appearance is None
+        assert repo.count() == 51
+        assert repo._conn.execute("SELECT count(*) FROM appearances").fetchone()[0] == 1
+        assert [lm.id for lm in repo.query_area(Circle(2.0, 2.0, 10.0))] == ["lm0003"]
+
+
+def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path: Path) -> None:
+    db = tmp_path / "a.db"
+    with SqliteLandmarkRepository(db) as repo:
+        import_map(repo, sample_map)
+        before = _dump(db)
+        good = Landmark("x0", "x", "logo", 1.0, 1.0, 0.0, 1.0, 1.0)
+        records = [dataclasses.replace(good, id=f"x{k}") for k in range(30_000)]
+        records[-1] = dataclasses.replace(records[-1], width_m=-1.0)  # CHECK fails in chunk 2
+        with pytest.raises(InputError, match="rejected by the database"):
+            repo.import_landmarks(records)
+    assert _dump(db) == before
+
+
+def test_killed_import_leaves_database_exactly_as_it_was(sample_map: Path,
+                                                         tmp_path: Path) -> None:
+    db = tmp_path / "a.db"
+    with SqliteLandmarkRepository(db) as repo:
+        import_map(repo, sample_map)
+    before = _dump(db)
+    big = write_json(tmp_path / "big.geojson", collection(
+        [feature(f"b{k}", 10.0 + k * 1e-5, 20.0) for k in range(45_000)]))
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, str(Path(__file__).with_name("import_worker.py")), str(db), str(big)],
+        stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line.startswith("HALFWAY"), line  # rows are written inside the transaction
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    assert _dump(db) == before
+    with SqliteLandmarkRepository(db) as repo:
+        assert repo.count() == 50
+        assert repo._conn.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+
+
+def test_area_queries_match_brute_force(tmp_path: Path) -> None:
+    rng = np.random.default_rng(7)
+    lat = ORIGIN_LAT + rng.uniform(-0.02, 0.02, 3000)
+    lon = ORIGIN_LON + rng.uniform(-0.03, 0.03, 3000)
+    records = [Landmark(f"r{k}", "r", "other", float(a), float(o), 0.0, 1.0, 1.0)
+               for k, (a, o) in enumerate(zip(lat, lon, strict=True))]
+    with SqliteLandmarkRepository(tmp_path / "a.db") as repo:
+        repo.import_landmarks(records)
+        box = BBox(ORIGIN_LON - 0.01, ORIGIN_LAT - 0.005, ORIGIN_LON + 0.004, ORIGIN_LAT + 0.01)
+        got = {lm.id for lm in repo.query_area(box)}
+        want = {f"r{k}" for k in np.flatnonzero(
+            (lat >= box.min_lat_deg) & (lat <= box.max_lat_deg)
+            & (lon >= box.min_lon_deg) & (lon <= box.max_lon_deg))}
+        assert got == want and len(want) > 50
+        circle = parse_area(f"circle:{ORIGIN_LAT},{ORIGIN_LON},900")
+        got = {lm.id for lm in repo.query_area(circle)}
+        n, e, _ = pymap3d.geodetic2ned(lat, lon, 0.0, ORIGIN_LAT, ORIGIN_LON, 0.0)
+        want = {f"r{k}" for k in np.flatnonzero(np.hypot(n, e) <= 900.0)}
+        assert got == want and len(want) > 50
+
+
+@pytest.mark.parametrize("text", ["bbox:1,2,3", "circle:1,2,-5", "bbox:3,2,1,4", "disc:1,2,3",
+                                  "circle:95,0,10", "bbox:a,b,c,d"])
+def test_bad_area_text_is_refused(text: str) -> None:
+    with pytest.raises(ValueError, match="expected bbox:"):
+        parse_area(text)
