@@ -214,7 +214,8 @@ class CompanionApp:
         for event in result.events:
             self.reporter.report("events", result.capture_t_us, event)
         self.reporter.report("tracks", result.capture_t_us,
-                             {"frame": result.frame_index, "tracks": list(result.tracks)})
+                             {"frame": result.frame_index, "tracks": list(result.tracks),
+                              "no_fix_reason": result.no_fix_reason})
         if result.tracks:
             self._ever_tracked = True
         if result.fix is None:

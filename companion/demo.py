@@ -18,23 +18,20 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from companion.app import CompanionApp
-from companion.autopilot import AttitudeHistory, BridgeSink
-from companion.flightlog import FlightLogWriter
-from companion.monitoring.publisher import MonitorPublisher
-from companion.perception import Perception, SideSensors
-from companion.reporting import Reporter
+from companion.autopilot import AttitudeHistory
+from companion.landmarks.geodesy import LocalFrame
+from companion.perception import Perception
+from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import Settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
-from companion.validate import to_plain
-from mavlink_bridge.bridge import VisionBridge, create_bridge
+from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from tracker.pose.types import MapLandmark, PoseFix
 
@@ -89,62 +86,39 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     """Run the embedded demo and return its summary (see :func:`summary`)."""
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
-    origin = sim.scenario.origin
+    o = sim.scenario.origin
+    pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
     # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
                                              endpoint="udpin:127.0.0.1:0"), truth=sim.truth_fn)
     await fake.start()
     source = SimCameraSource(sim, realtime=True, seconds=seconds,
                              t0_us=fake.start_ns // 1000)
-    mav_cfg = dataclasses.replace(
-        settings.mavlink, profile=settings.vehicle.profile,
-        endpoint=f"udpout:127.0.0.1:{fake.local_port}", origin_lat_deg=origin.lat,
-        origin_lon_deg=origin.lon, origin_alt_m=origin.alt_m, set_origin=True)
-    bridge = create_bridge(mav_cfg)
-    await bridge.start()
-    await bridge.wait_link(True, timeout_s=5.0)
-    attitude = AttitudeHistory(bridge)
-    attitude.start()
-    perception = Perception(sim.scenario.camera, landmarks, references,
-                            sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
-                            config=settings.perception, tracker_config=settings.tracker,
-                            pose_config=settings.pose, acquire_config=settings.acquire,
-                            gate_config=settings.fixgate)
-    recorder = TruthRecorder(perception, source, {lm.landmark_id: lm for lm in landmarks})
-    reporter = _reporter(settings, landmarks)
-    app = CompanionApp(source, recorder, BridgeSink(bridge), reporter, settings.vehicle.id)
+    bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+                        origin_lat_deg=o.lat, origin_lon_deg=o.lon, origin_alt_m=o.alt_m,
+                        set_origin=True)
+    recorders: list[TruthRecorder] = []
+
+    def processor(attitude: AttitudeHistory) -> TruthRecorder:
+        perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
+        recorders.append(TruthRecorder(perception, source,
+                                       {lm.landmark_id: lm for lm in landmarks}))
+        return recorders[0]
+
+    tickers: list[asyncio.Task[None]] = []
     cpu0, wall0 = os.times(), time.monotonic()
-    ticker = asyncio.create_task(_progress(app, fake, seconds, progress))
     try:
-        await app.run(seconds + 5.0)
+        app = await fly(settings, source, bridge, processor, landmarks, seconds=seconds + 5.0,
+                        prefix="demo", on_start=lambda a: tickers.append(asyncio.create_task(
+                            _progress(a, fake, seconds, progress))))
     finally:
-        ticker.cancel()
-        await asyncio.gather(ticker, return_exceptions=True)
+        for t in tickers:
+            t.cancel()
+        await asyncio.gather(*tickers, return_exceptions=True)
         cpu1, wall1 = os.times(), time.monotonic()
-        await attitude.stop()
-        await bridge.stop()
         await fake.stop()
-        reporter.close()
     busy = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / max(wall1 - wall0, 1e-9)
-    return summary(app, fake, bridge, recorder.result, source, busy)
-
-
-def _reporter(settings: Settings, landmarks: list[MapLandmark]) -> Reporter:
-    log_dir = Path(settings.flightlog.dir)
-    name = time.strftime("demo-%Y%m%d-%H%M%S.jsonl")
-    flightlog = FlightLogWriter(log_dir / name, settings.vehicle.id,
-                                settings.flightlog.fsync_interval_s)
-    monitor = None
-    if settings.monitor.enabled:
-        providers = {
-            "config": lambda: to_plain(settings),
-            "landmarks": lambda: [{"id": lm.landmark_id, "category": lm.category,
-                                   "position_ned_m": list(lm.position_ned_m),
-                                   "width_m": lm.width_m, "height_m": lm.height_m,
-                                   "facing_deg": lm.facing_deg} for lm in landmarks],
-        }
-        monitor = MonitorPublisher(settings.monitor, settings.vehicle.id, providers)
-    return Reporter(flightlog, monitor)
+    return summary(app, fake, bridge, recorders[0].result, source, busy)
 
 
 async def _progress(app: CompanionApp, fake: FakeAutopilot, seconds: float,
