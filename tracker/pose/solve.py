@@ -371,7 +371,8 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
         )
     rel = pts.points_ned - p0
     ahead = np.einsum("ij,ij->i", rel, b)
-    worst_angle = float(np.max(np.arccos(np.clip(ahead / np.linalg.norm(rel, axis=1), -1, 1))))
+    cos = ahead / np.maximum(np.linalg.norm(rel, axis=1), 1e-12)
+    worst_angle = float(np.max(np.arccos(np.clip(cos, -1.0, 1.0))))
     if not single and worst_angle > _consensus_threshold(ctx):  # cheap all-inlier test
         suspect = _consensus_outlier(ctx, pts, b)
         if suspect >= 0:

@@ -221,7 +221,7 @@ def bearing_consensus(
     t = (e - b * d) / denom
     pos = 0.5 * ((c[i] - s[:, None] * u[i]) + (c[j] - t[:, None] * u[j]))  # pairs x 3
     rel = c[None, :, :] - pos[:, None, :]  # pairs x groups x 3
-    cos = np.einsum("pgk,gk->pg", rel, u) / np.linalg.norm(rel, axis=2)
+    cos = np.einsum("pgk,gk->pg", rel, u) / np.maximum(np.linalg.norm(rel, axis=2), 1e-12)
     err = np.arccos(np.clip(cos, -1.0, 1.0))
     err[~ok] = np.pi
     inl = err < threshold_rad
