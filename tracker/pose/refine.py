@@ -252,15 +252,16 @@ def _finish(
 
 
 def arc_correction(cov: FloatArray, position: FloatArray, points_ned: FloatArray) -> FloatArray:
-    """Second-order term for the curved valley of bearing-only geometry (returns a new 6x6).
+    """Second-order term for the curved valley of bearing-dominated geometry (a new 6x6).
 
     Seen from afar, the landmarks fix the direction to them well but let the vehicle slide
-    on a sphere of radius ``d`` about them.  Linearisation replaces the arc by its tangent;
-    the arc departs from it along the line of sight by ``d phi^2 / 2`` for an angular error
-    ``phi ~ N(0, s^2)``, whose second moment is ``3 d^2 s^4 / 4`` (cf. the debiased converted
-    measurements of Lerro & Bar-Shalom, 1993).  With ``s_i^2 = lambda_i / d^2`` for the two
-    position variances ``lambda_i`` across the line of sight ``u``:
-    ``P_pos += 3/4 (lambda_1^2 + lambda_2^2) / d^2 u u^T``.
+    sideways while turning; the valley of the cost is curved, and the tangent (linear)
+    picture misses a departure along the line of sight ``u`` of order ``d phi^2 / 2`` for an
+    angular error ``phi ~ N(0, s^2)``, whose second moment is ``3 d^2 s^4 / 4`` (cf. the
+    converted-measurement bias of Lerro & Bar-Shalom, 1993).  Its sign depends on the
+    geometry (measured: away from a head-on wall), so it is added as a second moment, not
+    corrected as a bias.  With ``s_i^2 = lambda_i / d^2`` for the two position variances
+    ``lambda_i`` across ``u``: ``P_pos += 3/4 (lambda_1^2 + lambda_2^2) / d^2 u u^T``.
     """
     rel = points_ned.mean(axis=0) - position
     d = float(np.linalg.norm(rel))
