@@ -23,7 +23,7 @@ from tracker.pose.scenarios import ScenarioResult, run_scenario, scenarios
 #: smallest share of fixes with NEES inside the 95 % bounds).  Set from the measured
 #: figures in docs/pose.md with a margin for other seeds.
 BASELINE: dict[str, tuple[float | None, float]] = {
-    "hover_wall": (None, 0.88),
+    "hover_wall": (None, 0.85),  # at the edge: 0.88-0.91 over seeds 1-3 (docs/pose.md)
     "hover_wall_attitude": (None, 0.9),
     "hover_street": (0.5, 0.9),
     "survey": (0.5, 0.9),
