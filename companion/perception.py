@@ -35,6 +35,7 @@ from tracker.acquire import (
     homography_to,
     project_corners,
     refine_ecc,
+    search_template,
 )
 from tracker.camera import CameraModel
 from tracker.pose.config import PoseConfig
@@ -67,6 +68,10 @@ class PerceptionConfig:
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
+    #: Without a fix for this long, search the whole frame for one landmark per frame.
+    search_after_s: float = field(default=0.3, metadata={"ge": 0})
+    search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
+    search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
 
 
 @dataclass(frozen=True)
@@ -146,6 +151,8 @@ class Perception:
         self.gate = FixGate(gate_config or FixGateConfig())
         self._events_next: list[dict[str, Any]] = []
         self._last_fix: PoseFix | None = None
+        self._last_fix_us = -(2**62)
+        self._search_turn = 0
         self._seed = seed
         self._frames = 0
 
@@ -178,7 +185,10 @@ class Perception:
         if self._should_acquire():
             self._events_next += self._acquire(frame.image)
         if self._last_fix is not None:
+            self._last_fix_us = self._last_fix.time_us
             self._events_next += self._predict_acquire(frame.image, self._last_fix)
+        elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
+            self._events_next += self._search(frame.image)
 
     # -- tracking ---------------------------------------------------------------------
 
@@ -245,13 +255,44 @@ class Perception:
             box = clip_box(match.box, width, height)
             if box is None or len(self.tracks) >= self.config.max_tracks:
                 continue
-            tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
-            tracker.init(image, box)
-            self.tracks[match.landmark_id] = Track(match.landmark_id, tracker, box,
-                                                   match.homography, corners=match.corners_px)
-            events.append({"event": "acquired", "landmark": match.landmark_id,
-                           "box": [round(v, 1) for v in box], "inliers": match.inliers})
+            events.append(self._start(match.landmark_id, image, box, match.homography,
+                                      match.corners_px, "features"))
         return events
+
+    def _start(self, lid: str, image: npt.NDArray[np.uint8], box: Box, hom: FloatArray,
+               corners: FloatArray, by: str) -> dict[str, Any]:
+        """Start tracking landmark ``lid`` in ``box`` with a verified homography."""
+        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
+        tracker.init(image, box)
+        self.tracks[lid] = Track(lid, tracker, box, hom, corners=corners)
+        return {"event": "acquired", "landmark": lid, "by": by,
+                "box": [round(v, 1) for v in box]}
+
+    def _search(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+        """Look for one untracked landmark (round robin) by colour template search over the
+        whole frame, verified by alignment: finds distant or plain landmarks that feature
+        matching misses, while nothing gives a fix to predict from."""
+        untracked = [lid for lid in self.matcher.references if lid not in self.tracks]
+        if not untracked or len(self.tracks) >= self.config.max_tracks:
+            return []
+        lid = untracked[self._search_turn % len(untracked)]
+        self._search_turn += 1
+        ref = self.matcher.references[lid]
+        found = search_template(ref, image, self.config.search_widths_px)
+        if found is None or found[0] < self.config.search_min_score:
+            return []
+        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
+        aligned = refine_ecc(ref, gray, found[1], self.config.ecc_iterations,
+                             self.config.verify_correlation)
+        if aligned is None:
+            return []
+        quad = project_corners(ref, aligned)
+        x0, y0 = quad.min(axis=0)
+        x1, y1 = quad.max(axis=0)
+        box = clip_box((x0, y0, x1 - x0, y1 - y0), image.shape[1], image.shape[0])
+        if box is None or not inside(quad, image.shape[1], image.shape[0], margin=2.0):
+            return []
+        return [self._start(lid, image, box, aligned, quad, "search")]
 
     def _predict_acquire(self, image: npt.NDArray[np.uint8], fix: PoseFix) -> list[dict[str, Any]]:
         """Start tracks on map landmarks the fix says are in view, verified by alignment.
@@ -287,11 +328,7 @@ class Perception:
             box = clip_box((x0, y0, x1 - x0, y1 - y0), width, height)
             if box is None:
                 continue
-            tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
-            tracker.init(image, box)
-            self.tracks[lid] = Track(lid, tracker, box, aligned, corners=quad)
-            events.append({"event": "acquired", "landmark": lid, "by": "prediction",
-                           "box": [round(v, 1) for v in box]})
+            events.append(self._start(lid, image, box, aligned, quad, "prediction"))
         return events
 
     def _project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
