@@ -192,15 +192,15 @@ def _zones(args: argparse.Namespace, config: LandmarksConfig) -> list[Any]:
 
 def _print_selection(sel: Selection, as_json: bool) -> None:
     if as_json:
-        json.dump({"selected": [landmark_to_feature(lm, None) for lm in sel.selected],
+        json.dump({"selected": [landmark_to_feature(lm, None) for lm in sel.landmarks],
                    "left_out": [{"id": lo.id, "reason": lo.reason} for lo in sel.left_out],
                    "total_impact": sel.total_impact}, sys.stdout)
         print()
         return
     print(_HEADER)
-    for lm in sel.selected:
+    for lm in sel.landmarks:
         print(_row(lm))
-    print(f"selected {len(sel.selected)} landmarks, total impact {sel.total_impact:.2f}; "
+    print(f"selected {len(sel.ids)} landmarks, total impact {sel.total_impact:.2f}; "
           f"left out {len(sel.left_out)}:")
     for lo in sel.left_out:
         print(f"  {lo.id}: {lo.reason}")
@@ -224,7 +224,7 @@ def _sync(args: argparse.Namespace, repo: LandmarkRepository, config: LandmarksC
                                  include_candidates=args.include_candidates)
     finally:
         source.close()
-    print(f"synced {len(sel.selected)} landmarks (total impact {sel.total_impact:.2f}, "
+    print(f"synced {len(sel.ids)} landmarks (total impact {sel.total_impact:.2f}, "
           f"{len(sel.left_out)} left out) into {repo.path}; {repo.count()} in the database")
     return 0
 

@@ -32,6 +32,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, cast
 
+import orjson
+
 from companion.errors import InputError
 from companion.landmarks.record import (
     CATEGORIES,
@@ -62,17 +64,18 @@ def _show(value: object) -> str:
 
 def _number(value: object, field: str, lo: float | None = None, hi: float | None = None,
             lo_open: bool = False, hi_open: bool = False) -> float:
+    t = type(value)
+    if t is float or t is int:  # fast path; bool is not int here, NaN fails the range test
+        x = float(value)  # type: ignore[arg-type]
+        if ((lo is None or (x > lo if lo_open else x >= lo))
+                and (hi is None or (x < hi if hi_open else x <= hi)) and math.isfinite(x)):
+            return x
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise _FieldError(field, f"expected a number, got {_show(value)}")
-    x = float(value)
-    if (lo is not None and (x < lo or (lo_open and x == lo))) or (
-        hi is not None and (x > hi or (hi_open and x == hi))
-    ):
-        lo_t = "" if lo is None else (f"> {lo:g}" if lo_open else f">= {lo:g}")
-        hi_t = "" if hi is None else (f"< {hi:g}" if hi_open else f"<= {hi:g}")
-        rng = " and ".join(t for t in (lo_t, hi_t) if t)
-        raise _FieldError(field, f"expected a number {rng}, got {_show(value)}")
-    return x
+    lo_t = "" if lo is None else (f"> {lo:g}" if lo_open else f">= {lo:g}")
+    hi_t = "" if hi is None else (f"< {hi:g}" if hi_open else f"<= {hi:g}")
+    rng = " and ".join(t for t in (lo_t, hi_t) if t)
+    raise _FieldError(field, f"expected a number {rng}, got {_show(value)}")
 
 
 def _triples(value: object, field: str, geographic: bool) -> tuple[Point3, ...]:
@@ -238,8 +241,8 @@ def read_map(path: str | Path) -> list[Landmark]:
     except OSError as err:
         raise InputError(f"{p}: cannot read landmark map ({err.strerror})") from None
     try:
-        doc = json.loads(text)
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        doc = orjson.loads(text)
+    except orjson.JSONDecodeError as err:
         raise InputError(f"{p}: not valid JSON ({err})") from None
     return parse_feature_collection(doc, str(p), p.parent)
 
@@ -295,7 +298,7 @@ def write_map(path: str | Path, landmarks: Iterable[Landmark], embed_appearance:
             if lm.appearance is not None:
                 ref = data_uri(lm.appearance) if embed_appearance else _write_image(
                     img_dir, lm, used)
-            out.write((",\n" if n else "") + json.dumps(landmark_to_feature(lm, ref)))
+            out.write((",\n" if n else "") + orjson.dumps(landmark_to_feature(lm, ref)).decode())
             n += 1
         out.write("\n]}\n")
     os.replace(tmp, p)

@@ -16,7 +16,7 @@ from typing import Any
 import psycopg
 
 from companion.errors import InputError
-from companion.landmarks.record import Area, Landmark, filter_area
+from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
 from companion.landmarks.repository import (
     APPEARANCE_COLUMNS,
     COLUMNS,
@@ -144,7 +144,7 @@ class PostgisLandmarkRepository:
                                  ([lm.id for lm in landmarks],))
                 elif self.count():
                     check_new_ids(landmarks, self._existing, source, chunk=5000)
-                self._copy(landmarks, progress)
+                self._copy([landmarks[i] for i in spatial_order(list(landmarks))], progress)
         except psycopg.errors.IntegrityError as err:
             check_new_ids(landmarks, lambda ids: set(), source)  # names a repeated id
             first = str(err).strip().splitlines()[0]
@@ -194,6 +194,20 @@ class PostgisLandmarkRepository:
         params = (b.min_lon_deg, b.min_lat_deg, b.max_lon_deg, b.max_lat_deg,
                   b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)
         return filter_area(list(self._select(where, params, with_appearance)), area)
+
+    def area_candidates(self, area: Area) -> Candidates:
+        b = area.bbox()
+        rows = self._conn.execute(
+            "SELECT id, lat_deg, lon_deg, impact, status, status_reason FROM landmarks "
+            "WHERE geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326) "
+            "AND lon_deg BETWEEN %s AND %s AND lat_deg BETWEEN %s AND %s",
+            (b.min_lon_deg, b.min_lat_deg, b.max_lon_deg, b.max_lat_deg,
+             b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)).fetchall()
+        return Candidates.from_rows(rows, area)
+
+    def get_many(self, ids: Sequence[str]) -> list[Landmark]:
+        found = {lm.id: lm for lm in self._select("l.id = ANY(%s)", (list(ids),), True)}
+        return [found[i] for i in ids if i in found]
 
     def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]:
         return self._select("true ORDER BY l.id", (), with_appearance)

@@ -8,7 +8,15 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, cast
 
-from companion.landmarks.record import Appearance, Area, Category, Landmark, Scores, Status
+from companion.landmarks.record import (
+    Appearance,
+    Area,
+    Candidates,
+    Category,
+    Landmark,
+    Scores,
+    Status,
+)
 
 #: Columns of the ``landmarks`` table in the order of :func:`landmark_to_row`.
 COLUMNS: tuple[str, ...] = (
@@ -37,7 +45,9 @@ class LandmarkRepository(Protocol):
 
     ``import_landmarks`` is all or nothing: on any error (or if the process dies) the
     store is left exactly as it was.  ``query_area`` returns the landmarks inside the
-    area, without appearance images unless asked.
+    area, without appearance images unless asked; ``area_candidates`` returns only what
+    practical-map selection needs, as columns (fast); ``get_many`` returns full records
+    (with appearance) in the order of the ids, skipping unknown ids.
     """
 
     def schema_version(self) -> int: ...
@@ -52,6 +62,10 @@ class LandmarkRepository(Protocol):
     def find_by_name(self, name: str) -> list[Landmark]: ...
 
     def query_area(self, area: Area, *, with_appearance: bool = False) -> list[Landmark]: ...
+
+    def area_candidates(self, area: Area) -> Candidates: ...
+
+    def get_many(self, ids: Sequence[str]) -> list[Landmark]: ...
 
     def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]: ...
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from types import TracebackType
 
 from companion.errors import InputError
-from companion.landmarks.record import Area, Landmark, filter_area
+from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
 from companion.landmarks.repository import (
     APPEARANCE_COLUMNS,
     COLUMNS,
@@ -65,6 +65,8 @@ SCHEMA_VERSION = len(MIGRATIONS)
 _COLS = ", ".join(f"l.{c}" for c in COLUMNS)
 _APP_COLS = ", ".join(f"a.{c}" for c in APPEARANCE_COLUMNS)
 _CHUNK = 20_000
+#: Page cache per connection (KiB): holds the indexes of ~1M landmarks during imports.
+CACHE_KIB = 65_536
 
 
 def migrate(conn: sqlite3.Connection, target: int = SCHEMA_VERSION) -> int:
@@ -99,6 +101,7 @@ class SqliteLandmarkRepository:
             self._conn.execute("PRAGMA journal_mode = WAL")
             self._conn.execute("PRAGMA synchronous = NORMAL")
             self._conn.execute("PRAGMA foreign_keys = ON")
+            self._conn.execute(f"PRAGMA cache_size = {-CACHE_KIB}")
             migrate(self._conn)
         except sqlite3.DatabaseError as err:
             raise InputError(f"{self.path}: cannot open landmark database ({err})") from None
@@ -134,8 +137,9 @@ class SqliteLandmarkRepository:
             elif self.count():
                 check_new_ids(landmarks, self._existing, source)
             (rid0,) = conn.execute("SELECT coalesce(max(rid), 0) FROM landmarks").fetchone()
-            for start in range(0, len(landmarks), _CHUNK):
-                self._insert_chunk(landmarks[start:start + _CHUNK], rid0 + start + 1)
+            ordered = [landmarks[i] for i in spatial_order(list(landmarks))]
+            for start in range(0, len(ordered), _CHUNK):
+                self._insert_chunk(ordered[start:start + _CHUNK], rid0 + start + 1)
                 if progress is not None:
                     progress(min(start + _CHUNK, len(landmarks)))
             conn.execute("COMMIT")
@@ -203,6 +207,25 @@ class SqliteLandmarkRepository:
         params = (b.max_lon_deg, b.min_lon_deg, b.max_lat_deg, b.min_lat_deg,
                   b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)
         return filter_area(list(self._select(where, params, with_appearance, rtree=True)), area)
+
+    def area_candidates(self, area: Area) -> Candidates:
+        b = area.bbox()
+        rows = self._conn.execute(
+            "SELECT l.id, l.lat_deg, l.lon_deg, l.impact, l.status, l.status_reason "
+            "FROM landmarks_rtree r JOIN landmarks l ON l.rid = r.rid "
+            "WHERE r.min_lon <= ? AND r.max_lon >= ? AND r.min_lat <= ? AND r.max_lat >= ? "
+            "AND l.lon_deg BETWEEN ? AND ? AND l.lat_deg BETWEEN ? AND ?",
+            (b.max_lon_deg, b.min_lon_deg, b.max_lat_deg, b.min_lat_deg,
+             b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)).fetchall()
+        return Candidates.from_rows(rows, area)
+
+    def get_many(self, ids: Sequence[str]) -> list[Landmark]:
+        found: dict[str, Landmark] = {}
+        for start in range(0, len(ids), 500):
+            part = list(ids[start:start + 500])
+            marks = ",".join("?" * len(part))
+            found.update((lm.id, lm) for lm in self._select(f"l.id IN ({marks})", part, True))
+        return [found[i] for i in ids if i in found]
 
     def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]:
         return self._select("1 ORDER BY l.id", (), with_appearance)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -29,9 +30,10 @@ def select_area(repo: LandmarkRepository, area: Area, config: LandmarksConfig,
                 zones: Sequence[ZonePolygon], *, min_spacing_m: float | None = None,
                 max_count: int | None = None, include_candidates: bool | None = None
                 ) -> Selection:
-    """The practical map of ``area`` from ``repo`` (arguments override the config)."""
-    return select_practical_map(
-        repo.query_area(area),
+    """The practical map of ``area`` from ``repo`` (arguments override the config), with
+    the full records of the chosen landmarks."""
+    selection = select_practical_map(
+        repo.area_candidates(area),
         min_spacing_m=config.min_spacing_m if min_spacing_m is None else min_spacing_m,
         max_count=config.max_count if max_count is None else max_count,
         zones=zones,
@@ -39,6 +41,7 @@ def select_area(repo: LandmarkRepository, area: Area, config: LandmarksConfig,
                             else include_candidates),
         unknown_score=config.unknown_score,
     )
+    return dataclasses.replace(selection, landmarks=tuple(repo.get_many(selection.ids)))
 
 
 def sync_practical_map(source: LandmarkRepository, dest: LandmarkRepository, area: Area,
@@ -52,6 +55,6 @@ def sync_practical_map(source: LandmarkRepository, dest: LandmarkRepository, are
     """
     selection = select_area(source, area, config, zones, min_spacing_m=min_spacing_m,
                             max_count=max_count, include_candidates=include_candidates)
-    full = [source.get(lm.id) or lm for lm in selection.selected]
-    dest.import_landmarks(full, replace=True, source=f"sync from {type(source).__name__}")
+    dest.import_landmarks(list(selection.landmarks), replace=True,
+                          source=f"sync from {type(source).__name__}")
     return selection

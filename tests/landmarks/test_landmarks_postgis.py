@@ -89,13 +89,19 @@ def test_sync_pulls_the_practical_map_into_sqlite(postgis_db: str, tmp_path: Pat
         pg.import_landmarks(records)
         board.import_landmarks([dataclasses.replace(records[0], id="local-only")])
         sel = sync_practical_map(pg, board, area, config, ())
-        assert len(sel.selected) == 12
+        assert len(sel.ids) == 12
         stored = {lm.id: lm for lm in board.iter_all()}
-        assert set(stored) == {lm.id for lm in sel.selected} | {"local-only"}
-        for lm in sel.selected:
-            assert stored[lm.id] == pg.get(lm.id)
+        assert set(stored) == set(sel.ids) | {"local-only"}
+        for lm_id in sel.ids:
+            assert stored[lm_id] == pg.get(lm_id)
         in_area = pg.query_area(area)
-        assert len(sel.selected) + len(sel.left_out) == len(in_area)
+        assert len(sel.ids) + len(sel.left_out) == len(in_area)
+        candidates = pg.area_candidates(area)
+        assert sorted(candidates.ids) == [lm.id for lm in in_area]
+        by_id = {lm.id: lm for lm in in_area}
+        for k, lm_id in enumerate(candidates.ids):
+            assert candidates.impact[k] == by_id[lm_id].scores.impact
+            assert candidates.lat_deg[k] == by_id[lm_id].lat_deg
 
 
 def test_unreachable_repository_is_one_line_without_password() -> None:

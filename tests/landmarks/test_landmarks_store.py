@@ -229,12 +229,16 @@ def test_area_queries_match_brute_force(tmp_path: Path) -> None:
         repo.import_landmarks(records)
         box = BBox(ORIGIN_LON - 0.01, ORIGIN_LAT - 0.005, ORIGIN_LON + 0.004, ORIGIN_LAT + 0.01)
         got = {lm.id for lm in repo.query_area(box)}
+        assert set(repo.area_candidates(box).ids) == got
         want = {f"r{k}" for k in np.flatnonzero(
             (lat >= box.min_lat_deg) & (lat <= box.max_lat_deg)
             & (lon >= box.min_lon_deg) & (lon <= box.max_lon_deg))}
         assert got == want and len(want) > 50
         circle = parse_area(f"circle:{ORIGIN_LAT},{ORIGIN_LON},900")
         got = {lm.id for lm in repo.query_area(circle)}
+        assert set(repo.area_candidates(circle).ids) == got
+        picked = sorted(got)[:7]
+        assert [lm.id for lm in repo.get_many([*picked, "unknown"])] == picked
         n, e, _ = pymap3d.geodetic2ned(lat, lon, 0.0, ORIGIN_LAT, ORIGIN_LON, 0.0)
         want = {f"r{k}" for k in np.flatnonzero(np.hypot(n, e) <= 900.0)}
         assert got == want and len(want) > 50
