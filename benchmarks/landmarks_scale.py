@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import tempfile
 import time
@@ -53,9 +54,21 @@ def make_landmarks(n: int, region_km: float, rng: np.random.Generator) -> list[L
 
 
 def timed(fn: Callable[[], object]) -> float:
+    """Wall-clock seconds of one call."""
     t0 = time.perf_counter()
     fn()
     return time.perf_counter() - t0
+
+
+def timed_cpu(fn: Callable[[], object]) -> tuple[float, float]:
+    """(wall, this process's CPU) seconds of one call: the machine may be shared."""
+    c0, t0 = time.process_time(), time.perf_counter()
+    fn()
+    return time.perf_counter() - t0, time.process_time() - c0
+
+
+def load() -> str:
+    return "load average " + " ".join(f"{x:.1f}" for x in os.getloadavg())
 
 
 def bench_geojson_import(make_repo: Callable[[], LandmarkRepository], records: list[Landmark],
@@ -66,11 +79,12 @@ def bench_geojson_import(make_repo: Callable[[], LandmarkRepository], records: l
                    "features": [landmark_to_feature(lm, None) for lm in records]}, out)
     repo = make_repo()
     try:
-        dt = timed(lambda: import_map(repo, path))
+        dt, cpu = timed_cpu(lambda: import_map(repo, path))
     finally:
         repo.close()
     print(f"{label}: GeoJSON import of {len(records):,} features "
-          f"({path.stat().st_size / 1e6:.0f} MB): {dt:.2f} s = {len(records) / dt:,.0f} records/s")
+          f"({path.stat().st_size / 1e6:.0f} MB): {dt:.2f} s = {len(records) / dt:,.0f} records/s "
+          f"(client CPU {cpu:.2f} s; {load()})")
 
 
 def bench_select(repo: LandmarkRepository, region_km: float, area_km: float, repeats: int,
@@ -91,7 +105,7 @@ def bench_select(repo: LandmarkRepository, region_km: float, area_km: float, rep
           f"max 50) over {repeats} areas: median {statistics.median(ms):.1f} ms, "
           f"p90 {ms[int(0.9 * (len(ms) - 1))]:.1f} ms; query alone median "
           f"{statistics.median(query_times) * 1000:.1f} ms; "
-          f"{statistics.mean(counts):,.0f} landmarks per area")
+          f"{statistics.mean(counts):,.0f} landmarks per area; {load()}")
 
 
 def run_sqlite(args: argparse.Namespace, records: list[Landmark], tmp: Path) -> None:
@@ -99,9 +113,9 @@ def run_sqlite(args: argparse.Namespace, records: list[Landmark], tmp: Path) -> 
                          records[: args.geojson_count], tmp, "sqlite")
     repo = SqliteLandmarkRepository(tmp / "big.db")
     try:
-        dt = timed(lambda: repo.import_landmarks(records))
+        dt, cpu = timed_cpu(lambda: repo.import_landmarks(records))
         print(f"sqlite: import_landmarks of {len(records):,} records: {dt:.2f} s = "
-              f"{len(records) / dt:,.0f} records/s")
+              f"{len(records) / dt:,.0f} records/s (CPU {cpu:.2f} s; {load()})")
         bench_select(repo, args.region_km, args.area_km, args.repeats,
                      np.random.default_rng(2), "sqlite")
     finally:
@@ -124,9 +138,10 @@ def run_postgis(args: argparse.Namespace, records: list[Landmark], tmp: Path) ->
             bench_geojson_import(lambda: PostgisLandmarkRepository(base + "/geo"),
                                  records[: args.geojson_count], tmp, "postgis")
             with PostgisLandmarkRepository(base + "/big") as repo:
-                dt = timed(lambda: repo.import_landmarks(records))
+                dt, cpu = timed_cpu(lambda: repo.import_landmarks(records))
                 print(f"postgis: import_landmarks (COPY) of {len(records):,} records: "
-                      f"{dt:.2f} s = {len(records) / dt:,.0f} records/s")
+                      f"{dt:.2f} s = {len(records) / dt:,.0f} records/s (client CPU {cpu:.2f} s; "
+                      f"{load()})")
                 repo._conn.execute("ANALYZE landmarks")
                 bench_select(repo, args.region_km, args.area_km, args.repeats,
                              np.random.default_rng(2), "postgis")

@@ -249,3 +249,21 @@ def test_area_queries_match_brute_force(tmp_path: Path) -> None:
 def test_bad_area_text_is_refused(text: str) -> None:
     with pytest.raises(ValueError, match="expected bbox:"):
         parse_area(text)
+
+
+def test_replacing_the_newest_rows_never_duplicates_query_results(tmp_path: Path) -> None:
+    base = Landmark("x", "x", "logo", ORIGIN_LAT, ORIGIN_LON, 0.0, 1.0, 1.0)
+    first = [dataclasses.replace(base, id=f"p{k:02d}", lat_deg=ORIGIN_LAT + k * 1e-4)
+             for k in range(20)]
+    everything = Circle(ORIGIN_LAT, ORIGIN_LON, 5000.0)
+    with SqliteLandmarkRepository(tmp_path / "a.db") as repo:
+        repo.import_landmarks(first)
+        newest = max(first, key=lambda lm: repo._conn.execute(
+            "SELECT rid FROM landmarks WHERE id = ?", (lm.id,)).fetchone()[0])
+        moved = dataclasses.replace(newest, lon_deg=ORIGIN_LON + 0.01)  # replaced in place
+        repo.import_landmarks([moved], replace=True)
+        found = [lm.id for lm in repo.query_area(everything)]
+        assert sorted(found) == sorted(lm.id for lm in first)  # each exactly once
+        assert repo.area_candidates(everything).ids.count(moved.id) == 1
+        assert [lm.lon_deg for lm in repo.query_area(everything) if lm.id == moved.id] == [
+            moved.lon_deg]
