@@ -35,6 +35,12 @@ from companion.landmarks.repository import (
     row_to_landmark,
 )
 
+_ID_INDEX = "CREATE UNIQUE INDEX landmarks_id ON landmarks (id)"
+_NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"
+#: Imports at least this large (and larger than the table) drop the id and name indexes
+#: and build them again afterwards (a sort) instead of updating them row by row.
+BULK_ROWS = 50_000
+
 #: Consecutive rows per R*Tree entry (see the module docstring).
 BUCKET = 16
 
@@ -43,7 +49,7 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
     (  # 0 -> 1: landmarks and their spatial index
         """CREATE TABLE landmarks (
             rid INTEGER PRIMARY KEY,
-            id TEXT NOT NULL UNIQUE,
+            id TEXT NOT NULL,
             name TEXT NOT NULL,
             category TEXT NOT NULL
                 CHECK (category IN ('signpost', 'wall_image', 'logo', 'other')),
@@ -58,12 +64,13 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             status_reason TEXT NOT NULL DEFAULT '',
             distinctiveness REAL, flatness REAL, static REAL, impact REAL
         )""",
+        _ID_INDEX,
         "CREATE VIRTUAL TABLE landmarks_rtree USING rtree(rid, min_lon, max_lon, min_lat, max_lat)",
     ),
     (  # 1 -> 2: appearance images in the database, 3-D points and sightings, name index
         "ALTER TABLE landmarks ADD COLUMN points_json TEXT",
         "ALTER TABLE landmarks ADD COLUMN sightings_json TEXT",
-        "CREATE INDEX landmarks_name ON landmarks (name)",
+        _NAME_INDEX,
         """CREATE TABLE appearances (
             rid INTEGER PRIMARY KEY REFERENCES landmarks (rid) ON DELETE CASCADE,
             media_type TEXT NOT NULL,
@@ -174,10 +181,17 @@ class SqliteLandmarkRepository:
                 "SELECT max(coalesce((SELECT max(rid) FROM landmarks), 0), "
                 "coalesce((SELECT max(rid_hi) FROM landmarks_rtree), 0))").fetchone()
             ordered = [landmarks[i] for i in spatial_order(list(landmarks))]
+            bulk = len(ordered) >= BULK_ROWS and len(ordered) >= self.count()
+            if bulk:  # inside the transaction: a failure restores the indexes too
+                conn.execute("DROP INDEX landmarks_id")
+                conn.execute("DROP INDEX landmarks_name")
             for start in range(0, len(ordered), _CHUNK):
                 self._insert_chunk(ordered[start:start + _CHUNK], rid0 + start + 1)
                 if progress is not None:
                     progress(min(start + _CHUNK, len(landmarks)))
+            if bulk:
+                conn.execute(_ID_INDEX)  # fails on a repeated id: rolled back below
+                conn.execute(_NAME_INDEX)
             conn.execute("COMMIT")
         except sqlite3.IntegrityError as err:
             conn.execute("ROLLBACK")

@@ -17,6 +17,7 @@ import pymap3d
 import pytest
 
 from companion.errors import InputError
+from companion.landmarks import sqlite_repo
 from companion.landmarks.geojson_io import import_map, read_map, write_map
 from companion.landmarks.record import BBox, Circle, Landmark, parse_area
 from companion.landmarks.sqlite_repo import MIGRATIONS, SCHEMA_VERSION, SqliteLandmarkRepository
@@ -179,7 +180,11 @@ def test_duplicate_of_stored_id_fails_and_replace_overwrites(sample_map: Path,
         assert [lm.id for lm in repo.query_area(Circle(2.0, 2.0, 10.0))] == ["lm0003"]
 
 
-def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("bulk_rows", [10**9, 1000])  # row-by-row indexes, rebuilt indexes
+def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path: Path,
+                                                      bulk_rows: int,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sqlite_repo, "BULK_ROWS", bulk_rows)
     db = tmp_path / "a.db"
     with SqliteLandmarkRepository(db) as repo:
         import_map(repo, sample_map)
@@ -189,11 +194,20 @@ def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path
         records[-1] = dataclasses.replace(records[-1], width_m=-1.0)  # CHECK fails in chunk 2
         with pytest.raises(InputError, match="rejected by the database"):
             repo.import_landmarks(records)
+        assert _dump(db) == before
+        records[-1] = dataclasses.replace(records[-1], width_m=1.0, id="x7")  # repeated id
+        with pytest.raises(InputError, match="feature 29999: id: duplicate id 'x7'"):
+            repo.import_landmarks(records)
     assert _dump(db) == before
+    with SqliteLandmarkRepository(db) as repo:
+        assert repo.get("lm0003") is not None and len(repo.find_by_name("sign lm0003")) == 1
+        repo.import_landmarks(records[:-1])
+        assert repo.count() == 50 + 29_999 and repo.get("x29998") is not None
 
 
-def test_killed_import_leaves_database_exactly_as_it_was(sample_map: Path,
-                                                         tmp_path: Path) -> None:
+@pytest.mark.parametrize("bulk_rows", ["1000000000", "1000"])
+def test_killed_import_leaves_database_exactly_as_it_was(sample_map: Path, tmp_path: Path,
+                                                         bulk_rows: str) -> None:
     db = tmp_path / "a.db"
     with SqliteLandmarkRepository(db) as repo:
         import_map(repo, sample_map)
@@ -202,7 +216,8 @@ def test_killed_import_leaves_database_exactly_as_it_was(sample_map: Path,
         [feature(f"b{k}", 10.0 + k * 1e-5, 20.0) for k in range(45_000)]))
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     proc = subprocess.Popen(
-        [sys.executable, str(Path(__file__).with_name("import_worker.py")), str(db), str(big)],
+        [sys.executable, str(Path(__file__).with_name("import_worker.py")), str(db), str(big),
+         bulk_rows],
         stdout=subprocess.PIPE, text=True, env=env)
     try:
         assert proc.stdout is not None
