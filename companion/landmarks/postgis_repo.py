@@ -176,7 +176,7 @@ class PostgisLandmarkRepository:
                  f"LEFT JOIN appearances a ON a.id = l.id WHERE {where}")
         else:
             q = f"SELECT {_COLS} FROM landmarks l WHERE {where}"
-        with self._conn.cursor() as cur:
+        with self._conn.cursor(binary=True) as cur:
             cur.execute(q, params)
             for row in cur:
                 yield row_to_landmark(row[:n], row[n:] if with_appearance else None)
@@ -197,7 +197,7 @@ class PostgisLandmarkRepository:
 
     def area_candidates(self, area: Area) -> Candidates:
         b = area.bbox()
-        rows = self._conn.execute(
+        rows = self._conn.cursor(binary=True).execute(  # binary: half the client's parsing
             "SELECT id, lat_deg, lon_deg, impact, status, status_reason FROM landmarks "
             "WHERE geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326) "
             "AND lon_deg BETWEEN %s AND %s AND lat_deg BETWEEN %s AND %s",
