@@ -45,7 +45,7 @@ from companion.landmarks.record import (
     Scores,
     Status,
 )
-from companion.landmarks.repository import LandmarkRepository, Progress
+from companion.landmarks.repository import LandmarkRepository, Progress, paused_gc
 
 _SCORE_KEYS = ("distinctiveness", "flatness", "static", "impact")
 
@@ -240,11 +240,12 @@ def read_map(path: str | Path) -> list[Landmark]:
         text = p.read_bytes()
     except OSError as err:
         raise InputError(f"{p}: cannot read landmark map ({err.strerror})") from None
-    try:
-        doc = orjson.loads(text)
-    except orjson.JSONDecodeError as err:
-        raise InputError(f"{p}: not valid JSON ({err})") from None
-    return parse_feature_collection(doc, str(p), p.parent)
+    with paused_gc():
+        try:
+            doc = orjson.loads(text)
+        except orjson.JSONDecodeError as err:
+            raise InputError(f"{p}: not valid JSON ({err})") from None
+        return parse_feature_collection(doc, str(p), p.parent)
 
 
 def landmark_to_feature(lm: Landmark, appearance_ref: str | None) -> dict[str, Any]:
@@ -321,5 +322,7 @@ def _write_image(img_dir: Path, lm: Landmark, used: set[str]) -> str:
 def import_map(repo: LandmarkRepository, path: str | Path, *, replace: bool = False,
                progress: Progress | None = None) -> int:
     """Validate the whole map first, then store it in one transaction (all or nothing)."""
-    landmarks = read_map(path)
-    return repo.import_landmarks(landmarks, replace=replace, source=str(path), progress=progress)
+    with paused_gc():
+        landmarks = read_map(path)
+        return repo.import_landmarks(landmarks, replace=replace, source=str(path),
+                                     progress=progress)

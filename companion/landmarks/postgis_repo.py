@@ -25,6 +25,7 @@ from companion.landmarks.repository import (
     appearance_to_row,
     check_new_ids,
     landmark_to_row,
+    paused_gc,
     row_to_landmark,
 )
 
@@ -138,7 +139,7 @@ class PostgisLandmarkRepository:
         """``COPY`` every record in one transaction (``replace`` overwrites equal ids)."""
         conn = self._conn
         try:
-            with conn.transaction():
+            with paused_gc(), conn.transaction():
                 if replace:
                     conn.execute("DELETE FROM landmarks WHERE id = ANY(%s)",
                                  ([lm.id for lm in landmarks],))

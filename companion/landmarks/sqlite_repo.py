@@ -32,6 +32,7 @@ from companion.landmarks.repository import (
     appearance_to_row,
     check_new_ids,
     landmark_to_row,
+    paused_gc,
     row_to_landmark,
 )
 
@@ -169,6 +170,11 @@ class SqliteLandmarkRepository:
     def import_landmarks(self, landmarks: Sequence[Landmark], *, replace: bool = False,
                          source: str = "input", progress: Progress | None = None) -> int:
         """Insert all records in one transaction (``replace`` overwrites equal ids)."""
+        with paused_gc():
+            return self._import(landmarks, replace, source, progress)
+
+    def _import(self, landmarks: Sequence[Landmark], replace: bool, source: str,
+                progress: Progress | None) -> int:
         conn = self._conn
         conn.execute("BEGIN IMMEDIATE")
         try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import os
 import signal
@@ -282,3 +283,19 @@ def test_replacing_the_newest_rows_never_duplicates_query_results(tmp_path: Path
         assert repo.area_candidates(everything).ids.count(moved.id) == 1
         assert [lm.lon_deg for lm in repo.query_area(everything) if lm.id == moved.id] == [
             moved.lon_deg]
+
+
+def test_bulk_load_pauses_and_restores_the_garbage_collector(sample_map: Path,
+                                                             tmp_path: Path) -> None:
+    bad = tmp_path / "bad.geojson"
+    bad.write_text("{")
+    assert gc.isenabled()
+    with pytest.raises(InputError):
+        read_map(bad)
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        read_map(sample_map)
+        assert not gc.isenabled()  # a caller's choice is kept
+    finally:
+        gc.enable()
