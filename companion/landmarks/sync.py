@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from companion.landmarks.config import LandmarksConfig
+from companion.landmarks.geojson_io import import_map
 from companion.landmarks.record import Area
 from companion.landmarks.repository import LandmarkRepository
 from companion.landmarks.selection import Selection, ZonePolygon, select_practical_map
@@ -24,6 +25,19 @@ def open_repository(location: str | Path) -> LandmarkRepository:
 
         return PostgisLandmarkRepository(text)
     return SqliteLandmarkRepository(text)
+
+
+def open_onboard(config: LandmarksConfig) -> SqliteLandmarkRepository:
+    """The on-board database ``db_path``; an empty one is first filled from ``map_path``
+    (when set), in one transaction."""
+    repo = SqliteLandmarkRepository(config.db_path)
+    try:
+        if config.map_path and repo.count() == 0:
+            import_map(repo, config.map_path)
+    except BaseException:
+        repo.close()
+        raise
+    return repo
 
 
 def select_area(repo: LandmarkRepository, area: Area, config: LandmarksConfig,

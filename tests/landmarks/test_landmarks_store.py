@@ -19,9 +19,12 @@ import pytest
 
 from companion.errors import InputError
 from companion.landmarks import sqlite_repo
+from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.geojson_io import import_map, read_map, write_map
-from companion.landmarks.record import BBox, Circle, Landmark, parse_area
+from companion.landmarks.record import BBox, Circle, Landmark, Scores, parse_area
+from companion.landmarks.repository import ScoreUpdate
 from companion.landmarks.sqlite_repo import MIGRATIONS, SCHEMA_VERSION, SqliteLandmarkRepository
+from companion.landmarks.sync import open_onboard
 from tests.landmarks.helpers import (
     ORIGIN_LAT,
     ORIGIN_LON,
@@ -299,3 +302,18 @@ def test_bulk_load_pauses_and_restores_the_garbage_collector(sample_map: Path,
         assert not gc.isenabled()  # a caller's choice is kept
     finally:
         gc.enable()
+
+
+def test_onboard_database_is_seeded_from_the_configured_map_once(sample_map: Path,
+                                                                 tmp_path: Path) -> None:
+    config = LandmarksConfig(db_path=str(tmp_path / "board.db"), map_path=str(sample_map))
+    with open_onboard(config) as repo:
+        assert repo.count() == 50
+        repo.update_scores([ScoreUpdate("lm0001", Scores(impact=0.9), "approved", "")])
+    with open_onboard(config) as repo:  # not empty: the map is not imported again
+        assert repo.count() == 50
+        first = repo.get("lm0001")
+        assert first is not None and first.status == "approved"
+    bad = LandmarksConfig(db_path=str(tmp_path / "other.db"), map_path=str(tmp_path / "no"))
+    with pytest.raises(InputError, match="cannot read landmark map"):
+        open_onboard(bad)
