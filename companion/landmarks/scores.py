@@ -2,7 +2,7 @@
 
 * distinctiveness ``d = VR / (VR + vr_half)`` where ``VR`` is the best variance ratio of
   the reference image's landmark box against its surroundings, computed by the tracker's
-  feature ranking (``tracker.ranking.best_variance_ratio``; not written twice here);
+  feature ranking (``tracker.distinctiveness.best_variance_ratio``; not written twice);
 * flatness ``f = 1 / (1 + (rms / flatness_tolerance_m)^2)`` with ``rms`` the RMS distance
   of the measured 3-D points from their least-squares plane;
 * static ``s = (consistent / n) * min(1, n / static_min_sightings)`` over ``n``
@@ -34,17 +34,22 @@ from companion.landmarks.repository import ScoreUpdate
 VrScorer = Callable[[npt.NDArray[np.uint8], tuple[int, int, int, int]], float]
 
 
+#: Where the tracker keeps ``best_variance_ratio(image_bgr, box) -> float``, in order.
+TRACKER_SCORER_MODULES = ("tracker.distinctiveness", "tracker.ranking")
+
+
 def tracker_vr_scorer() -> VrScorer:
     """The tracker's ``best_variance_ratio(image_bgr, box) -> float`` (imported lazily)."""
-    try:
-        ranking = importlib.import_module("tracker.ranking")
-    except ImportError as err:
-        raise CompanionError(f"distinctiveness: cannot import tracker.ranking ({err})") from None
-    scorer = getattr(ranking, "best_variance_ratio", None)
-    if not callable(scorer):
-        raise CompanionError("distinctiveness needs tracker.ranking.best_variance_ratio"
-                             "(image_bgr, box) -> float, which this build does not have")
-    return cast(VrScorer, scorer)
+    for name in TRACKER_SCORER_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ImportError:
+            continue
+        scorer = getattr(module, "best_variance_ratio", None)
+        if callable(scorer):
+            return cast(VrScorer, scorer)
+    raise CompanionError("distinctiveness needs best_variance_ratio(image_bgr, box) -> float "
+                         f"from {' or '.join(TRACKER_SCORER_MODULES)}, which this build lacks")
 
 
 def distinctiveness_from_vr(vr: float, vr_half: float) -> float:

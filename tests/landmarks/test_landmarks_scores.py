@@ -68,8 +68,9 @@ def test_measure_distinctiveness_passes_decoded_image_and_box_to_scorer() -> Non
 
 
 def test_tracker_scorer_missing_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(sys.modules, "tracker.ranking", types.ModuleType("tracker.ranking"))
-    with pytest.raises(CompanionError, match=r"tracker.ranking.best_variance_ratio"):
+    for name in ("tracker.distinctiveness", "tracker.ranking"):
+        monkeypatch.setitem(sys.modules, name, types.ModuleType(name))
+    with pytest.raises(CompanionError, match=r"needs best_variance_ratio\(image_bgr, box\)"):
         tracker_vr_scorer()
 
 
