@@ -250,10 +250,10 @@ class CompanionApp:
                          self._last_fix_s, self._ever_tracked, self.sink.link_up, bad_ratio),
             self.policy,
         )
+        self.sink.set_health(state)  # every time: the heartbeat shows the app is alive
         if state != self.state:
             old, self.state = self.state, state
             log.info("health %s -> %s", old, state)
-            self.sink.set_health(state)
             self._event("health", old=old, new=state)
             self.reporter.report("status", now_us(), self.status())
 

@@ -24,9 +24,16 @@ from pathlib import Path
 from typing import Any, Literal
 
 from companion.errors import ConfigError
+from companion.landmarks.config import LandmarksConfig
 from companion.monitoring.config import MonitorConfig
+from companion.perception import PerceptionConfig
+from companion.sources.config import SourceConfig
 from companion.validate import FieldError, build
+from mavlink_bridge.config import MavlinkConfig
+from tracker.acquire import AcquireConfig
 from tracker.camera import CameraModel
+from tracker.config import TrackerConfig
+from tracker.pose.config import PoseConfig
 
 PROFILES = ("ardupilot", "px4")
 SET_SOURCE = "--set"
@@ -63,6 +70,13 @@ class Settings:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     camera: CameraModel = field(default_factory=CameraModel)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
+    source: SourceConfig = field(default_factory=SourceConfig)
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    acquire: AcquireConfig = field(default_factory=AcquireConfig)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+    pose: PoseConfig = field(default_factory=PoseConfig)
+    landmarks: LandmarksConfig = field(default_factory=LandmarksConfig)
+    mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     monitor: MonitorConfig = field(default_factory=MonitorConfig)
     flightlog: FlightLogConfig = field(default_factory=FlightLogConfig)
     #: The files that were read, in order (set by the loader, not by users).

@@ -66,7 +66,8 @@ class Sink:
         self.texts: list[str] = []
 
     def set_health(self, state: str) -> None:
-        self.health.append(state)
+        if not self.health or self.health[-1] != state:
+            self.health.append(state)
 
     async def send_fix(self, fix: Any) -> bool:
         self.fixes.append(fix)
@@ -130,7 +131,7 @@ async def test_link_down_is_the_health_state() -> None:
     sink = Sink(link_up=False)
     app = CompanionApp(ListSource(5), Processor(), sink, Recorder(), "v1")
     await asyncio.wait_for(app.run(), timeout=10)
-    assert sink.health[0] == "link-down"
+    assert sink.health[:2] == ["starting", "link-down"]
     assert "tracking" not in sink.health
 
 

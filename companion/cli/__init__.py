@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,11 +23,15 @@ from companion.settings import load_settings
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES: tuple[str, ...] = (
+    "demo_cmd",
     "monitor_cmd",
     "dashboard_cmd",
     "router_cmd",
     "log_cmd",
     "config_cmd",
+    "synth_cmd",
+    "record_cmd",
+    "fake_autopilot_cmd",
     "landmarks_cmd",
 )
 
@@ -87,3 +92,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return err.exit_status
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # e.g. `companion config | head`: not an error
+        sys.stdout = open(os.devnull, "w")
+        return 0

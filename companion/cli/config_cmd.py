@@ -26,6 +26,16 @@ def _toml_value(value: object) -> str:
     return json.dumps(value) if not isinstance(value, bool) else str(value).lower()
 
 
+def _print_table(name: str, values: dict[str, object]) -> None:
+    print(f"\n[{name}]")
+    tables = {k: v for k, v in values.items() if isinstance(v, dict)}
+    for key, value in values.items():
+        if key not in tables:
+            print(f"{key} = {_toml_value(value)}")
+    for key, value in tables.items():
+        _print_table(f"{name}.{key}", value)  # type: ignore[arg-type]
+
+
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Print the settings; the loader has already validated them."""
     plain = to_plain(settings)
@@ -35,8 +45,6 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         return 0
     print("# files read, in order: " + ", ".join(files))
     for section, values in plain.items():
-        print(f"\n[{section}]")
-        for key, value in values.items():
-            print(f"{key} = {_toml_value(value)}")
+        _print_table(section, values)
     sys.stdout.flush()
     return 0

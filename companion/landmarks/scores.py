@@ -2,7 +2,7 @@
 
 * distinctiveness ``d = VR / (VR + vr_half)`` where ``VR`` is the best variance ratio of
   the reference image's landmark box against its surroundings, computed by the tracker's
-  feature ranking (``tracker.distinctiveness.best_variance_ratio``; not written twice);
+  feature ranking (``tracker.distinctiveness.best_variance_ratio``; not written twice here);
 * flatness ``f = 1 / (1 + (rms / flatness_tolerance_m)^2)`` with ``rms`` the RMS distance
   of the measured 3-D points from their least-squares plane;
 * static ``s = (consistent / n) * min(1, n / static_min_sightings)`` over ``n``
@@ -15,41 +15,26 @@ A factor that cannot be measured keeps its declared value (from the map's ``scor
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Callable, Sequence
-from typing import cast
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from companion.errors import CompanionError
 from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.record import Appearance, Landmark, Point3, Scores, Status
 from companion.landmarks.repository import ScoreUpdate
+from tracker.distinctiveness import best_variance_ratio
 
 #: ``(image_bgr uint8 HxWx3, (x, y, w, h) box in pixels) -> best variance ratio >= 0``.
 VrScorer = Callable[[npt.NDArray[np.uint8], tuple[int, int, int, int]], float]
 
 
-#: Where the tracker keeps ``best_variance_ratio(image_bgr, box) -> float``, in order.
-TRACKER_SCORER_MODULES = ("tracker.distinctiveness", "tracker.ranking")
-
-
 def tracker_vr_scorer() -> VrScorer:
-    """The tracker's ``best_variance_ratio(image_bgr, box) -> float`` (imported lazily)."""
-    for name in TRACKER_SCORER_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ImportError:
-            continue
-        scorer = getattr(module, "best_variance_ratio", None)
-        if callable(scorer):
-            return cast(VrScorer, scorer)
-    raise CompanionError("distinctiveness needs best_variance_ratio(image_bgr, box) -> float "
-                         f"from {' or '.join(TRACKER_SCORER_MODULES)}, which this build lacks")
+    """The tracker's own ranking, :func:`tracker.distinctiveness.best_variance_ratio`."""
+    return best_variance_ratio
 
 
 def distinctiveness_from_vr(vr: float, vr_half: float) -> float:

@@ -1,0 +1,1 @@
+"""Tracker evaluation: metrics, sequence loading, running trackers, reports (`companion eval`)."""

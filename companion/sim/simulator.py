@@ -1,0 +1,90 @@
+"""The simulator: one scenario's world, trajectory, camera, effects and range finder."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from companion import __version__
+from companion.errors import ConfigError
+from companion.sim.effects import EffectStack
+from companion.sim.rangefinder import RangeFinder
+from companion.sim.render import Renderer
+from companion.sim.scenario import ScenarioConfig, landmarks_path
+from companion.sim.trajectory import Trajectory, VehicleState
+from companion.sim.world import World, load_landmark_map
+from companion.sources.base import ImageU8
+from companion.sources.stream_format import FrameTruth, StreamMeta
+
+RANGE_STREAM = 7919  # keeps range-finder randomness apart from effect randomness
+
+
+class Simulator:
+    """Renders frame ``index`` (time ``index / fps``) with its truth, deterministically.
+
+    :meth:`state_at` is the callable to hand to the fake autopilot: the camera and the
+    autopilot then report the same flight.
+    """
+
+    def __init__(self, scenario: ScenarioConfig) -> None:
+        self.scenario = scenario
+        origin = scenario.origin.to_origin()
+        landmarks = load_landmark_map(landmarks_path(scenario), origin, scenario.seed)
+        self.world = World(landmarks, scenario.world, scenario.seed)
+        self.trajectory = Trajectory(scenario.trajectory)
+        self.renderer = Renderer(scenario.camera, self.world)
+        try:
+            self.effects = EffectStack(scenario.effects, self.world, scenario.seed)
+        except KeyError as err:
+            where = scenario.path or scenario.name
+            raise ConfigError(f"{where}: effects: unknown landmark_id {err}") from None
+        self.rangefinder = RangeFinder(scenario.rangefinder, self.world)
+
+    @property
+    def fps(self) -> float:
+        """Frames per second of the simulated camera."""
+        return self.scenario.fps
+
+    def state_at(self, t_s: float) -> VehicleState:
+        """The vehicle state at ``t_s`` scenario seconds (shared with the fake autopilot)."""
+        return self.trajectory.state_at(t_s)
+
+    def render(self, index: int, t_s: float | None = None) -> tuple[ImageU8, FrameTruth]:
+        """Frame ``index`` at ``t_s`` (default ``index / fps``) and its truth."""
+        t = index / self.fps if t_s is None else t_s
+        state = self.state_at(t)
+        rendered = self.renderer.render(state, self.effects.world_quads(t))
+        image = self.effects.apply(rendered.image, t, index, rendered.boxes)
+        rng = np.random.default_rng([self.scenario.seed, index, RANGE_STREAM])
+        range_m = self.rangefinder.measure(state, rng)
+        truth = FrameTruth(rendered.boxes, rendered.pose, rendered.camera, range_m)
+        return image, truth
+
+    def stream_meta(self, fps: float | None = None) -> StreamMeta:
+        """``stream.toml`` contents for a recording of this scenario."""
+        s = self.scenario
+        provenance = {
+            "generator": f"landmark-companion {__version__} synth",
+            "scenario": s.name,
+            "scenario_file": s.path,
+            "seed": s.seed,
+            "landmarks": str(landmarks_path(s)),
+        }
+        return StreamMeta(
+            fps=fps or s.fps,
+            camera=s.camera,
+            camera_id=s.camera_id,
+            origin=s.origin.to_origin(),
+            provenance=provenance,
+        )
+
+    def with_overrides(
+        self, seconds: float | None = None, fps: float | None = None, seed: int | None = None
+    ) -> Simulator:
+        """A simulator for the same scenario with other duration, rate or seed."""
+        s = self.scenario
+        return Simulator(
+            replace(s, seconds=seconds or s.seconds, fps=fps or s.fps,
+                    seed=s.seed if seed is None else seed)
+        )

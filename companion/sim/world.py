@@ -1,0 +1,265 @@
+"""The simulated world: landmarks from a GeoJSON landmark map as textured quads, facades
+behind the wall images, poles under the signposts, and a ground plane."""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import math
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import cv2
+import numpy as np
+import pymap3d
+
+from companion.errors import InputError
+from companion.sim import textures
+from companion.sources.base import ImageU8
+from companion.sources.stream_format import Origin
+from tracker.geometry import FloatArray
+
+Category = Literal["signpost", "wall_image", "logo", "other"]
+CATEGORIES = ("signpost", "wall_image", "logo", "other")
+DOWN = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Ground, facades and poles around the landmarks (metres, BGR colours)."""
+
+    ground_down_m: float = 0.0  # the ground plane's NED down coordinate
+    ground_extent_m: float = 256.0  # side of the textured ground square around the origin
+    ground_texture_px: int = field(default=1024, metadata={"ge": 64})
+    far_ground_bgr: tuple[int, int, int] = (85, 112, 95)
+    facade_margin_m: float = field(default=8.0, metadata={"ge": 0})
+    facade_extra_height_m: float = field(default=4.0, metadata={"ge": 0})
+    facade_gap_m: float = field(default=0.02, metadata={"gt": 0})
+    pole_width_m: float = field(default=0.08, metadata={"gt": 0})
+
+
+@dataclass(frozen=True, eq=False)
+class Quad:
+    """A planar rectangle in NED: corners TL, TR, BR, BL (4x3) as seen from its front.
+
+    ``texture`` None means a plain ``colour_bgr`` fill; ``two_sided`` quads are drawn from
+    behind too (ground, poles).  ``landmark_id`` is set only for landmarks (truth).
+    """
+
+    corners_ned: FloatArray
+    texture: ImageU8 | None = None
+    colour_bgr: tuple[int, int, int] = (128, 128, 128)
+    two_sided: bool = False
+    landmark_id: str = ""
+
+    @property
+    def centre_ned(self) -> FloatArray:
+        """Mean of the corners."""
+        return np.asarray(self.corners_ned.mean(axis=0), dtype=np.float64)
+
+    @property
+    def normal_ned(self) -> FloatArray:
+        """Unit outward normal (towards the viewer of the front face)."""
+        c = self.corners_ned
+        n = np.cross(c[3] - c[0], c[1] - c[0])  # (BL-TL) x (TR-TL) points out of the face
+        return np.asarray(n / np.linalg.norm(n), dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False)
+class SimLandmark:
+    """One landmark of the map, placed in local NED."""
+
+    landmark_id: str
+    name: str
+    category: str
+    centre_ned: FloatArray
+    width_m: float
+    height_m: float
+    facing_deg: float | None
+    quad: Quad
+
+
+def face_corners(
+    centre: FloatArray, width_m: float, height_m: float, facing_deg: float | None
+) -> FloatArray:
+    """TL, TR, BR, BL of a face centred at ``centre`` (NED).
+
+    Upright faces have outward normal n = (cos f, sin f, 0); a viewer looks along -n with
+    right = down x (-n) and up = -down.  A flat face (``facing_deg`` None) faces up with
+    its top edge to the north and its right edge to the east.
+    """
+    if facing_deg is None:
+        right, up = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
+    else:
+        f = math.radians(facing_deg)
+        look = -np.array([math.cos(f), math.sin(f), 0.0])
+        right, up = np.cross(DOWN, look), -DOWN
+    hw, hh = right * width_m / 2.0, up * height_m / 2.0
+    return np.array([centre - hw + hh, centre + hw + hh, centre + hw - hh, centre - hw - hh])
+
+
+def seeded_rng(seed: int, key: str) -> np.random.Generator:
+    """A generator that depends only on the world seed and a name (textures per id)."""
+    return np.random.default_rng([seed, zlib.crc32(key.encode("utf-8"))])
+
+
+def _appearance(value: Any, base: Path, where: str) -> ImageU8 | None:
+    if not isinstance(value, str) or not value:
+        return None
+    if value.startswith("data:"):
+        try:
+            raw = base64.b64decode(value.split(",", 1)[1], validate=False)
+        except (IndexError, binascii.Error) as err:
+            raise InputError(f"{where}: appearance data URI is not base64") from err
+        img = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR)
+    else:
+        img = cv2.imread(str(base / value), cv2.IMREAD_COLOR)
+    if img is None:
+        raise InputError(f"{where}: appearance {value[:60]!r} is not a readable image")
+    return np.asarray(img, dtype=np.uint8)
+
+
+def _number(props: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
+    value = props.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float) or value is None:
+        raise InputError(f"{where}: property '{key}' must be a number, got {value!r}")
+    return float(value)
+
+
+def parse_landmark(
+    feature: Any, n: int, origin: Origin, base: Path, seed: int
+) -> SimLandmark:
+    """One GeoJSON Feature -> :class:`SimLandmark` (raises :class:`InputError`)."""
+    where = f"feature {n}"
+    if not isinstance(feature, dict) or feature.get("type") != "Feature":
+        raise InputError(f"{where}: not a GeoJSON Feature")
+    geom = feature.get("geometry") or {}
+    coords = geom.get("coordinates")
+    if geom.get("type") != "Point" or not isinstance(coords, list) or len(coords) < 2:
+        raise InputError(f"{where}: geometry must be a Point [lon, lat, alt_m]")
+    if "id" not in feature:
+        raise InputError(f"{where}: missing Feature id (the landmark id)")
+    lid = str(feature["id"])
+    where = f"landmark {lid}"
+    props = feature.get("properties") or {}
+    category = str(props.get("category", "other"))
+    if category not in CATEGORIES:
+        raise InputError(f"{where}: category must be one of {CATEGORIES}, got {category!r}")
+    width, height = _number(props, "width_m", where), _number(props, "height_m", where)
+    if width <= 0 or height <= 0:
+        raise InputError(f"{where}: width_m and height_m must be > 0")
+    facing = None if props.get("facing_deg") is None else _number(props, "facing_deg", where)
+    lon, lat = float(coords[0]), float(coords[1])
+    alt = float(coords[2]) if len(coords) > 2 else origin.alt_m
+    n_m, e_m, d_m = pymap3d.geodetic2ned(lat, lon, alt, origin.lat, origin.lon, origin.alt_m)
+    centre = np.array([n_m, e_m, d_m], dtype=np.float64)
+    name = str(props.get("name", lid))
+    texture = _appearance(props.get("appearance"), base, where)
+    if texture is None:
+        rng = seeded_rng(seed, lid)
+        make = textures.signpost_texture if category == "signpost" else textures.poster_texture
+        texture = make(rng, width, height, name)
+    quad = Quad(face_corners(centre, width, height, facing), texture, landmark_id=lid)
+    return SimLandmark(lid, name, category, centre, width, height, facing, quad)
+
+
+def load_landmark_map(path: Path, origin: Origin, seed: int = 0) -> list[SimLandmark]:
+    """Read a GeoJSON landmark map and place every landmark in NED about ``origin``."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{path}: landmark map is missing") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"{path}: not valid JSON ({err})") from err
+    if not isinstance(data, dict) or data.get("type") != "FeatureCollection":
+        raise InputError(f"{path}: must be a GeoJSON FeatureCollection")
+    out = []
+    for n, feature in enumerate(data.get("features", [])):
+        try:
+            out.append(parse_landmark(feature, n, origin, path.parent, seed))
+        except InputError as err:
+            raise InputError(f"{path}: {err}") from None
+    ids = [lm.landmark_id for lm in out]
+    if len(set(ids)) != len(ids):
+        raise InputError(f"{path}: landmark ids must be unique")
+    return out
+
+
+@dataclass(eq=False)
+class World:
+    """Landmarks plus the scenery built around them (facades, poles, ground)."""
+
+    landmarks: list[SimLandmark]
+    config: WorldConfig = field(default_factory=WorldConfig)
+    seed: int = 0
+    facades: list[Quad] = field(init=False)
+    poles: list[Quad] = field(init=False)
+    ground: Quad = field(init=False)
+    far_ground: Quad = field(init=False)
+
+    def __post_init__(self) -> None:
+        cfg = self.config
+        self.facades = self._facades()
+        self.poles = [p for lm in self.landmarks if (p := self._pole(lm)) is not None]
+        half, g = cfg.ground_extent_m / 2.0, cfg.ground_down_m
+        rng = seeded_rng(self.seed, "ground")
+        tex = textures.ground_texture(rng, cfg.ground_texture_px)
+        self.ground = Quad(_flat_square(half, g), tex, two_sided=True)
+        self.far_ground = Quad(_flat_square(20_000.0, g + 1e-3), None, cfg.far_ground_bgr, True)
+
+    def _facades(self) -> list[Quad]:
+        """One wall per plane of wall images, from the ground to above the highest one."""
+        cfg = self.config
+        groups: dict[tuple[float, float], list[SimLandmark]] = {}
+        for lm in self.landmarks:
+            if lm.category != "wall_image" or lm.facing_deg is None:
+                continue
+            offset = float(lm.quad.normal_ned @ lm.centre_ned)
+            groups.setdefault((round(lm.facing_deg % 360.0, 1), round(offset, 1)), []).append(lm)
+        out = []
+        for (facing, _), members in sorted(groups.items()):
+            n = members[0].quad.normal_ned
+            right = members[0].quad.corners_ned[1] - members[0].quad.corners_ned[0]
+            right /= np.linalg.norm(right)
+            corners = np.concatenate([m.quad.corners_ned for m in members])
+            along = corners @ right
+            lo, hi = along.min() - cfg.facade_margin_m, along.max() + cfg.facade_margin_m
+            top_down = float(corners[:, 2].min()) - cfg.facade_extra_height_m
+            height, width = cfg.ground_down_m - top_down, hi - lo
+            anchor = members[0].centre_ned - n * cfg.facade_gap_m
+            centre = anchor + right * ((lo + hi) / 2.0 - float(anchor @ right))
+            centre[2] = (cfg.ground_down_m + top_down) / 2.0
+            rng = seeded_rng(self.seed, f"facade:{members[0].landmark_id}")
+            tex = textures.facade_texture(rng, width, height)
+            out.append(Quad(face_corners(centre, width, height, facing), tex))
+        return out
+
+    def _pole(self, lm: SimLandmark) -> Quad | None:
+        """A grey pole from a signpost's bottom edge down to the ground."""
+        if lm.category != "signpost" or lm.facing_deg is None:
+            return None
+        bottom = float(lm.quad.corners_ned[3, 2])
+        length = self.config.ground_down_m - bottom
+        if length <= 0:
+            return None
+        n = lm.quad.normal_ned
+        centre = lm.centre_ned - n * 0.01
+        centre[2] = bottom + length / 2.0
+        corners = face_corners(centre, self.config.pole_width_m, length, lm.facing_deg)
+        return Quad(corners, None, (110, 110, 115), two_sided=True)
+
+    def landmark(self, landmark_id: str) -> SimLandmark:
+        """The landmark with this id (KeyError if none)."""
+        for lm in self.landmarks:
+            if lm.landmark_id == landmark_id:
+                return lm
+        raise KeyError(landmark_id)
+
+
+def _flat_square(half_m: float, down_m: float) -> FloatArray:
+    return np.array([[half_m, -half_m, down_m], [half_m, half_m, down_m],
+                     [-half_m, half_m, down_m], [-half_m, -half_m, down_m]], dtype=np.float64)

@@ -1,0 +1,271 @@
+"""Connection strings and the asyncio byte transports behind them.
+
+Spelling follows pymavlink's ``mavutil``: ``udpin:HOST:PORT`` listens and answers the last
+sender, ``udpout:HOST:PORT`` sends to a peer, ``tcp:HOST:PORT`` connects, ``tcpin:HOST:PORT``
+listens for one client at a time (the newest wins) and ``serial:DEVICE:BAUD`` opens a tty in raw
+mode.  The transports only move bytes; MAVLink framing lives in :mod:`mavlink_bridge.codec`.
+Everything runs on the event loop; nothing blocks it (serial uses ``add_reader`` on a
+non-blocking file descriptor, writes that would block are dropped and counted).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import termios
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+from mavlink_bridge.errors import EndpointError, LinkOpenError
+
+EndpointKind = Literal["udpin", "udpout", "tcp", "tcpin", "serial"]
+DataCallback = Callable[[bytes], None]
+_KINDS: tuple[EndpointKind, ...] = ("udpin", "udpout", "tcp", "tcpin", "serial")
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A parsed connection string; ``host``/``port`` for sockets, ``device``/``baud`` for serial."""
+
+    kind: EndpointKind
+    host: str = ""
+    port: int = 0
+    device: str = ""
+    baud: int = 0
+
+    @property
+    def datagram(self) -> bool:
+        """True when each read is one whole datagram (UDP): leftovers are truncated packets."""
+        return self.kind in ("udpin", "udpout")
+
+    def __str__(self) -> str:
+        if self.kind == "serial":
+            return f"serial:{self.device}:{self.baud}"
+        return f"{self.kind}:{self.host}:{self.port}"
+
+
+def parse_endpoint(spec: str) -> Endpoint:
+    """Parse ``KIND:HOST:PORT`` or ``serial:DEVICE:BAUD``; raise :class:`EndpointError`."""
+    kind, sep, rest = spec.strip().partition(":")
+    if not sep or kind not in _KINDS:
+        raise EndpointError(
+            f"endpoint {spec!r}: expected udpin:|udpout:|tcp:|tcpin:HOST:PORT or serial:DEVICE:BAUD"
+        )
+    where, sep, number = rest.rpartition(":")
+    if not sep or not where or not number.isdigit():
+        shape = "DEVICE:BAUD" if kind == "serial" else "HOST:PORT"
+        raise EndpointError(f"endpoint {spec!r}: expected {kind}:{shape}")
+    value = int(number)
+    if kind == "serial":
+        if value <= 0:
+            raise EndpointError(f"endpoint {spec!r}: baud rate must be > 0")
+        return Endpoint(kind="serial", device=where, baud=value)
+    if value > 65535:
+        raise EndpointError(f"endpoint {spec!r}: port must be 0..65535")
+    return Endpoint(kind=kind, host=where.strip("[]"), port=value)
+
+
+class Connection:
+    """An open transport.  ``write`` never blocks; ``closed`` resolves when it dies."""
+
+    def __init__(self, endpoint: Endpoint) -> None:
+        self.endpoint = endpoint
+        self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self.bytes_dropped = 0
+        self.local_port = 0
+
+    def write(self, data: bytes) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def close(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def _mark_closed(self) -> None:
+        if not self.closed.done():
+            self.closed.set_result(None)
+
+
+class _UdpProtocol(asyncio.DatagramProtocol):
+    def __init__(self, conn: UdpConnection, on_data: DataCallback) -> None:
+        self._conn = conn
+        self._on_data = on_data
+
+    def datagram_received(self, data: bytes, addr: tuple[str | object, ...]) -> None:
+        if self._conn.endpoint.kind == "udpin":
+            self._conn.peer = addr  # answer whoever spoke last, like mavutil
+        self._on_data(data)
+
+    def error_received(self, exc: Exception) -> None:
+        # ICMP "port unreachable" while the peer is not up yet: not fatal for UDP.
+        self._conn.send_errors += 1
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._conn._mark_closed()
+
+
+class UdpConnection(Connection):
+    """udpin (bind, reply to last sender) or udpout (fixed peer)."""
+
+    def __init__(self, endpoint: Endpoint) -> None:
+        super().__init__(endpoint)
+        self.transport: asyncio.DatagramTransport | None = None
+        self.peer: tuple[str | object, ...] | None = None
+        self.send_errors = 0
+
+    def write(self, data: bytes) -> None:
+        if self.transport is None or self.transport.is_closing():
+            self.bytes_dropped += len(data)
+            return
+        if self.endpoint.kind == "udpout":
+            self.transport.sendto(data)
+        elif self.peer is not None:
+            self.transport.sendto(data, self.peer)
+        else:
+            self.bytes_dropped += len(data)  # nobody has spoken to us yet
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+        self._mark_closed()
+
+
+class _StreamProtocol(asyncio.Protocol):
+    def __init__(self, conn: StreamConnection, on_data: DataCallback) -> None:
+        self._conn = conn
+        self._on_data = on_data
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        previous = self._conn.transport
+        self._conn.transport = transport
+        if previous is not None and previous is not transport:
+            previous.close()  # tcpin: the newest client wins
+
+    def data_received(self, data: bytes) -> None:
+        self._on_data(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._conn.endpoint.kind == "tcp":
+            self._conn._mark_closed()
+
+
+class StreamConnection(Connection):
+    """tcp (client: closes with the socket) or tcpin (server: lives until closed)."""
+
+    def __init__(self, endpoint: Endpoint) -> None:
+        super().__init__(endpoint)
+        self.transport: asyncio.Transport | None = None
+        self.server: asyncio.Server | None = None
+
+    def write(self, data: bytes) -> None:
+        t = self.transport
+        if t is None or t.is_closing() or t.get_write_buffer_size() > 65536:
+            self.bytes_dropped += len(data)
+            return
+        t.write(data)
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+        if self.server is not None:
+            self.server.close()
+        self._mark_closed()
+
+
+class SerialConnection(Connection):
+    """A tty opened raw and non-blocking, read with ``loop.add_reader``."""
+
+    def __init__(self, endpoint: Endpoint, on_data: DataCallback) -> None:
+        super().__init__(endpoint)
+        self._on_data = on_data
+        self._loop = asyncio.get_running_loop()
+        try:
+            self.fd = os.open(endpoint.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError as err:
+            raise LinkOpenError(f"serial {endpoint.device}: {err.strerror}") from err
+        try:
+            _configure_tty(self.fd, endpoint.baud)
+        except (termios.error, OSError, ValueError) as err:
+            os.close(self.fd)
+            raise LinkOpenError(f"serial {endpoint.device}: cannot configure: {err}") from err
+        self._loop.add_reader(self.fd, self._readable)
+
+    def _readable(self) -> None:
+        try:
+            data = os.read(self.fd, 4096)
+        except BlockingIOError:
+            return
+        except OSError:
+            self.close()
+            return
+        if not data:
+            self.close()
+            return
+        self._on_data(data)
+
+    def write(self, data: bytes) -> None:
+        if self.closed.done():
+            self.bytes_dropped += len(data)
+            return
+        try:
+            sent = os.write(self.fd, data)
+        except BlockingIOError:
+            sent = 0
+        except OSError:
+            self.close()
+            return
+        self.bytes_dropped += len(data) - sent
+
+    def close(self) -> None:
+        if not self.closed.done():
+            self._loop.remove_reader(self.fd)
+            with contextlib.suppress(OSError):
+                os.close(self.fd)
+        self._mark_closed()
+
+
+def _configure_tty(fd: int, baud: int) -> None:
+    tty.setraw(fd)
+    attrs = termios.tcgetattr(fd)
+    speed = getattr(termios, f"B{baud}", None)
+    if speed is None:
+        raise ValueError(f"unsupported baud rate {baud}")
+    attrs[4] = attrs[5] = speed
+    termios.tcsetattr(fd, termios.TCSANOW, attrs)
+
+
+async def open_connection(endpoint: Endpoint, on_data: DataCallback) -> Connection:
+    """Open ``endpoint``; bytes arrive through ``on_data`` on the loop thread."""
+    loop = asyncio.get_running_loop()
+    try:
+        if endpoint.datagram:
+            udp = UdpConnection(endpoint)
+            if endpoint.kind == "udpin":
+                transport, _ = await loop.create_datagram_endpoint(
+                    lambda: _UdpProtocol(udp, on_data), local_addr=(endpoint.host, endpoint.port)
+                )
+            else:
+                transport, _ = await loop.create_datagram_endpoint(
+                    lambda: _UdpProtocol(udp, on_data), remote_addr=(endpoint.host, endpoint.port)
+                )
+            udp.transport = transport
+            udp.local_port = transport.get_extra_info("sockname")[1]
+            return udp
+        if endpoint.kind in ("tcp", "tcpin"):
+            tcp = StreamConnection(endpoint)
+            if endpoint.kind == "tcp":
+                await loop.create_connection(
+                    lambda: _StreamProtocol(tcp, on_data), endpoint.host, endpoint.port
+                )
+            else:
+                tcp.server = await loop.create_server(
+                    lambda: _StreamProtocol(tcp, on_data), endpoint.host, endpoint.port
+                )
+                tcp.local_port = tcp.server.sockets[0].getsockname()[1]
+            return tcp
+        return SerialConnection(endpoint, on_data)
+    except OSError as err:
+        raise LinkOpenError(f"{endpoint}: {err.strerror or err}") from err

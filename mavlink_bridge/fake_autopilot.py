@@ -1,0 +1,364 @@
+"""A scripted fake autopilot (ArduPilot or PX4 flavour) that enforces the autopilots' rules.
+
+It is first-class code: tests, ``companion demo`` and ``companion fake-autopilot`` use it.
+
+* Flies ``truth(time_s) -> VehicleState`` (default: :func:`hover_then_circle`) and streams
+  HEARTBEAT (component 1), ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT (0, 0 until the
+  origin is set, like ArduPilot), SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT,
+  HOME_POSITION (once the origin is set), STATUSTEXT on events, and in PX4 mode TIMESYNC
+  requests at 10 Hz.
+* ACKs COMMAND_LONG/COMMAND_INT; the EKF origin (COMMAND_INT 611 for ArduPilot,
+  SET_GPS_GLOBAL_ORIGIN for PX4) is accepted once, optionally after ``origin_fail_first``
+  MAV_RESULT_FAILED answers as ArduPilot SITL gives while its EKF is not ready.
+* Judges every VISION_POSITION_ESTIMATE / ODOMETRY / LANDING_TARGET with
+  :mod:`mavlink_bridge.fake_rules` and records it (:attr:`FakeAutopilot.vision`).
+* Enforces signing (with a key) and optionally ArduPilot's SYSID_ENFORCE.
+* Faults: :meth:`drop_link`, :meth:`reboot`, :attr:`faults` (latency, jitter, loss, corruption).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from mavlink_bridge.codec import Codec, MAVLinkMessage
+from mavlink_bridge.endpoint import Connection, open_connection, parse_endpoint
+from mavlink_bridge.fake_faults import FaultInjector
+from mavlink_bridge.fake_rules import FakeRules, VisionJudge, VisionRecord, judge_landing_target
+from mavlink_bridge.vehicle import TruthFn, VehicleState, hover_then_circle
+
+Profile = Literal["ardupilot", "px4"]
+_EARTH_RADIUS_M = 6_378_137.0
+MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED = 0, 4, 3
+_ALWAYS_ACCEPTED = {511, 512, 520}  # SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAP.
+
+
+@dataclass(frozen=True)
+class FakeAutopilotConfig:
+    profile: Profile = "ardupilot"
+    endpoint: str = "udpin:127.0.0.1:0"
+    system_id: int = 1
+    signing_key: bytes | None = None
+    sysid_enforce: bool = False
+    origin_fail_first: int = 0
+    timesync_samples_required: int = 500  # PX4 needs 500 good round trips
+    timesync_max_rtt_ms: float = 10.0
+    rules: FakeRules = field(default_factory=FakeRules)
+    seed: int = 0
+    # stream periods in seconds
+    periods_s: tuple[tuple[str, float], ...] = (
+        ("HEARTBEAT", 1.0), ("ATTITUDE", 0.05), ("LOCAL_POSITION_NED", 0.1),
+        ("GLOBAL_POSITION_INT", 0.2), ("SYSTEM_TIME", 1.0), ("DISTANCE_SENSOR", 0.1),
+        ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.1), ("HOME_POSITION", 1.0),
+    )
+
+
+@dataclass
+class CompanionHeartbeat:
+    arrival_s: float
+    system_id: int
+    component_id: int
+    type: int
+    autopilot: int
+    system_status: int
+
+
+class FakeAutopilot:
+    """See module doc.  ``async with FakeAutopilot(cfg) as ap: ... ap.summary()``."""
+
+    def __init__(self, config: FakeAutopilotConfig, truth: TruthFn | None = None,
+                 clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
+        self.config = config
+        self.truth = truth or hover_then_circle()
+        self.clock_ns = clock_ns
+        self.faults = FaultInjector(np.random.default_rng(config.seed), clock_ns)
+        self.judge = VisionJudge(config.profile, config.rules)
+        self.vision: list[VisionRecord] = []
+        self.landing_targets: list[dict[str, Any]] = []
+        self.commands: list[dict[str, Any]] = []
+        self.heartbeats: list[CompanionHeartbeat] = []
+        self.statustexts: list[str] = []
+        self.counters: dict[str, int] = {"sysid_rejected": 0, "reboots": 0,
+                                         "deprecated_origin_ignored": 0}
+        self.connection: Connection | None = None
+        self._start_ns = clock_ns()
+        self._task: asyncio.Task[None] | None = None
+        self._boot()
+
+    def _boot(self) -> None:
+        """(Re)boot: new sequence numbers and boot time; origin, time sync, EKF state lost."""
+        self.codec = Codec(self.config.system_id, 1)
+        if self.config.signing_key is not None:
+            self.codec.enable_signing(self.config.signing_key, 0, ("RADIO_STATUS",))
+        if self.connection is not None:
+            self.codec.set_writer(self._tx)
+        self.boot_ns = self.clock_ns()
+        self.origin: tuple[float, float, float] | None = None
+        self.origin_attempts = 0
+        self.timesync_offset_ns = 0.0
+        self.timesync_samples = 0
+        self._next_due: dict[str, float] = {}
+        self.judge.reset()
+
+    # ------------------------------------------------------------ lifecycle
+    async def start(self) -> None:
+        self.connection = await open_connection(parse_endpoint(self.config.endpoint),
+                                                self._rx)
+        self.codec.set_writer(self._tx)
+        self._task = asyncio.create_task(self._stream_loop(), name="fake-autopilot")
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+        self.faults.cancel_pending()
+        if self.connection is not None:
+            self.connection.close()
+
+    async def __aenter__(self) -> FakeAutopilot:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    @property
+    def local_port(self) -> int:
+        return 0 if self.connection is None else self.connection.local_port
+
+    def boot_s(self) -> float:
+        return (self.clock_ns() - self.boot_ns) * 1e-9
+
+    def flight_s(self) -> float:
+        return (self.clock_ns() - self._start_ns) * 1e-9
+
+    @property
+    def timesync_synced(self) -> bool:
+        return self.timesync_samples >= self.config.timesync_samples_required
+
+    # ------------------------------------------------------------ faults
+    def drop_link(self, seconds: float) -> None:
+        """Nothing passes in either direction for ``seconds``."""
+        self.faults.state.drop_until_ns = self.clock_ns() + int(seconds * 1e9)
+
+    def reboot(self, silent_s: float = 1.0) -> None:
+        """Reboot: silent for ``silent_s``, then sequence 0, boot time 0, no origin."""
+        self.counters["reboots"] += 1
+        self.drop_link(silent_s)
+        self._boot()
+        self.boot_ns += int(silent_s * 1e9)
+
+    # ------------------------------------------------------------ transmit
+    def _tx(self, data: bytes) -> None:
+        if self.connection is not None:
+            self.faults.apply(data, self.connection.write, corrupt=True)
+
+    async def _stream_loop(self) -> None:
+        while True:
+            if not self.faults.link_down():
+                now = self.boot_s()
+                for name, period in self.config.periods_s:
+                    if name == "TIMESYNC" and self.config.profile != "px4":
+                        continue
+                    if now >= self._next_due.get(name, 0.0):
+                        self._next_due[name] = now + period
+                        self._send_stream(name, self.truth(self.flight_s()))
+            await asyncio.sleep(0.01)
+
+    def _send_stream(self, name: str, s: VehicleState) -> None:
+        mav = self.codec.mav
+        boot_ms = int(self.boot_s() * 1000) & 0xFFFFFFFF
+        n, e, d = s.position_ned_m
+        vn, ve, vd = s.velocity_ned_m_s
+        r, p, y = s.attitude_rpy_rad
+        if name == "HEARTBEAT":
+            ap = 3 if self.config.profile == "ardupilot" else 12  # ARDUPILOTMEGA / PX4
+            mav.heartbeat_send(2, ap, 0x81, 0, 4)  # QUADROTOR, armed|custom, ACTIVE
+        elif name == "ATTITUDE":
+            mav.attitude_send(boot_ms, r, p, y, 0.0, 0.0, 0.0)
+        elif name == "LOCAL_POSITION_NED":
+            mav.local_position_ned_send(boot_ms, n, e, d, vn, ve, vd)
+        elif name == "GLOBAL_POSITION_INT":
+            lat, lon, alt = self._global(n, e, d)
+            mav.global_position_int_send(boot_ms, lat, lon, alt, round(-d * 1000),
+                                         round(vn * 100), round(ve * 100), round(vd * 100),
+                                         round(math.degrees(y) % 360 * 100))
+        elif name == "SYSTEM_TIME":
+            mav.system_time_send(int(time.time() * 1e6), boot_ms)
+        elif name == "DISTANCE_SENSOR":
+            mav.distance_sensor_send(boot_ms, 20, 4000, round(s.range_m * 100), 0, 0, 25, 0)
+        elif name == "EKF_STATUS_REPORT" and self.config.profile == "ardupilot":
+            flags = 0x1FF if self.origin is not None else 0x07
+            mav.ekf_status_report_send(flags, 0.1, 0.1, 0.1, 0.1, 0.0)
+        elif name == "TIMESYNC":
+            mav.timesync_send(0, self._local_ns())
+        elif name == "HOME_POSITION" and self.origin is not None:
+            lat, lon, alt = self._global(0.0, 0.0, 0.0)
+            mav.home_position_send(lat, lon, alt, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
+                                   0.0, 0.0, 0.0)
+
+    def _local_ns(self) -> int:
+        return self.clock_ns() - self.boot_ns
+
+    def _global(self, n: float, e: float, d: float) -> tuple[int, int, int]:
+        if self.origin is None:
+            return 0, 0, 0
+        lat0, lon0, alt0 = self.origin
+        lat = lat0 + math.degrees(n / _EARTH_RADIUS_M)
+        lon = lon0 + math.degrees(e / (_EARTH_RADIUS_M * math.cos(math.radians(lat0))))
+        return round(lat * 1e7), round(lon * 1e7), round((alt0 - d) * 1000)
+
+    # ------------------------------------------------------------ receive
+    def _rx(self, data: bytes) -> None:
+        self.faults.apply(data, self._process, corrupt=False)
+
+    def _process(self, data: bytes) -> None:
+        if self.connection is None:
+            return
+        for msg in self.codec.feed(data, self.connection.endpoint.datagram):
+            sysid = msg.get_srcSystem()
+            if self.config.sysid_enforce and sysid not in (self.config.system_id, 255):
+                self.counters["sysid_rejected"] += 1
+                continue
+            try:
+                self._handle(msg)
+            except Exception:  # a fake must survive whatever the companion sends
+                self.counters["handler_errors"] = self.counters.get("handler_errors", 0) + 1
+
+    def _handle(self, msg: MAVLinkMessage) -> None:
+        name = msg.get_type()
+        if name in ("VISION_POSITION_ESTIMATE", "ODOMETRY"):
+            self._on_vision(name, msg)
+        elif name == "LANDING_TARGET":
+            ok, why = judge_landing_target(self.config.profile, msg.to_dict())
+            self.landing_targets.append({**msg.to_dict(), "arrival_s": self.boot_s(),
+                                         "accepted": ok, "reason": why})
+        elif name == "HEARTBEAT":
+            self.heartbeats.append(CompanionHeartbeat(
+                self.flight_s(), msg.get_srcSystem(), msg.get_srcComponent(), msg.type,
+                msg.autopilot, msg.system_status))
+        elif name in ("COMMAND_INT", "COMMAND_LONG"):
+            self._on_command(name, msg)
+        elif name == "SET_GPS_GLOBAL_ORIGIN":
+            if self.config.profile == "px4":
+                self._set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+            else:
+                self.counters["deprecated_origin_ignored"] += 1
+        elif name == "TIMESYNC":
+            self._on_timesync(msg)
+        elif name == "STATUSTEXT":
+            self.statustexts.append(str(msg.text))
+
+    def _on_timesync(self, msg: MAVLinkMessage) -> None:
+        now = self._local_ns()
+        if msg.tc1 == 0:
+            self.codec.mav.timesync_send(now, msg.ts1)
+            return
+        rtt_ns = now - msg.ts1
+        if not 0 <= rtt_ns < self.config.timesync_max_rtt_ms * 1e6:
+            return
+        offset = (msg.ts1 + now) / 2 - msg.tc1  # local - remote
+        k = self.timesync_samples
+        self.timesync_offset_ns = offset if k == 0 else 0.9 * self.timesync_offset_ns + 0.1 * offset
+        self.timesync_samples += 1
+
+    def _stamp_age_ms(self, stamp_us: int) -> float:
+        """How old the sample is in our clock; ArduPilot corrects jitter (age ~ 0 + delay),
+        PX4 converts with the TIMESYNC offset once synced, else uses the arrival time."""
+        if self.config.profile == "ardupilot" or not self.timesync_synced:
+            return 0.0
+        local_us = stamp_us + self.timesync_offset_ns / 1000
+        return (self._local_ns() / 1000 - local_us) / 1000
+
+    def _on_vision(self, name: str, msg: MAVLinkMessage) -> None:
+        f = msg.to_dict()
+        stamp = int(f["time_usec"] if name == "ODOMETRY" else f["usec"])
+        age_ms = self._stamp_age_ms(stamp)
+        truth_t = self.flight_s() - self.config.rules.delay_ms / 1000 - max(age_ms, 0) / 1000
+        ok, why, innov = self.judge.judge(name, f, self.truth(truth_t), age_ms)
+        self.vision.append(VisionRecord(
+            name=name, arrival_s=self.boot_s(), time_usec=stamp,
+            position_ned_m=(float(f["x"]), float(f["y"]), float(f["z"])),
+            frame_id=int(f.get("frame_id", 1)), child_frame_id=int(f.get("child_frame_id", 0)),
+            estimator_type=int(f.get("estimator_type", 0)), quality=int(f.get("quality", 0)),
+            reset_counter=int(f.get("reset_counter", 0)), accepted=ok, reason=why,
+            innovation_m=innov, stamp_age_ms=age_ms if self.timesync_synced else math.nan))
+
+    def _on_command(self, name: str, msg: MAVLinkMessage) -> None:
+        cmd = int(msg.command)
+        if cmd == 611 and name == "COMMAND_INT" and self.config.profile == "ardupilot":
+            result = self._origin_command(msg)
+        elif cmd in _ALWAYS_ACCEPTED:
+            result = MAV_RESULT_ACCEPTED
+        else:
+            result = MAV_RESULT_UNSUPPORTED
+        self.commands.append({"kind": name, "command": cmd, "result": result,
+                              "arrival_s": self.boot_s()})
+        self.codec.mav.command_ack_send(cmd, result, 0, 0, msg.get_srcSystem(),
+                                        msg.get_srcComponent())
+
+    def _origin_command(self, msg: MAVLinkMessage) -> int:
+        if self.origin is not None:
+            return MAV_RESULT_FAILED  # it can be set once
+        self.origin_attempts += 1
+        if self.origin_attempts <= self.config.origin_fail_first:
+            return MAV_RESULT_FAILED  # EKF not ready yet, like SITL right after boot
+        self._set_origin(msg.x * 1e-7, msg.y * 1e-7, float(msg.z))
+        return MAV_RESULT_ACCEPTED
+
+    def _set_origin(self, lat: float, lon: float, alt_m: float) -> None:
+        if self.origin is not None:
+            return
+        self.origin = (lat, lon, alt_m)
+        self.codec.mav.gps_global_origin_send(round(lat * 1e7), round(lon * 1e7),
+                                              round(alt_m * 1000), self._local_ns() // 1000)
+        self.codec.mav.statustext_send(6, b"EKF3 IMU0 origin set")
+
+    # ------------------------------------------------------------ results
+    def accepted(self) -> list[VisionRecord]:
+        return [r for r in self.vision if r.accepted]
+
+    def summary(self) -> dict[str, Any]:
+        """Everything a test or a user wants to know, JSON-serialisable."""
+        reasons: dict[str, int] = {}
+        for r in self.vision:
+            reasons[r.reason] = reasons.get(r.reason, 0) + 1
+        periods = np.diff([h.arrival_s for h in self.heartbeats])
+        return {
+            "profile": self.config.profile,
+            "flight_s": self.flight_s(),
+            "vision_received": len(self.vision),
+            "vision_accepted": len(self.accepted()),
+            "vision_reasons": reasons,
+            "vision": [r.as_dict() for r in self.vision],
+            "landing_targets": self.landing_targets,
+            "commands": self.commands,
+            "origin": self.origin,
+            "timesync_samples": self.timesync_samples,
+            "timesync_synced": self.timesync_synced,
+            "companion_heartbeats": len(self.heartbeats),
+            "heartbeat_period_s": _period_stats(periods),
+            "statustexts": self.statustexts,
+            "rx": self.codec.rx.as_dict(),
+            "faults": vars(self.faults.counters),
+            "counters": dict(self.counters),
+        }
+
+
+def _period_stats(periods: np.ndarray) -> dict[str, float | None]:
+    """Median/min/max of the companion's heartbeat periods and the jitter |period - median|."""
+    if periods.size == 0:
+        return {"median": None, "min": None, "max": None, "jitter_p99": None,
+                "jitter_max": None}
+    med = float(np.median(periods))
+    dev = np.abs(periods - med)
+    return {"median": med, "min": float(periods.min()), "max": float(periods.max()),
+            "jitter_p99": float(np.percentile(dev, 99)), "jitter_max": float(dev.max())}

@@ -1,0 +1,95 @@
+"""Acquisition by appearance reference, on photos the simulated world did not make."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tracker.acquire import ReferenceMatcher
+
+ROOT = Path(__file__).resolve().parents[2]
+OTB = Path(os.environ.get("LMC_SHARED_DATA", ROOT.parent / "shared" / "data")) / "otb"
+
+
+def textured_poster(seed: int, w: int = 160, h: int = 120) -> np.ndarray:
+    """A poster-like image with text and shapes (generated, deterministic)."""
+    rng = np.random.default_rng(seed)
+    blocks = rng.integers(0, 255, (h // 8, w // 8, 3), dtype=np.uint8)
+    img = cv2.resize(blocks, (w, h), interpolation=cv2.INTER_NEAREST)
+    for _ in range(12):
+        c = tuple(int(v) for v in rng.integers(0, 255, 3))
+        x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
+        cv2.circle(img, (x, y), int(rng.integers(4, 20)), c, -1)
+        cv2.rectangle(img, (x, y), (x + int(rng.integers(5, 30)), y + 10), c[::-1], 2)
+    cv2.putText(img, f"LMC {seed}", (8, h // 2), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (0, 0, 0), 2)
+    return img
+
+
+def place(ref: np.ndarray, corners: np.ndarray, size: tuple[int, int] = (640, 480),
+          seed: int = 0) -> np.ndarray:
+    """Warp ``ref`` onto a cluttered background at ``corners`` (TL, TR, BR, BL)."""
+    rng = np.random.default_rng(seed)
+    bg = rng.integers(60, 120, (size[1], size[0], 3), dtype=np.uint8)
+    bg = cv2.GaussianBlur(bg, (0, 0), 3)
+    h, w = ref.shape[:2]
+    src = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float32)
+    hom = cv2.getPerspectiveTransform(src, corners.astype(np.float32))
+    warped = cv2.warpPerspective(ref, hom, size)
+    mask = cv2.warpPerspective(np.full((h, w), 255, np.uint8), hom, size)
+    bg[mask > 0] = warped[mask > 0]
+    return bg
+
+
+def test_finds_a_perspective_warped_reference_with_corners_within_2px() -> None:
+    ref = textured_poster(1)
+    corners = np.array([[200, 120], [380, 140], [370, 290], [210, 300]], np.float64)
+    frame = place(ref, corners)
+    matcher = ReferenceMatcher()
+    matcher.add("poster-1", ref)
+    matcher.add("poster-2", textured_poster(2))  # a different landmark, not in the frame
+    found = matcher.find(frame)
+    assert [m.landmark_id for m in found] == ["poster-1"]
+    assert np.abs(found[0].corners_px - corners).max() < 2.0
+    x, y, w, _ = found[0].box
+    assert (x, y) == pytest.approx((200, 120), abs=2) and w == pytest.approx(180, abs=3)
+
+
+def test_a_frame_without_the_landmark_gives_nothing() -> None:
+    matcher = ReferenceMatcher()
+    matcher.add("poster-1", textured_poster(1))
+    frame = place(textured_poster(7), np.array([[100, 100], [300, 100], [300, 250], [100, 250]]))
+    assert matcher.find(frame) == []
+
+
+def test_a_blank_reference_is_refused_with_a_reason() -> None:
+    with pytest.raises(ValueError, match="too little texture"):
+        ReferenceMatcher().add("blank", np.full((100, 100, 3), 128, np.uint8))
+
+
+def test_real_photo_crop_found_when_placed_in_a_real_scene() -> None:
+    """A real photo (a crop of Tiger1 frame 1) as a poster on a real background (Coke 50).
+
+    Nothing here comes from the simulated world: this is what a user's own photo of a sign
+    looks like to the matcher.
+    """
+    if not (OTB / "Tiger1").is_dir() or not (OTB / "Coke").is_dir():
+        pytest.skip(f"real sequences not available at {OTB} (set LMC_SHARED_DATA)")
+    photo = cv2.imread(str(OTB / "Tiger1" / "img" / "0001.jpg"))[40:280, 120:440]
+    background = cv2.imread(str(OTB / "Coke" / "img" / "0050.jpg"))
+    corners = np.array([[330, 60], [600, 90], [590, 300], [340, 330]], np.float64)
+    h, w = photo.shape[:2]
+    src = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float32)
+    hom = cv2.getPerspectiveTransform(src, corners.astype(np.float32))
+    mask = cv2.warpPerspective(np.full((h, w), 255, np.uint8), hom, (640, 480))
+    frame = background.copy()
+    frame[mask > 0] = cv2.warpPerspective(photo, hom, (640, 480))[mask > 0]
+    frame = cv2.convertScaleAbs(frame, alpha=0.8, beta=10)  # other light than the photo
+    matcher = ReferenceMatcher()
+    matcher.add("tiger-poster", photo)
+    found = matcher.find(frame)
+    assert [m.landmark_id for m in found] == ["tiger-poster"]
+    assert np.abs(found[0].corners_px - corners).max() < 2.0

@@ -1,0 +1,242 @@
+"""Solver choice and exactness on noise-free views; robustness; bad input gives NoFix."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tracker.camera import CameraModel
+from tracker.pose import (
+    AltitudeSample,
+    AttitudeSample,
+    MapLandmark,
+    NoFix,
+    Observation,
+    PoseFix,
+    RangeSample,
+    solve_pose,
+)
+from tracker.pose.simulate import SensorNoise, cast_laser
+
+from .conftest import TRUE_P, TRUE_RPY, assert_exact, see, wall
+
+T_US = 1_000_000
+ATT = AttitudeSample(T_US, *TRUE_RPY)
+
+
+def _fix(result: PoseFix | NoFix) -> PoseFix:
+    assert isinstance(result, PoseFix), getattr(result, "reason", "")
+    return result
+
+
+def _centres_only(obs: list[Observation]) -> list[Observation]:
+    return [replace(o, corners_px=None) for o in obs]
+
+
+def _assert_pose(fix: PoseFix) -> None:
+    assert_exact(fix, TRUE_P, TRUE_RPY)
+
+
+def test_single_square_landmark_uses_ippe_square(camera: CameraModel) -> None:
+    lms = (MapLandmark("N", (5.0, -0.2, -4.5), 1.2, 1.2, 200.0),)
+    fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US))
+    assert fix.solver == "ippe_square" and fix.landmark_ids == ("N",)
+    _assert_pose(fix)
+
+
+def test_far_planar_flip_is_reported_without_attitude_and_resolved_with_it(
+    camera: CameraModel,
+) -> None:
+    lms = wall()[:1]  # 1.2 m sign 20 m away: both IPPE solutions fit within the pixel noise
+    result = solve_pose(see(lms, camera), lms, camera, T_US)
+    assert isinstance(result, NoFix) and "planar ambiguity" in result.reason
+    fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US, attitude=ATT))
+    assert fix.solver == "ippe_square"
+    _assert_pose(fix)
+
+
+def test_single_rectangular_landmark_uses_plain_ippe(camera: CameraModel) -> None:
+    lms = wall()[1:2]
+    fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US, attitude=ATT))
+    assert fix.solver == "ippe"
+    _assert_pose(fix)
+
+
+def test_several_landmarks_without_attitude_use_pnp_ransac(camera: CameraModel) -> None:
+    lms = wall()
+    fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US))
+    assert fix.solver == "pnp_ransac" and set(fix.landmark_ids) == {"A", "B", "C", "D"}
+    _assert_pose(fix)
+
+
+def test_four_centres_without_attitude_use_pnp(camera: CameraModel) -> None:
+    lms = wall()
+    fix = _fix(solve_pose(_centres_only(see(lms, camera)), lms, camera, T_US))
+    assert fix.solver == "pnp_ransac"
+    _assert_pose(fix)
+
+
+def test_two_centres_with_attitude_use_bearing_least_squares(camera: CameraModel) -> None:
+    lms = wall()[:2]
+    fix = _fix(solve_pose(_centres_only(see(lms, camera)), lms, camera, T_US, attitude=ATT))
+    assert fix.solver == "bearing_ls"
+    _assert_pose(fix)
+
+
+def test_one_centre_with_laser_and_attitude_uses_range_bearing(camera: CameraModel) -> None:
+    lm = MapLandmark("L", (20.0, 0.0, -5.0), 3.0, 3.0, 180.0)
+    p, rpy = np.array([0.5, 0.2, -5.1]), (0.0, 0.01, 0.02)
+    d = cast_laser([lm], p, rpy, (1.0, 0.0, 0.0))
+    assert d is not None
+    laser = RangeSample(T_US, d, (1.0, 0.0, 0.0))
+    obs = _centres_only(see((lm,), camera, p, rpy))
+    fix = _fix(
+        solve_pose(obs, [lm], camera, T_US, attitude=AttitudeSample(T_US, *rpy), laser=laser)
+    )
+    assert fix.solver == "range_bearing"
+    assert_exact(fix, p, rpy)
+
+
+def test_one_centre_with_altitude_and_attitude_uses_altitude_bearing() -> None:
+    cam = CameraModel(mount_rpy_deg=(0.0, -90.0, 0.0))
+    lm = MapLandmark("G", (3.0, 2.0, 0.0), 2.0, 2.0, None)
+    p, rpy = np.array([1.0, 1.0, -30.0]), (0.01, -0.02, 0.3)
+    obs = _centres_only(see((lm,), cam, p, rpy))
+    alt = AltitudeSample(T_US, -30.0)
+    fix = _fix(solve_pose(obs, [lm], cam, T_US, attitude=AttitudeSample(T_US, *rpy), altitude=alt))
+    assert fix.solver == "altitude_bearing"
+    assert_exact(fix, p, rpy)
+
+
+def test_distortion_and_a_down_looking_mount_are_handled() -> None:
+    cam = CameraModel(distortion=(-0.2, 0.05, 0.001, -0.001, 0.0), mount_rpy_deg=(0, -90, 0))
+    lms = tuple(
+        MapLandmark(f"G{i}", (n, e, 0.0), 2.0, 2.0, None)
+        for i, (n, e) in enumerate([(-8, -6), (7, -5), (5, 8), (-6, 6)])
+    )
+    p, rpy = np.array([0.5, 0.5, -25.0]), (0.02, 0.01, 0.4)
+    obs = see(lms, cam, p, rpy)
+    assert len(obs) == 4
+    fix = _fix(solve_pose(obs, lms, cam, T_US))
+    assert_exact(fix, p, rpy)
+
+
+def test_a_wrongly_labelled_landmark_is_dropped_as_an_outlier(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera, noise=SensorNoise(pixel_sigma_px=0.5), seed=3)
+    elsewhere = MapLandmark("E", (15.0, 9.0, -2.0), 1.2, 1.2, 180.0)
+    obs[2] = replace(obs[2], landmark_id="E")  # the detector named C wrongly
+    fix = _fix(solve_pose(obs, (*lms, elsewhere), camera, T_US))
+    assert fix.landmark_ids == ("A", "B", "D")
+    assert any("dropped landmark 'E'" in n for n in fix.notes)
+    assert np.linalg.norm(np.asarray(fix.position_ned_m) - TRUE_P) < 0.1
+
+
+def test_with_one_of_two_landmarks_mislabelled_the_attitude_solver_drops_it(
+    camera: CameraModel,
+) -> None:
+    lms = wall()
+    obs = _centres_only(see(lms, camera))
+    obs[3] = replace(obs[3], centre_px=(obs[3].centre_px[0] - 80.0, obs[3].centre_px[1]))
+    fix = _fix(solve_pose(obs, lms, camera, T_US, attitude=ATT))
+    assert fix.landmark_ids == ("A", "B", "C")
+    assert any("'D'" in n for n in fix.notes)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "needle"),
+    [
+        ("centre_px", (float("nan"), 10.0), "centre_px"),
+        ("box_wh_px", (10.0, float("inf")), "box_wh_px"),
+        ("confidence", float("nan"), "confidence"),
+        ("centre_px", (1e9, 10.0), "outside the image"),
+    ],
+)
+def test_nan_in_an_observation_gives_no_fix_with_the_reason(
+    camera: CameraModel, field: str, value: object, needle: str
+) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    kwargs: dict[str, Any] = {field: value}
+    obs[2] = replace(obs[2], **kwargs)
+    result = solve_pose(obs, lms, camera, T_US)
+    assert isinstance(result, NoFix)
+    assert "observation 2" in result.reason and needle in result.reason
+
+
+def test_nan_in_a_corner_gives_no_fix(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    corners = list(obs[0].corners_px or ())
+    corners[1] = (float("nan"), 3.0)
+    obs[0] = replace(obs[0], corners_px=tuple(corners))
+    result = solve_pose(obs, lms, camera, T_US)
+    assert isinstance(result, NoFix) and "corners_px" in result.reason
+
+
+def test_all_points_on_one_pixel_is_degenerate(camera: CameraModel) -> None:
+    lms = wall()
+    obs = [
+        replace(o, centre_px=(300.0, 200.0), corners_px=((300.0, 200.0),) * 4)
+        for o in see(lms, camera)
+    ]
+    result = solve_pose(obs, lms, camera, T_US)
+    assert isinstance(result, NoFix) and "degenerate" in result.reason
+
+
+def test_collinear_landmarks_without_attitude_give_no_fix(camera: CameraModel) -> None:
+    lms = tuple(
+        MapLandmark(f"L{i}", (20.0 + i, -6.0 + 4 * i, -4.0), 1.0, 1.0, 180.0) for i in range(4)
+    )
+    obs = _centres_only(see(lms, camera, np.array([0.0, 0.0, -2.0]), (0.0, 0.0, 0.0)))
+    assert len(obs) == 4
+    result = solve_pose(obs, lms, camera, T_US)
+    assert isinstance(result, NoFix) and "collinear" in result.reason
+
+
+def test_a_landmark_behind_the_camera_gives_no_fix(camera: CameraModel) -> None:
+    lm = MapLandmark("G", (0.0, 0.0, 0.0), 2.0, 2.0, None)
+    # camera looks forward and up (pitch +30 deg) but the landmark lies below on the ground
+    obs = [Observation((320.0, 100.0), (20.0, 20.0), landmark_id="G")]
+    att = AttitudeSample(T_US, 0.0, np.deg2rad(30.0), 0.0)
+    result = solve_pose(obs, [lm], camera, T_US, attitude=att, altitude=AltitudeSample(T_US, -10.0))
+    assert isinstance(result, NoFix) and "behind" in result.reason
+
+
+def test_one_centre_and_nothing_else_is_unobservable(camera: CameraModel) -> None:
+    lms = wall()[:1]
+    obs = _centres_only(see(lms, camera))
+    result = solve_pose(obs, lms, camera, T_US, attitude=ATT)
+    assert isinstance(result, NoFix) and "unobservable" in result.reason
+    result = solve_pose(obs, lms, camera, T_US)
+    assert isinstance(result, NoFix) and "unobservable" in result.reason
+
+
+def test_a_stale_attitude_is_ignored(camera: CameraModel) -> None:
+    lms = wall()[:2]
+    obs = _centres_only(see(lms, camera))
+    stale = replace(ATT, time_us=T_US - 500_000)
+    result = solve_pose(obs, lms, camera, T_US, attitude=stale)
+    assert isinstance(result, NoFix)
+    assert any("attitude sample ignored" in n for n in result.notes)
+    assert isinstance(solve_pose(obs, lms, camera, T_US, attitude=ATT), PoseFix)
+
+
+def test_no_identified_landmark_gives_no_fix(camera: CameraModel) -> None:
+    result = solve_pose([], wall(), camera, T_US)
+    assert isinstance(result, NoFix) and "no identified landmark" in result.reason
+
+
+def test_covariance_is_symmetric_positive_definite_and_ordered(camera: CameraModel) -> None:
+    lms = wall()
+    fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US))
+    c = fix.covariance
+    assert c.shape == (6, 6)
+    np.testing.assert_allclose(c, c.T)
+    assert np.all(np.linalg.eigvalsh(c) > 0)
+    # looking north at a wall: depth (north) is known worse than... the angles are radians
+    assert np.all(np.sqrt(np.diag(c)[3:]) < 0.1)
+    assert 1 <= fix.quality <= 100

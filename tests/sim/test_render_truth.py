@@ -1,0 +1,99 @@
+"""Truth geometry: projected corners and boxes match the rendered pixels within 1 px."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from companion.sim.render import Renderer
+from companion.sim.trajectory import VehicleState
+from companion.sim.world import World
+from tracker.camera import CameraModel
+
+
+def landmark_mask(camera: CameraModel, world: World, state: VehicleState) -> np.ndarray:
+    """Pixels that change by more than half the landmark's contrast when it is added.
+
+    (Half, because lens distortion resamples the frame bilinearly: a pixel half covered by
+    the landmark is half way between the two colours.)
+    """
+    with_lm = Renderer(camera, world).render(state).image
+    empty = World([], world.config, world.seed)
+    without = Renderer(camera, empty).render(state).image
+    diff = np.abs(with_lm.astype(int) - without.astype(int)).sum(axis=2)
+    contrast = np.median(diff[diff > 0])
+    return diff > contrast / 2
+
+
+def boundary_distance(poly: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    contour = poly.reshape(-1, 1, 2).astype(np.float32)
+    return np.array([abs(cv2.pointPolygonTest(contour, (float(x), float(y)), True))
+                     for y, x in pixels])
+
+
+def check_mask_matches(mask: np.ndarray, outline: np.ndarray) -> None:
+    truth = np.zeros(mask.shape, np.uint8)
+    cv2.fillPoly(truth, [np.round(outline * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
+    disagree = np.argwhere(mask != truth.astype(bool))
+    assert mask.sum() > 500  # the landmark really is in the picture
+    if len(disagree):
+        assert boundary_distance(outline, disagree).max() <= 1.0
+
+
+def test_corners_and_box_match_rendered_pixels(one_landmark_world, east_state, camera) -> None:
+    out = Renderer(camera, one_landmark_world).render(east_state)
+    assert [b.landmark_id for b in out.boxes] == ["L1"]
+    box = out.boxes[0]
+    mask = landmark_mask(camera, one_landmark_world, east_state)
+    check_mask_matches(mask, box.corners_px)
+    ys, xs = np.nonzero(mask)
+    assert abs(xs.min() - box.x) <= 1 and abs(xs.max() - (box.x + box.w)) <= 1
+    assert abs(ys.min() - box.y) <= 1 and abs(ys.max() - (box.y + box.h)) <= 1
+    assert box.in_view_frac == 1.0
+
+
+def test_corner_order_is_tl_tr_br_bl(one_landmark_world, east_state, camera) -> None:
+    c = Renderer(camera, one_landmark_world).render(east_state).boxes[0].corners_px
+    assert c[0, 0] < c[1, 0] and c[3, 0] < c[2, 0]  # left of right
+    assert c[0, 1] < c[3, 1] and c[1, 1] < c[2, 1]  # top above bottom
+
+
+def test_truth_with_lens_distortion(one_landmark_world, east_state) -> None:
+    cam = CameraModel(distortion=(-0.3, 0.1, 0.001, -0.001, 0.0), mount_rpy_deg=(0, -5, 0))
+    r = Renderer(cam, one_landmark_world)
+    state = dataclasses.replace(east_state, position_ned_m=(2.0, 4.0, -4.2))  # off-centre
+    box = r.render(state).boxes[0]
+    mask = landmark_mask(cam, one_landmark_world, state)
+    pc = (one_landmark_world.landmarks[0].quad.corners_ned - state.position_ned_m) @ (
+        r.camera_pose(state)[1])
+    check_mask_matches(mask, r.image_outline(pc))
+    ys, xs = np.nonzero(mask)
+    assert abs(xs.min() - box.x) <= 1 and abs(ys.max() - (box.y + box.h)) <= 1
+
+
+def test_flat_landmark_seen_from_above(make_landmark) -> None:
+    world = World([make_landmark("F", (5.0, 0.0, 0.0), (2.0, 1.0), None)], seed=1)
+    down = CameraModel(mount_rpy_deg=(0.0, -90.0, 0.0))
+    state = VehicleState(0.0, (5.2, 0.1, -10.0), (0, 0, 0), (0.0, 0.0, 0.3))
+    box = Renderer(down, world).render(state).boxes[0]
+    check_mask_matches(landmark_mask(down, world, state), box.corners_px)
+    # facing north (yaw 0.3 rad): the landmark's north (top) edge is up in the image
+    assert box.corners_px[0, 1] < box.corners_px[3, 1]
+
+
+def test_back_face_and_out_of_view_are_not_truth(one_landmark_world, camera) -> None:
+    behind = VehicleState(0.0, (0.0, 20.0, -4.0), (0, 0, 0), (0.0, 0.0, -np.pi / 2))
+    assert Renderer(camera, one_landmark_world).render(behind).boxes == ()
+    away = VehicleState(0.0, (0.0, 0.0, -4.0), (0, 0, 0), (0.0, 0.0, -np.pi / 2))
+    assert Renderer(camera, one_landmark_world).render(away).boxes == ()
+
+
+def test_partly_in_view_is_clipped(one_landmark_world, camera) -> None:
+    # yaw so that the landmark straddles the right image border
+    state = VehicleState(0.0, (0.0, 0.0, -4.0), (0, 0, 0), (0.0, 0.0, np.deg2rad(62.0)))
+    box = Renderer(camera, one_landmark_world).render(state).boxes[0]
+    assert 0.0 < box.in_view_frac < 1.0
+    assert box.corners_px[:, 0].max() > camera.width - 1
+    assert abs(box.x + box.w - (camera.width - 1)) < 1e-6

@@ -1,0 +1,114 @@
+"""Scenario files, the simulator and the simulated camera source."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.errors import ConfigError
+from companion.sim.scenario import SCENARIO_DIR, load_scenario
+from companion.sim.simulator import Simulator
+from companion.sim.source import SimCameraSource
+from companion.sim.synth import synth_stream
+from companion.sources.base import EndOfStream
+from companion.sources.files import RecordedStreamSource
+from companion.sources.stream_io import read_truth_boxes, read_truth_pose
+
+REQUIRED = ("hover", "survey", "illumination_ramp", "sudden_light", "occlusion")
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
+def test_builtin_scenarios_load_and_see_landmarks(name: str) -> None:
+    sim = Simulator(load_scenario(name))
+    _, truth = sim.render(0)
+    assert len(truth.boxes) >= 1
+    assert truth.pose is not None and truth.camera is not None
+
+
+def test_required_scenarios_exist() -> None:
+    assert set(REQUIRED) <= {p.stem for p in SCENARIO_DIR.glob("*.toml")}
+
+
+def test_survey_sees_three_landmarks_at_a_time() -> None:
+    sim = Simulator(load_scenario("survey"))
+    counts = [len(sim.render(i, t_s=t)[1].boxes) for i, t in enumerate(range(8, 20, 2))]
+    assert max(counts) == 3 and min(counts) >= 2
+
+
+def test_leave_and_reenter_view() -> None:
+    sim = Simulator(load_scenario("leave_reenter"))
+    seen = [len(sim.render(0, t_s=t)[1].boxes) for t in (1.0, 8.0, 20.0)]
+    assert seen[0] >= 1 and seen[1] == 0 and seen[2] == seen[0]
+
+
+def test_same_seed_same_frames_other_seed_other_noise() -> None:
+    sim = Simulator(load_scenario("illumination_ramp"))
+    a, _ = sim.render(7)
+    b, _ = Simulator(load_scenario("illumination_ramp")).render(7)
+    assert np.array_equal(a, b)
+    c, _ = sim.with_overrides(seed=99).render(7)
+    assert not np.array_equal(a, c)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("seconds = -1.0", r"seconds: expected a number > 0"),
+        ("fps = \"fast\"", r"fps: expected a number"),
+        ("[camera]\nwidht = 3", r"camera.widht: unknown key"),
+        ("[[effects]]\nkind = \"fog\"", r"effects\[0\].kind: expected one of"),
+        ("[[effects]]\nkind = \"shadow\"\nlandmark_id = \"zz\"", r"unknown landmark_id 'zz'"),
+    ],
+)
+def test_bad_scenario_is_one_line_error(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(f'landmarks = "{SCENARIO_DIR.parent / "landmarks.geojson"}"\n{text}\n')
+    with pytest.raises(ConfigError, match=message) as info:
+        Simulator(load_scenario(str(path)))
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_unknown_scenario_name_lists_builtins() -> None:
+    with pytest.raises(ConfigError, match=r"built-in: .*survey"):
+        load_scenario("no_such_scenario")
+
+
+async def test_sim_source_fast_mode_and_truth() -> None:
+    sim = Simulator(dataclasses.replace(load_scenario("hover"), seconds=0.2, fps=10.0))
+    source = SimCameraSource(sim, realtime=False)
+    frames = [await source.recv(), await source.recv()]
+    assert [f.index for f in frames] == [0, 1] and frames[1].t_us == 100_000
+    assert frames[0].image.shape == (480, 640, 3) and frames[0].camera_id == "sim0"
+    assert source.truth(1) is not None and source.scenario_time_s(frames[1]) == 0.1
+    with pytest.raises(EndOfStream):
+        await source.recv()
+
+
+async def test_sim_source_realtime_is_paced_on_the_monotonic_clock() -> None:
+    sim = Simulator(dataclasses.replace(load_scenario("hover"), seconds=1.0, fps=50.0))
+    source = SimCameraSource(sim, realtime=True)
+    frames = [await source.recv() for _ in range(3)]
+    assert source.t0_us is not None
+    ts = [source.scenario_time_s(f) for f in frames]
+    assert all(b > a for a, b in itertools.pairwise(ts))
+    assert source.status.delivered == 3
+
+
+async def test_synth_writes_a_stream_that_replays_with_truth(tmp_path: Path) -> None:
+    sim = Simulator(dataclasses.replace(load_scenario("occlusion"), seconds=0.5, fps=6.0))
+    assert synth_stream(sim, tmp_path / "s") == 3
+    source = RecordedStreamSource(tmp_path / "s", realtime=False)
+    for index in range(3):
+        frame = await source.recv()
+        image, truth = sim.render(index)
+        assert np.array_equal(frame.image, image)  # lossless PNG, deterministic render
+        boxes = read_truth_boxes(tmp_path / "s")[index]
+        assert [b.landmark_id for b in boxes] == [b.landmark_id for b in truth.boxes]
+        assert np.allclose(boxes[0].corners_px, truth.boxes[0].corners_px, atol=1e-3)
+    _, pose = read_truth_pose(tmp_path / "s")[2]
+    assert pose.east_m == pytest.approx(sim.state_at(2 / 6.0).position_ned_m[1], abs=1e-6)
+    assert source.meta.origin is not None and source.meta.provenance["scenario"] == "occlusion"

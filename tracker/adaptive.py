@@ -1,0 +1,362 @@
+"""The adaptive landmark tracker: online feature selection + mean-shift-embedded particle filter.
+
+Per frame (paper sec. 3-4): propagate the particles with adaptive noise (eq. 1); cut a search
+window around the last estimate and compute only the selected features there; back-project the
+log-likelihood ratio of each feature (eq. 8) into a likelihood image (fig. 5); move one set of
+particles by mean shift on that image and leave the other set where it is; weight every particle
+by ``exp(-omega s^2)`` from the Bhattacharyya distance of its Epanechnikov-weighted histograms
+(eq. 2-4); drop particles below ``weight_threshold``; estimate; resample systematically.
+Features are re-ranked by variance ratio (eq. 6-7) every ``rerank_every_frames`` frames and when
+the confidence drops, with the object histograms anchored to the first frame's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from tracker.appearance import (
+    bhattacharyya,
+    joint_planes,
+    kernel_histograms,
+    particle_likelihood,
+)
+from tracker.config import TrackerConfig, check_config
+from tracker.features import GRAY_FEATURES, colour_weights, feature_bins, is_grayscale
+from tracker.particles import (
+    integral_images,
+    mean_shift,
+    motion_noise,
+    propagate,
+    systematic_resample,
+    weighted_estimate,
+    window_sums,
+)
+from tracker.ranking import log_likelihood_ratio, masked_histograms, rank_features, ring_masks
+from tracker.types import Box, Cue, TrackResult
+from tracker.validation import check_box, check_image, check_same_frame
+from tracker.window import Window, cut_window, work_factor
+
+FloatArray = npt.NDArray[np.float64]
+_NEIGHBOURS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy], float)
+
+
+@dataclass
+class _Model:
+    """The appearance model for the selected features."""
+
+    features: tuple[int, ...]
+    llr: FloatArray  # (k, bins) log-likelihood ratio, eq. 8
+    first: FloatArray  # (k, bins) kernel histograms on the first frame
+    recent: FloatArray  # (k, bins) running kernel histograms of recent estimates
+    rho_ref: float  # rho of the first frame's target against the model
+    rho_bg: float  # mean rho of the background around the target against the model
+
+
+class AdaptiveTracker:
+    """Track one target; ``init`` on the first frame, then ``update`` on each next frame."""
+
+    name = "adaptive"
+
+    def __init__(self, config: TrackerConfig | None = None, seed: int = 0) -> None:
+        self.config = config if config is not None else TrackerConfig()
+        check_config(self.config)
+        self.rng = np.random.default_rng(seed)
+        self._shape: tuple[int, ...] | None = None
+
+    # ------------------------------------------------------------------ public API
+    def init(self, image_bgr: npt.NDArray[np.uint8], box: Box) -> None:
+        """Start tracking the target inside ``box`` = (x, y, w, h) of the first frame."""
+        image = check_image(image_bgr)
+        x, y, w, h = check_box(box, image.shape)
+        cfg = self.config
+        self._shape = image.shape
+        self._size0 = (w, h)
+        self._state = np.array([x + w / 2.0, y + h / 2.0, 1.0])
+        window = self._window(image, self._state, 0.0, 1.0)
+        self._cue: Cue = "grayscale" if is_grayscale(window.patch, cfg.gray_tolerance) else "colour"
+        self._candidates = GRAY_FEATURES if self._cue == "grayscale" else tuple(range(49))
+        self._first = (window, self._state.copy())
+        self._ref_mean = self._box_mean(window, self._state)
+        self._gain = np.ones(3)
+        self._p_first: FloatArray | None = None
+        self._model = self._rank(window, self._state)
+        self._particles = np.tile(self._state, (cfg.particles, 1))
+        self._history: list[tuple[float, float]] = [(self._state[0], self._state[1])]
+        self._since_rank = 0
+        self._low_frames = 0
+        self._lost_frames = 0
+
+    @property
+    def features(self) -> tuple[int, ...]:
+        """Ids of the features in use (best first)."""
+        return self._model.features
+
+    @property
+    def cue(self) -> Cue:
+        """``"colour"`` or ``"grayscale"`` (intensity and gradient fallback)."""
+        return self._cue
+
+    def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:
+        """Track into the next frame; ``box`` is None while the target is lost."""
+        if self._shape is None:
+            raise ValueError("update: call init(image_bgr, box) first")
+        check_same_frame(image_bgr, self._shape)
+        if self._lost_frames > 0:
+            return self._search_lost(image_bgr)
+        return self._track(image_bgr)
+
+    def likelihood_images(
+        self, image_bgr: npt.NDArray[np.uint8]
+    ) -> list[tuple[int, npt.NDArray[np.float32]]]:
+        """The log-likelihood ratio of each selected feature back-projected on a whole frame.
+
+        For reports and inspection only (fig. 5); tracking never computes whole-frame features.
+        """
+        image = check_image(image_bgr)
+        planes = feature_bins(
+            image, self._model.features, self.config.bins, self.config.stretch_features
+        )
+        return [
+            (fid, self._model.llr[i][planes[i]].astype(np.float32))
+            for i, fid in enumerate(self._model.features)
+        ]
+
+    # ------------------------------------------------------------------ internals
+    def _half(self, scale: FloatArray | float, window: Window) -> FloatArray:
+        """Half box sizes in patch pixels for one or more scales -> (P, 2)."""
+        s = np.atleast_1d(np.asarray(scale, dtype=np.float64))
+        w0, h0 = self._size0
+        return np.stack([s * w0 * window.fx / 2.0, s * h0 * window.fy / 2.0], axis=1)
+
+    def _window(
+        self, image: npt.NDArray[np.uint8], state: FloatArray, extra_px: float, widen: float
+    ) -> Window:
+        w, h = self._size0[0] * state[2], self._size0[1] * state[2]
+        grow = (0.5 + self.config.search_margin_frac) * widen
+        extent = (w * grow + extra_px, h * grow + extra_px)
+        factor = work_factor(w, h, self.config.work_area_px)
+        return cut_window(image, (state[0], state[1]), extent, factor)
+
+    def _box_mean(self, window: Window, state: FloatArray) -> FloatArray:
+        """Mean BGR of the box ``state`` inside the window's patch."""
+        c = window.to_patch(state[None, :2])[0]
+        half = self._half(state[2], window)[0]
+        h, w = window.patch.shape[:2]
+        x0, x1 = int(np.clip(c[0] - half[0], 0, w - 1)), int(np.clip(c[0] + half[0], 1, w))
+        y0, y1 = int(np.clip(c[1] - half[1], 0, h - 1)), int(np.clip(c[1] + half[1], 1, h))
+        region = window.patch[y0 : max(y1, y0 + 1), x0 : max(x1, x0 + 1)]
+        return np.maximum(region.reshape(-1, 3).mean(axis=0), 1.0)
+
+    def _compensated(self, window: Window) -> Window:
+        """The window with the illumination gain removed (per channel, clipped to 0..255)."""
+        band = self.config.gain_deadband
+        excess = np.sign(self._gain - 1.0) * np.maximum(np.abs(self._gain - 1.0) - band, 0.0)
+        if not self.config.gain_compensation or np.abs(excess).max() < 0.01:
+            return window
+        gain = (1.0 + excess).astype(np.float32)  # a dead band keeps small drifts uncorrected
+        patch = np.clip(window.patch * gain, 0, 255).astype(np.uint8)
+        return Window(window.x0, window.y0, window.fx, window.fy, patch)
+
+    def _update_gain(self, raw: Window, state: FloatArray) -> None:
+        """gain <- (1-r) gain + r * (first-frame target mean / current target mean)."""
+        ratio = np.clip(self._ref_mean / self._box_mean(raw, state), 0.25, 4.0)
+        if self.config.gain_mode == "grey":
+            ratio = np.full(3, float(self._ref_mean.sum() / self._box_mean(raw, state).sum()))
+            ratio = np.clip(ratio, 0.25, 4.0)
+        rate = self.config.gain_rate
+        self._gain = (1.0 - rate) * self._gain + rate * ratio
+
+    def _likelihood(self, window: Window) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float32]]:
+        """Bin images of the selected features and their mean back-projected LLR image."""
+        planes = feature_bins(
+            window.patch, self._model.features, self.config.bins, self.config.stretch_features
+        )
+        llr = self._model.llr
+        image = llr[0][planes[0]]
+        for i in range(1, len(planes)):
+            image = image + llr[i][planes[i]]
+        return planes, (image / len(planes)).astype(np.float32)
+
+    def _rank(self, window: Window, state: FloatArray) -> _Model:
+        """Select the top features by variance ratio (eq. 6-8) and rebuild the model."""
+        cfg = self.config
+        centre = window.to_patch(state[None, :2])[0]
+        half = self._half(state[2], window)[0]
+        patch_box = (centre[0] - half[0], centre[1] - half[1], 2 * half[0], 2 * half[1])
+        planes = feature_bins(window.patch, self._candidates, cfg.bins, cfg.stretch_features)
+        inner, ring = ring_masks(window.patch.shape[:2], patch_box, cfg.ring_area_ratio)
+        p_now = masked_histograms(planes, inner, cfg.bins)
+        q = masked_histograms(planes, ring, cfg.bins)
+        if self._p_first is None:
+            self._p_first = p_now
+        p = cfg.anchor_weight * self._p_first + (1.0 - cfg.anchor_weight) * p_now
+        directions = colour_weights().astype(np.float64) if self._cue == "colour" else None
+        top, _ = rank_features(
+            p, q, self._candidates, cfg.loglik_floor, cfg.top_features, directions,
+            cfg.max_feature_cosine,
+        )
+        rows = [self._candidates.index(f) for f in top]
+        llr = log_likelihood_ratio(p[rows], q[rows], cfg.loglik_floor)
+        first_window, first_state = self._first
+        first = self._hist(first_window, first_state[None], top)[0]
+        sel = planes[rows]
+        recent = self._kernel(sel, centre[None], half[None])[0]
+        model = cfg.anchor_weight * first + (1.0 - cfg.anchor_weight) * recent
+        around = centre[None] + _NEIGHBOURS * 2.0 * half[None]
+        halves = np.repeat(half[None], len(around), axis=0)
+        bg = self._kernel(sel, around, halves)
+        rho_bg = float(bhattacharyya(bg, model).mean())
+        rho_ref = float(bhattacharyya(first[None], model)[0])
+        return _Model(top, llr, first, recent, rho_ref, min(rho_bg, rho_ref - 0.05))
+
+    def _hist(self, window: Window, states: FloatArray, ids: tuple[int, ...]) -> FloatArray:
+        planes = feature_bins(window.patch, ids, self.config.bins, self.config.stretch_features)
+        centres = window.to_patch(states[:, :2])
+        return self._kernel(planes, centres, self._half(states[:, 2], window))
+
+    def _kernel(
+        self, planes: npt.NDArray[np.intp], centres: FloatArray, halves: FloatArray
+    ) -> FloatArray:
+        """Kernel histograms (eq. 2) of the appearance model: joint or per-feature."""
+        cfg = self.config
+        if cfg.appearance == "joint":
+            joint = joint_planes(planes, cfg.bins, cfg.joint_bins)
+            nbins = cfg.joint_bins ** planes.shape[0]
+            return kernel_histograms(joint, centres, halves, cfg.sample_grid, nbins)
+        return kernel_histograms(planes, centres, halves, cfg.sample_grid, cfg.bins)
+
+    def _confidence(self, rho: FloatArray) -> FloatArray:
+        """Calibrated confidence: 0 at the background's similarity, 1 at the first frame's."""
+        m = self._model
+        return np.clip((rho - m.rho_bg) / (m.rho_ref - m.rho_bg), 0.0, 1.0)
+
+    def _model_hist(self) -> FloatArray:
+        a = self.config.anchor_weight
+        return a * self._model.first + (1.0 - a) * self._model.recent
+
+    def _noise(self) -> float:
+        cfg = self.config
+        side = 0.5 * (self._size0[0] + self._size0[1]) * self._state[2]
+        return motion_noise(
+            self._history, cfg.motion_history_frames, cfg.motion_gain,
+            cfg.motion_min_frac * side, cfg.motion_max_frac * side,
+        )
+
+    def _track(self, image: npt.NDArray[np.uint8]) -> TrackResult:
+        cfg = self.config
+        noise = self._noise()
+        scale_range = (cfg.min_scale, cfg.max_scale)
+        particles = propagate(self._particles, noise, cfg.scale_noise, scale_range, self.rng)
+        raw = self._window(image, self._state, 2.0 * noise, 1.0)
+        window = self._compensated(raw)
+        planes, lik = self._likelihood(window)
+        centres = window.to_patch(particles[:, :2])
+        halves = self._half(particles[:, 2], window)
+        shifted = round(cfg.particles * cfg.mean_shift_fraction)
+        tables = integral_images(np.maximum(lik, 0.0))
+        if shifted and cfg.mean_shift_iterations:
+            centres[:shifted] = mean_shift(
+                tables, centres[:shifted], halves[:shifted], cfg.mean_shift_iterations
+            )
+            particles[:shifted, :2] = window.to_frame(centres[:shifted])
+        model = self._model_hist()
+        hists = self._kernel(planes, centres, halves)
+        weights = particle_likelihood(bhattacharyya(hists, model), cfg.omega)
+        if cfg.llr_gain > 0:
+            weights = weights * self._llr_factor(lik, centres, halves)
+        kept = np.where(weights >= cfg.weight_threshold, weights, 0.0)
+        if kept.sum() <= 0:
+            kept = weights
+        candidates = np.stack([weighted_estimate(particles, kept), particles[np.argmax(kept)]])
+        cand_hists = self._kernel(
+            planes, window.to_patch(candidates[:, :2]), self._half(candidates[:, 2], window)
+        )
+        rhos = bhattacharyya(cand_hists, model)
+        best = int(np.argmax(rhos))
+        self._particles = particles[systematic_resample(kept, self.rng)]
+        result = self._accept(window, candidates[best], cand_hists[best], float(rhos[best]))
+        if result.box is not None and result.confidence >= cfg.lost_below_confidence:
+            self._update_gain(raw, candidates[best])
+        return result
+
+    def _llr_factor(
+        self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
+    ) -> FloatArray:
+        """``exp(gain * (mean LLR in box - max over particles))``: the likelihood image's vote."""
+        sums, area = window_sums(integral_images(lik)[:1], centres, halves)
+        mean = sums[0] / np.maximum(area, 1.0)
+        return np.exp(self.config.llr_gain * (mean - mean.max()))
+
+    def _accept(
+        self, window: Window, state: FloatArray, hist: FloatArray, rho: float
+    ) -> TrackResult:
+        """Commit an estimate: model update, re-ranking, lost bookkeeping."""
+        cfg = self.config
+        confidence = float(self._confidence(np.array([rho]))[0])
+        self._low_frames = self._low_frames + 1 if confidence < cfg.lost_below_confidence else 0
+        if self._low_frames >= cfg.lost_after_frames:
+            self._lost_frames = 1
+            return self._result(None, confidence)
+        self._state = state
+        self._history.append((state[0], state[1]))
+        del self._history[: -cfg.motion_history_frames - 1]
+        if confidence >= cfg.rerank_below_confidence:
+            rate = cfg.model_update_rate
+            self._model.recent = (1.0 - rate) * self._model.recent + rate * hist
+        self._since_rank += 1
+        low = confidence < cfg.rerank_below_confidence and self._since_rank >= 3
+        if self._since_rank >= cfg.rerank_every_frames or low:
+            self._model = self._rank(window, state)
+            self._since_rank = 0
+        return self._result(self._box(state), confidence)
+
+    def _search_lost(self, image: npt.NDArray[np.uint8]) -> TrackResult:
+        """Widening search: mode of the smoothed likelihood plus scattered, mean-shifted samples."""
+        cfg = self.config
+        widen = cfg.reacquire_growth ** self._lost_frames
+        self._lost_frames += 1
+        window = self._compensated(self._window(image, self._state, 0.0, widen))
+        planes, lik = self._likelihood(window)
+        half = self._half(self._state[2], window)[0]
+        positive = np.maximum(lik, 0.0)
+        ksize = (max(1, int(2 * half[0])), max(1, int(2 * half[1])))
+        smooth = cv2.boxFilter(positive, -1, ksize)
+        iy, ix = np.unravel_index(int(np.argmax(smooth)), smooth.shape)
+        h, w = positive.shape
+        scatter = self.rng.random((cfg.particles - 1, 2)) * np.array([w, h])
+        centres = np.vstack([[ix + 0.5, iy + 0.5], scatter])
+        halves = np.repeat(half[None], len(centres), axis=0)
+        centres = mean_shift(integral_images(positive), centres, halves, cfg.mean_shift_iterations)
+        hists = self._kernel(planes, centres, halves)
+        rhos = bhattacharyya(hists, self._model_hist())
+        best = int(np.argmax(rhos))
+        confidence = float(self._confidence(rhos[best : best + 1])[0])
+        if confidence < cfg.reacquire_confidence:
+            return self._result(None, confidence)
+        xy = window.to_frame(centres[best])
+        self._state = np.array([xy[0], xy[1], self._state[2]])
+        self._particles = np.tile(self._state, (cfg.particles, 1))
+        self._history = [(self._state[0], self._state[1])]
+        self._lost_frames = 0
+        self._low_frames = 0
+        return self._result(self._box(self._state), confidence)
+
+    def _box(self, state: FloatArray) -> Box:
+        w, h = self._size0[0] * state[2], self._size0[1] * state[2]
+        return (float(state[0] - w / 2), float(state[1] - h / 2), float(w), float(h))
+
+    def _result(self, box: Box | None, confidence: float) -> TrackResult:
+        return TrackResult(
+            box=box, confidence=confidence, features=self._model.features, lost=box is None,
+            cue=self._cue, particles=self.config.particles,
+        )
+
+
+def feature_weights(feature_id: int) -> tuple[int, int, int]:
+    """The (wR, wG, wB) weights of a colour feature id (0..48)."""
+    r, g, b = (int(v) for v in colour_weights()[feature_id])
+    return (r, g, b)

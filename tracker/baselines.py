@@ -1,0 +1,182 @@
+"""Baselines with the same interface as :class:`tracker.AdaptiveTracker` (paper Table 1).
+
+- :class:`ParticleFilterTracker`: a plain particle filter, fixed RGB histogram, 120 particles.
+- :class:`MeanShiftTracker`: plain mean shift (Comaniciu et al.) with a fixed RGB histogram.
+- :class:`MilTracker`: OpenCV's ``TrackerMIL`` as an external peer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from tracker.appearance import bhattacharyya, kernel_histograms, particle_likelihood
+from tracker.features import is_grayscale
+from tracker.particles import (
+    integral_images,
+    mean_shift,
+    propagate,
+    systematic_resample,
+    weighted_estimate,
+)
+from tracker.types import Box, Cue, TrackResult
+from tracker.validation import check_box, check_image, check_same_frame
+from tracker.window import Window, cut_window, work_factor
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class BaselineConfig:
+    """Parameters shared by the baselines (fixed, not adaptive)."""
+
+    particles: int = field(default=120, metadata={"ge": 4})
+    rgb_bins_per_channel: int = field(default=8, metadata={"ge": 2, "le": 32})
+    motion_noise_frac: float = field(default=0.1, metadata={"gt": 0.0})
+    scale_noise: float = field(default=0.02, metadata={"ge": 0.0})
+    omega: float = field(default=20.0, metadata={"gt": 0.0})
+    search_margin_frac: float = field(default=0.75, metadata={"ge": 0.0})
+    work_area_px: int = field(default=900, metadata={"ge": 64})
+    sample_grid: int = field(default=16, metadata={"ge": 4})
+    mean_shift_iterations: int = field(default=20, metadata={"ge": 1})
+
+
+def rgb_bins(patch_bgr: npt.NDArray[np.uint8], per_channel: int) -> npt.NDArray[np.intp]:
+    """Joint RGB bin index image, shape (1, H, W), values in 0..per_channel^3-1."""
+    q = (patch_bgr.astype(np.intp) * per_channel) >> 8
+    return ((q[:, :, 2] * per_channel + q[:, :, 1]) * per_channel + q[:, :, 0])[None]
+
+
+class _FixedHistogramTracker:
+    """Common state of the fixed-histogram baselines."""
+
+    name = "fixed"
+
+    def __init__(self, config: BaselineConfig | None = None, seed: int = 0) -> None:
+        self.config = config if config is not None else BaselineConfig()
+        self.rng = np.random.default_rng(seed)
+        self._shape: tuple[int, ...] | None = None
+        self._bins = self.config.rgb_bins_per_channel**3
+
+    def init(self, image_bgr: npt.NDArray[np.uint8], box: Box) -> None:
+        image = check_image(image_bgr)
+        x, y, w, h = check_box(box, image.shape)
+        self._shape = image.shape
+        self._size0 = (w, h)
+        self._state = np.array([x + w / 2.0, y + h / 2.0, 1.0])
+        window = self._window(image, self._state)
+        self._cue: Cue = "grayscale" if is_grayscale(window.patch, 1.0) else "colour"
+        self._model = self._hists(window, self._state[None])[0]
+
+    def _check(self, image_bgr: npt.NDArray[np.uint8]) -> None:
+        if self._shape is None:
+            raise ValueError("update: call init(image_bgr, box) first")
+        check_same_frame(image_bgr, self._shape)
+
+    def _window(self, image: npt.NDArray[np.uint8], state: FloatArray) -> Window:
+        w, h = self._size0[0] * state[2], self._size0[1] * state[2]
+        grow = 0.5 + self.config.search_margin_frac
+        factor = work_factor(w, h, self.config.work_area_px)
+        return cut_window(image, (state[0], state[1]), (w * grow, h * grow), factor)
+
+    def _half(self, scales: FloatArray, window: Window) -> FloatArray:
+        w0, h0 = self._size0
+        return np.stack([scales * w0 * window.fx / 2.0, scales * h0 * window.fy / 2.0], axis=1)
+
+    def _hists(self, window: Window, states: FloatArray) -> FloatArray:
+        planes = rgb_bins(window.patch, self.config.rgb_bins_per_channel)
+        centres = window.to_patch(states[:, :2])
+        halves = self._half(states[:, 2], window)
+        return kernel_histograms(planes, centres, halves, self.config.sample_grid, self._bins)
+
+    def _box(self, state: FloatArray) -> Box:
+        w, h = self._size0[0] * state[2], self._size0[1] * state[2]
+        return (float(state[0] - w / 2), float(state[1] - h / 2), float(w), float(h))
+
+
+class ParticleFilterTracker(_FixedHistogramTracker):
+    """Plain colour particle filter (Nummiaro/Perez style): fixed RGB histogram, 120 particles."""
+
+    name = "pf"
+
+    def init(self, image_bgr: npt.NDArray[np.uint8], box: Box) -> None:
+        """Start tracking the target inside ``box`` of the first frame."""
+        super().init(image_bgr, box)
+        self._particles = np.tile(self._state, (self.config.particles, 1))
+
+    def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:
+        """Propagate with fixed noise, weight by exp(-omega s^2), estimate, resample."""
+        self._check(image_bgr)
+        cfg = self.config
+        noise = cfg.motion_noise_frac * 0.5 * (self._size0[0] + self._size0[1]) * self._state[2]
+        particles = propagate(self._particles, noise, cfg.scale_noise, (0.3, 3.0), self.rng)
+        window = self._window(image_bgr, self._state)
+        rho = bhattacharyya(self._hists(window, particles), self._model)
+        weights = particle_likelihood(rho, cfg.omega)
+        self._state = weighted_estimate(particles, weights)
+        self._particles = particles[systematic_resample(weights, self.rng)]
+        est_rho = float(bhattacharyya(self._hists(window, self._state[None]), self._model)[0])
+        return TrackResult(
+            self._box(self._state), est_rho, (), False, self._cue, cfg.particles
+        )
+
+
+class MeanShiftTracker(_FixedHistogramTracker):
+    """Plain mean shift (Comaniciu, Ramesh & Meer) with a fixed RGB histogram and fixed size."""
+
+    name = "meanshift"
+
+    def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:
+        """Iterate ``y1 = sum x_i w_i / sum w_i`` with ``w_i = sqrt(q_b / p_b(y0))``."""
+        self._check(image_bgr)
+        cfg = self.config
+        window = self._window(image_bgr, self._state)
+        planes = rgb_bins(window.patch, cfg.rgb_bins_per_channel)
+        centre = window.to_patch(self._state[None, :2])
+        half = self._half(self._state[None, 2], window)
+        for _ in range(cfg.mean_shift_iterations):
+            p = kernel_histograms(planes, centre, half, cfg.sample_grid, self._bins)[0, 0]
+            ratio = np.sqrt(self._model[0] / np.maximum(p, 1e-12)).astype(np.float32)
+            moved = mean_shift(integral_images(ratio[planes[0]]), centre, half, 1)
+            step = float(np.abs(moved - centre).max())
+            centre = moved
+            if step < 0.5:
+                break
+        self._state[:2] = window.to_frame(centre)[0]
+        p = kernel_histograms(planes, centre, half, cfg.sample_grid, self._bins)
+        rho = float(bhattacharyya(p, self._model)[0])
+        return TrackResult(self._box(self._state), rho, (), False, self._cue, 0)
+
+
+class MilTracker:
+    """OpenCV ``TrackerMIL`` (Babenko et al.) with this package's interface."""
+
+    name = "mil"
+
+    def __init__(self, seed: int = 0) -> None:
+        self.seed = seed
+        self._shape: tuple[int, ...] | None = None
+
+    def init(self, image_bgr: npt.NDArray[np.uint8], box: Box) -> None:
+        """Start tracking the target inside ``box`` of the first frame."""
+        image = check_image(image_bgr)
+        x, y, w, h = check_box(box, image.shape)
+        self._shape = image.shape
+        cv2.setRNGSeed(self.seed)
+        self._tracker = cv2.TrackerMIL.create()
+        self._tracker.init(image, (round(x), round(y), max(1, round(w)), max(1, round(h))))
+        self._cue: Cue = "grayscale" if is_grayscale(image, 1.0) else "colour"
+
+    def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:
+        """Run OpenCV's update; a failed update reports the target lost."""
+        if self._shape is None:
+            raise ValueError("update: call init(image_bgr, box) first")
+        check_same_frame(image_bgr, self._shape)
+        ok, rect = self._tracker.update(image_bgr)
+        if not ok:
+            return TrackResult(None, 0.0, (), True, self._cue, 0)
+        box = tuple(float(v) for v in rect)
+        return TrackResult((box[0], box[1], box[2], box[3]), 1.0, (), False, self._cue, 0)

@@ -1,0 +1,78 @@
+"""Configuration of the adaptive landmark tracker (TOML section ``[tracker]``).
+
+Constraints live in field metadata (``ge``, ``gt``, ``le``, ``lt``) and are checked by the
+application loader; :func:`check_config` re-checks them for direct library use.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any, Literal
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Parameters of :class:`tracker.AdaptiveTracker`.
+
+    Distances are in pixels of the *working* patch (the search region downscaled so that the
+    target box covers about ``work_area_px`` pixels) unless a name says ``_frac`` (fraction of
+    the box size) or ``_px_full`` (full-resolution pixels).
+    """
+
+    particles: int = field(default=20, metadata={"ge": 4, "le": 2000})
+    mean_shift_fraction: float = field(default=0.5, metadata={"ge": 0.0, "le": 1.0})
+    mean_shift_iterations: int = field(default=4, metadata={"ge": 0, "le": 50})
+    bins: int = field(default=16, metadata={"ge": 4, "le": 256})
+    stretch_features: bool = False
+    gain_compensation: bool = True
+    gain_mode: Literal["grey", "colour"] = "grey"
+    gain_deadband: float = field(default=0.0, metadata={"ge": 0.0, "lt": 1.0})
+    gain_rate: float = field(default=0.3, metadata={"gt": 0.0, "le": 1.0})
+    appearance: Literal["joint", "marginal"] = "joint"
+    joint_bins: int = field(default=8, metadata={"ge": 2, "le": 32})
+    top_features: int = field(default=3, metadata={"ge": 1, "le": 49})
+    max_feature_cosine: float = field(default=0.6, metadata={"ge": 0.0, "le": 1.0})
+    rerank_every_frames: int = field(default=10, metadata={"ge": 1})
+    rerank_below_confidence: float = field(default=0.5, metadata={"ge": 0.0, "le": 1.0})
+    anchor_weight: float = field(default=0.5, metadata={"ge": 0.0, "le": 1.0})
+    model_update_rate: float = field(default=0.05, metadata={"ge": 0.0, "le": 1.0})
+    ring_area_ratio: float = field(default=1.0, metadata={"gt": 0.0, "le": 8.0})
+    loglik_floor: float = field(default=0.001, metadata={"gt": 0.0, "lt": 1.0})
+    llr_gain: float = field(default=0.0, metadata={"ge": 0.0})
+    omega: float = field(default=20.0, metadata={"gt": 0.0})
+    weight_threshold: float = field(default=0.02, metadata={"ge": 0.0, "lt": 1.0})
+    motion_history_frames: int = field(default=5, metadata={"ge": 1})
+    motion_gain: float = field(default=1.0, metadata={"gt": 0.0})
+    motion_min_frac: float = field(default=0.04, metadata={"ge": 0.0})
+    motion_max_frac: float = field(default=0.5, metadata={"gt": 0.0})
+    scale_noise: float = field(default=0.02, metadata={"ge": 0.0, "le": 0.5})
+    min_scale: float = field(default=0.3, metadata={"gt": 0.0})
+    max_scale: float = field(default=3.0, metadata={"gt": 1.0})
+    search_margin_frac: float = field(default=0.75, metadata={"ge": 0.0})
+    work_area_px: int = field(default=900, metadata={"ge": 64})
+    sample_grid: int = field(default=16, metadata={"ge": 4, "le": 64})
+    lost_below_confidence: float = field(default=0.15, metadata={"ge": 0.0, "le": 1.0})
+    lost_after_frames: int = field(default=3, metadata={"ge": 1})
+    reacquire_confidence: float = field(default=0.45, metadata={"ge": 0.0, "le": 1.0})
+    reacquire_growth: float = field(default=1.5, metadata={"gt": 1.0})
+    gray_tolerance: float = field(default=1.0, metadata={"ge": 0.0})
+
+
+def check_config(config: TrackerConfig) -> None:
+    """Raise ``ValueError`` naming the first field that breaks its metadata constraint."""
+    checks: dict[str, Any] = {
+        "ge": lambda v, b: v >= b,
+        "gt": lambda v, b: v > b,
+        "le": lambda v, b: v <= b,
+        "lt": lambda v, b: v < b,
+    }
+    words = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
+    for f in fields(config):
+        value = getattr(config, f.name)
+        for key, bound in f.metadata.items():
+            if key in checks and not checks[key](value, bound):
+                raise ValueError(
+                    f"config.{f.name}: expected a value {words[key]} {bound}, got {value!r}"
+                )
+    if config.top_features > 49:
+        raise ValueError("config.top_features: expected <= 49")

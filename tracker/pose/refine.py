@@ -1,0 +1,246 @@
+"""Maximum a posteriori pose refinement (Gauss-Newton) and its covariance.
+
+State ``x = (p_n, p_e, p_d, roll, pitch, yaw)``: the vehicle (= camera centre) position in
+NED and the body attitude (ZYX Euler).  Residuals, each whitened by its 1-sigma:
+
+* pixels:   ``r_i = (pi(K, R_cam_ned (L_i - p)) - u_i) / sigma_i``   (ideal, undistorted px)
+* attitude: ``r = wrap(rpy - rpy_0) / sigma``                         (autopilot prior)
+* altitude: ``r = (p_d - d_0) / sigma``
+* range:    ``r = (n.(c - p) / n.(R_nb a_b) - d) / sigma``           (beam meets the face plane)
+
+Gauss-Newton ``dx = -(J^T J)^-1 J^T r``; at convergence the covariance is the inverse of the
+whitened normal matrix ``P = (J^T J)^-1`` (first order, Cramer-Rao for Gaussian noise).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tracker.geometry import FloatArray
+
+IntArray = npt.NDArray[np.int64]
+
+_MIN_DEPTH_M = 1e-3
+
+
+@dataclass(frozen=True)
+class PointSet:
+    """Correspondences: Nx3 NED points, Nx2 ideal pixels, N sigmas (px), N landmark indices."""
+
+    points_ned: FloatArray
+    pixels: FloatArray
+    sigma_px: FloatArray
+    landmark_index: IntArray
+
+
+@dataclass(frozen=True)
+class RangePrior:
+    """A laser range along ``axis_body`` meeting the plane (``plane_point``, ``plane_normal``)."""
+
+    distance_m: float
+    sigma_m: float
+    axis_body: FloatArray
+    plane_point: FloatArray
+    plane_normal: FloatArray
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Optional prior information from the autopilot and the rangefinder."""
+
+    attitude_rpy_rad: FloatArray | None = None
+    attitude_sigma_rad: FloatArray | None = None
+    altitude_down_m: float | None = None
+    altitude_sigma_m: float = 0.1
+    range: RangePrior | None = None
+
+
+@dataclass(frozen=True)
+class Refined:
+    """Result of :func:`refine_pose`; ``reason`` is set when it failed."""
+
+    position_ned_m: FloatArray
+    attitude_rpy_rad: FloatArray
+    covariance: FloatArray
+    point_errors: FloatArray  # N normalised squared pixel errors
+    reason: str = ""
+    bad_point: int = -1  # the point behind the camera, when that is the reason
+    cost: float = 0.0  # whitened residual sum of squares (chi-square) at the solution
+
+
+def _rotation_and_derivatives(rpy: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``R = Rz(y) Ry(p) Rx(r)`` and the stacked ``dR/droll, dR/dpitch, dR/dyaw`` (3x3x3)."""
+    sr, cr = math.sin(rpy[0]), math.cos(rpy[0])
+    sp, cp = math.sin(rpy[1]), math.cos(rpy[1])
+    sy, cy = math.sin(rpy[2]), math.cos(rpy[2])
+    m = np.array(
+        [
+            [  # R
+                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                [-sp, cp * sr, cp * cr],
+            ],
+            [  # dR/droll
+                [0.0, cy * sp * cr + sy * sr, -cy * sp * sr + sy * cr],
+                [0.0, sy * sp * cr - cy * sr, -sy * sp * sr - cy * cr],
+                [0.0, cp * cr, -cp * sr],
+            ],
+            [  # dR/dpitch
+                [-cy * sp, cy * cp * sr, cy * cp * cr],
+                [-sy * sp, sy * cp * sr, sy * cp * cr],
+                [-cp, -sp * sr, -sp * cr],
+            ],
+            [  # dR/dyaw
+                [-sy * cp, -sy * sp * sr - cy * cr, -sy * sp * cr + cy * sr],
+                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                [0.0, 0.0, 0.0],
+            ],
+        ]
+    )
+    return m[0], m[1:]
+
+
+def wrap_angle(a: FloatArray) -> FloatArray:
+    """Wrap angles to [-pi, pi)."""
+    return np.asarray((a + np.pi) % (2.0 * np.pi) - np.pi, dtype=np.float64)
+
+
+def _residuals(
+    x: FloatArray, k: FloatArray, r_body_cam: FloatArray, pts: PointSet, priors: Priors
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Whitened residuals (u0, v0, u1, v1, ..., priors), Jacobian (rows x 6), point depths."""
+    r_nb, dr_nb = _rotation_and_derivatives(x[3:])
+    # one product gives X_c = R_cam_ned (L - p) and dX_c/dtheta_i = (dR_nb_i R_body_cam)^T (L - p)
+    mats = np.concatenate([r_nb[None], dr_nb]) @ r_body_cam  # 4 x 3 x 3
+    rel = pts.points_ned - x[:3]
+    prod = rel @ mats.transpose(1, 0, 2).reshape(3, 12)  # N x (4 x 3)
+    xc = prod[:, :3]
+    n = xc.shape[0]
+    z = xc[:, 2]
+    zs = np.where(np.abs(z) < _MIN_DEPTH_M, _MIN_DEPTH_M, z)
+    xn = xc[:, :2] / zs[:, None]
+    f = np.array([k[0, 0], k[1, 1]])
+    w = 1.0 / pts.sigma_px
+    res = ((f * xn + k[:2, 2] - pts.pixels) * w[:, None]).reshape(-1)  # u = fx X/Z + cx
+    # dX_c/dx per component (N x 6): position columns -R_cam_ned, angle columns from prod
+    d = np.empty((n, 3, 6))
+    d[:, :, :3] = -mats[0].T
+    d[:, :, 3:] = prod[:, 3:].reshape(n, 3, 3).transpose(0, 2, 1)
+    # d(u, v) = f w / Z (dX - (X/Z) dZ) for X -> u and Y -> v
+    jac = (d[:, :2, :] - xn[:, :, None] * d[:, 2:3, :]) * (f[None, :] * (w / zs)[:, None])[
+        :, :, None
+    ]
+    jac = jac.reshape(2 * n, 6)
+    rows_r, rows_j = [res], [jac]
+    _prior_rows(x, r_nb, list(dr_nb), priors, rows_r, rows_j)
+    if len(rows_r) == 1:
+        return res, jac, z
+    return np.concatenate(rows_r), np.vstack(rows_j), z
+
+
+def _prior_rows(
+    x: FloatArray,
+    r_nb: FloatArray,
+    dr_nb: list[FloatArray],
+    priors: Priors,
+    rows_r: list[FloatArray],
+    rows_j: list[FloatArray],
+) -> None:
+    """Append the whitened prior residuals and Jacobian rows."""
+    if priors.attitude_rpy_rad is not None and priors.attitude_sigma_rad is not None:
+        s = priors.attitude_sigma_rad
+        rows_r.append(wrap_angle(x[3:] - priors.attitude_rpy_rad) / s)
+        rows_j.append(np.hstack([np.zeros((3, 3)), np.diag(1.0 / s)]))
+    if priors.altitude_down_m is not None:
+        rows_r.append(np.array([(x[2] - priors.altitude_down_m) / priors.altitude_sigma_m]))
+        rows_j.append(np.array([[0.0, 0.0, 1.0 / priors.altitude_sigma_m, 0.0, 0.0, 0.0]]))
+    rp = priors.range
+    if rp is not None:
+        n = rp.plane_normal
+        a = r_nb @ rp.axis_body
+        na = float(n @ a)
+        if abs(na) < 1e-6:
+            na = 1e-6
+        t = float(n @ (rp.plane_point - x[:3])) / na  # t = n.(c - p) / n.a
+        rows_r.append(np.array([(t - rp.distance_m) / rp.sigma_m]))
+        jp = -n / na
+        ja = np.array([-t * float(n @ (d @ rp.axis_body)) / na for d in dr_nb])
+        rows_j.append(np.hstack([jp, ja])[None, :] / rp.sigma_m)
+
+
+def initial_cost(
+    k: FloatArray, r_body_cam: FloatArray, pts: PointSet, priors: Priors, x: FloatArray
+) -> float:
+    """Whitened residual sum of squares at ``x`` (no refinement)."""
+    r, _, _ = _residuals(np.asarray(x, dtype=np.float64), k, r_body_cam, pts, priors)
+    return float(r @ r)
+
+
+def refine_pose(
+    k: FloatArray,
+    r_body_cam: FloatArray,
+    pts: PointSet,
+    priors: Priors,
+    x0: FloatArray,
+    max_iterations: int = 10,
+    max_condition: float = 1e12,
+) -> Refined:
+    """Gauss-Newton from ``x0`` (6,) to the MAP pose, with its covariance ``(J^T J)^-1``."""
+    x = np.asarray(x0, dtype=np.float64).copy()
+    r, j, z = _residuals(x, k, r_body_cam, pts, priors)
+    cost = float(r @ r)
+    for _ in range(max_iterations):
+        h = j.T @ j
+        g = j.T @ r
+        try:
+            dx = -np.linalg.solve(h, g)
+        except np.linalg.LinAlgError:
+            return _failed(x, "degenerate geometry: singular normal matrix")
+        # converged when the step is far below the uncertainty: dx^T H dx = -g^T dx (sigma^2)
+        if float(-g @ dx) < 1e-6:
+            break
+        accepted = False
+        for step in (1.0, 0.5, 0.25, 0.125):  # step halving keeps the cost decreasing
+            xn = x + step * dx
+            rn, jn, zn = _residuals(xn, k, r_body_cam, pts, priors)
+            cn = float(rn @ rn)
+            if cn <= cost * (1.0 + 1e-12):
+                x, r, j, z, cost, accepted = xn, rn, jn, zn, cn, True
+                break
+        if not accepted:
+            break
+    return _finish(x, r, j, z, pts, max_condition)
+
+
+def _finish(
+    x: FloatArray, r: FloatArray, j: FloatArray, z: FloatArray, pts: PointSet, max_cond: float
+) -> Refined:
+    """Covariance at the solution, cheirality and conditioning checks."""
+    if np.any(z <= _MIN_DEPTH_M):
+        bad = int(np.argmin(z))
+        return _failed(x, f"point {bad} is behind the camera", index=bad)
+    h = j.T @ j
+    scale = np.sqrt(np.diag(h))
+    if np.any(scale <= 0) or not np.all(np.isfinite(h)):
+        return _failed(x, "degenerate geometry: a pose parameter is unobservable")
+    outer = np.outer(scale, scale)
+    lam, vec = np.linalg.eigh(h / outer)  # the scaled normal matrix, for its condition
+    if lam[0] <= 0 or lam[-1] > max_cond * lam[0]:
+        cond = lam[-1] / lam[0] if lam[0] > 0 else float("inf")
+        return _failed(x, f"degenerate geometry: normal matrix condition {cond:.3g}")
+    cov = (vec / lam) @ vec.T / outer  # P = H^-1
+    cov = 0.5 * (cov + cov.T)
+    n = pts.points_ned.shape[0]
+    errs = np.sum(r[: 2 * n].reshape(n, 2) ** 2, axis=1)
+    x[3:] = wrap_angle(x[3:])
+    return Refined(x[:3].copy(), x[3:].copy(), cov, errs, cost=float(r @ r))
+
+
+def _failed(x: FloatArray, reason: str, index: int = -1) -> Refined:
+    """A failed refinement carrying the reason (and the offending point index, if any)."""
+    nan6 = np.full((6, 6), np.nan)
+    return Refined(x[:3].copy(), x[3:].copy(), nan6, np.zeros(0), reason, index)

@@ -1,0 +1,469 @@
+"""From what the camera sees to where the vehicle is: :func:`solve_pose`.
+
+Solver choice (automatic, see ``docs/pose.md``):
+
+========================================  =====================  ==================
+what is in view                           autopilot attitude      solver
+========================================  =====================  ==================
+one landmark with four corners            optional (picks flip)   ``ippe[_square]``
+four or more points, two+ landmarks       absent                  ``pnp_ransac``
+two or more landmarks (centres/corners)   present                 ``bearing_ls``
+one landmark centre + laser range         present                 ``range_bearing``
+one landmark centre + altitude            present                 ``altitude_bearing``
+========================================  =====================  ==================
+
+Every initial estimate is refined by the same MAP Gauss-Newton (:mod:`tracker.pose.refine`)
+that also yields the 6x6 covariance; landmarks that do not fit are dropped one at a time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from tracker.camera import CameraModel
+from tracker.geometry import FloatArray, rotation_from_rpy
+from tracker.pose.association import associate
+from tracker.pose.config import PoseConfig
+from tracker.pose.landmarks import (
+    face_corners,
+    face_rotation,
+    landmark_corners_ned,
+    landmark_normal_ned,
+)
+from tracker.pose.refine import (
+    PointSet,
+    Priors,
+    RangePrior,
+    Refined,
+    initial_cost,
+    refine_pose,
+)
+from tracker.pose.solvers import (
+    bearing_least_squares,
+    bearings_ned,
+    ippe_candidates,
+    pnp_ransac,
+)
+from tracker.pose.types import (
+    AltitudeSample,
+    AttitudeSample,
+    MapLandmark,
+    NoFix,
+    Observation,
+    PoseFix,
+    PosePrior,
+    RangeSample,
+)
+from tracker.pose.validate import check_observation, fresh_samples
+
+#: Chi-square difference below which both planar (IPPE) solutions explain the corners.
+_FLIP_CHI2 = 4.0
+#: A second IPPE solution starting this much (chi-square) worse is not refined.
+_SKIP_CHI2 = 25.0
+
+
+@dataclass(frozen=True)
+class _Group:
+    """One landmark in view with its observation and its image points."""
+
+    landmark: MapLandmark
+    observation: Observation
+    points_ned: FloatArray
+    pixels_distorted: FloatArray
+    pixels_ideal: FloatArray
+    sigma_px: float
+
+
+@dataclass(frozen=True)
+class _Context:
+    """Everything that stays fixed while landmarks are dropped."""
+
+    camera: CameraModel
+    k: FloatArray
+    dist: FloatArray
+    r_body_cam: FloatArray
+    config: PoseConfig
+    attitude: AttitudeSample | None
+    altitude: AltitudeSample | None
+    laser: RangeSample | None
+
+
+@dataclass(frozen=True)
+class _Solved:
+    solver: str
+    refined: Refined
+
+
+@dataclass(frozen=True)
+class _Failure:
+    reason: str
+    bad_group: int = -1
+
+
+def solve_pose(
+    observations: Sequence[Observation],
+    landmarks: Sequence[MapLandmark],
+    camera: CameraModel,
+    time_us: int,
+    *,
+    attitude: AttitudeSample | None = None,
+    altitude: AltitudeSample | None = None,
+    laser: RangeSample | None = None,
+    prior: PosePrior | None = None,
+    config: PoseConfig | None = None,
+    reset_counter: int = 0,
+) -> PoseFix | NoFix:
+    """Vehicle pose fix from landmark observations, or :class:`NoFix` with the reason.
+
+    ``time_us`` is the frame's capture time; side samples further than
+    ``config.max_sample_age_s`` from it are ignored (and said so in ``notes``).
+    """
+    cfg = config or PoseConfig()
+    for i, obs in enumerate(observations):
+        problem = check_observation(obs, camera.width, camera.height)
+        if problem:
+            return NoFix(time_us, f"observation {i}: {problem}")
+    notes: list[str] = []
+    attitude, altitude, laser = fresh_samples(time_us, attitude, altitude, laser, cfg, notes)
+    usable = [o for o in observations if o.confidence >= cfg.min_confidence]
+    if len(usable) < len(observations):
+        notes.append(f"{len(observations) - len(usable)} observation(s) below min_confidence")
+    if prior is None and attitude is not None and any(o.landmark_id is None for o in usable):
+        notes.append("no predicted pose: unlabelled observations cannot be named")
+    assoc = associate(usable, landmarks, camera, prior, cfg)
+    notes += list(assoc.notes)
+    notes += [f"observation {a.observation_index} ambiguous: {a.reason}" for a in assoc.ambiguities]
+    ctx = _Context(camera, *_camera_arrays(camera), cfg, attitude, altitude, laser)
+    by_id = {lm.landmark_id: lm for lm in landmarks}
+    groups = _make_groups(
+        ctx, usable, [(m.observation_index, by_id[m.landmark_id]) for m in assoc.matches], notes
+    )
+    if not groups:
+        return NoFix(time_us, "no identified landmark in view", tuple(notes))
+    return _solve_robust(ctx, groups, time_us, reset_counter, notes)
+
+
+@lru_cache(maxsize=16)
+def _camera_arrays(camera: CameraModel) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """K, distortion and R_body_cam of a camera (computed once per camera model)."""
+    arrays = (camera.matrix, camera.dist_coeffs, camera.r_body_cam)
+    for a in arrays:
+        a.setflags(write=False)
+    return arrays
+
+
+def _make_groups(
+    ctx: _Context,
+    observations: Sequence[Observation],
+    named: list[tuple[int, MapLandmark]],
+    notes: list[str],
+) -> list[_Group]:
+    """Image points per landmark (corners when known, else the centre); one per landmark."""
+    best: dict[str, tuple[int, MapLandmark]] = {}
+    for i, lm in named:
+        prev = best.get(lm.landmark_id)
+        if prev is None or observations[i].confidence > observations[prev[0]].confidence:
+            if prev is not None:
+                notes.append(f"landmark {lm.landmark_id!r} seen twice: kept the more confident")
+            best[lm.landmark_id] = (i, lm)
+    cfg = ctx.config
+    groups = []
+    for i, lm in best.values():
+        obs = observations[i]
+        if obs.corners_px is not None:
+            pts, px, sig = landmark_corners_ned(lm), np.asarray(obs.corners_px), cfg.pixel_sigma_px
+        else:
+            pts = np.asarray([lm.position_ned_m], dtype=np.float64)
+            px = np.asarray([obs.centre_px], dtype=np.float64)
+            sig = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
+        px = px.astype(np.float64)
+        groups.append(_Group(lm, obs, pts, px, _undistort(ctx, px), sig))
+    return groups
+
+
+def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
+    """Distorted -> ideal pinhole pixels (same K)."""
+    if not np.any(ctx.dist):
+        return px
+    out = cv2.undistortPoints(px.reshape(-1, 1, 2), ctx.k, ctx.dist, P=ctx.k)
+    return np.asarray(out.reshape(-1, 2), dtype=np.float64)
+
+
+def _solve_robust(
+    ctx: _Context, groups: list[_Group], time_us: int, reset_counter: int, notes: list[str]
+) -> PoseFix | NoFix:
+    """Solve; while a landmark does not fit, drop the worst one and solve again."""
+    active = list(groups)
+    dropped = 0
+    while True:
+        out = _solve_once(ctx, active)
+        if isinstance(out, _Failure):
+            if out.bad_group < 0 or len(active) == 1:
+                return NoFix(time_us, out.reason, tuple(notes))
+            bad, why = out.bad_group, out.reason
+        else:
+            bad, why = _worst_group(ctx, active, out.refined)
+            if bad < 0:
+                return _make_fix(ctx, active, out, time_us, reset_counter, dropped, notes)
+            if len(active) == 1:
+                return NoFix(time_us, why, tuple(notes))
+        notes.append(f"dropped {why}")
+        del active[bad]
+        dropped += 1
+
+
+def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int, str]:
+    """Index of the landmark to drop with the reason, or (-1, "") when all fit."""
+    for gi, g in enumerate(groups):
+        c = np.asarray(g.landmark.position_ned_m)
+        if float(landmark_normal_ned(g.landmark) @ (ref.position_ned_m - c)) <= 0.0:
+            return gi, f"landmark {g.landmark.landmark_id!r}: the camera is behind its face"
+    counts = np.array([g.points_ned.shape[0] for g in groups])
+    idx = np.repeat(np.arange(len(groups)), counts)
+    per_point = np.bincount(idx, weights=ref.point_errors, minlength=len(groups)) / counts
+    worst_i = int(np.argmax(per_point))
+    worst = float(per_point[worst_i])
+    if worst > ctx.config.outlier_chi2_per_point:
+        lid = groups[worst_i].landmark.landmark_id
+        return worst_i, f"landmark {lid!r}: reprojection error {math.sqrt(worst):.1f} sigma"
+    return -1, ""
+
+
+def _point_set(groups: list[_Group]) -> PointSet:
+    """Stack every landmark's points for the refinement."""
+    counts = [g.points_ned.shape[0] for g in groups]
+    return PointSet(
+        np.vstack([g.points_ned for g in groups]),
+        np.vstack([g.pixels_ideal for g in groups]),
+        np.repeat([g.sigma_px for g in groups], counts),
+        np.repeat(np.arange(len(groups), dtype=np.int64), counts),
+    )
+
+
+def _priors(ctx: _Context, laser: RangePrior | None) -> Priors:
+    """Autopilot attitude and altitude (when fresh) and the laser, as refinement priors."""
+    att_rpy = att_sig = None
+    if ctx.attitude is not None:
+        a = ctx.attitude
+        att_rpy = np.array([a.roll_rad, a.pitch_rad, a.yaw_rad])
+        att_sig = np.array([a.roll_pitch_sigma_rad, a.roll_pitch_sigma_rad, a.yaw_sigma_rad])
+    alt = ctx.altitude
+    return Priors(
+        att_rpy,
+        att_sig,
+        None if alt is None else alt.down_m,
+        0.1 if alt is None else alt.sigma_m,
+        laser,
+    )
+
+
+def _range_prior(ctx: _Context, lm: MapLandmark) -> RangePrior | None:
+    """The laser as meeting the plane of ``lm``."""
+    if ctx.laser is None:
+        return None
+    axis = np.asarray(ctx.laser.axis_body, dtype=np.float64)
+    return RangePrior(
+        ctx.laser.distance_m,
+        ctx.laser.sigma_m,
+        axis / np.linalg.norm(axis),
+        np.asarray(lm.position_ned_m, dtype=np.float64),
+        landmark_normal_ned(lm),
+    )
+
+
+def _laser_hits(rp: RangePrior, lm: MapLandmark, x: FloatArray) -> bool:
+    """Does the beam from pose ``x`` meet the face of ``lm`` (half-size x 1.5 margin)?"""
+    a = rotation_from_rpy(*x[3:]) @ rp.axis_body
+    na = float(rp.plane_normal @ a)
+    if abs(na) < 1e-6:
+        return False
+    t = float(rp.plane_normal @ (rp.plane_point - x[:3])) / na
+    if t <= 0:
+        return False
+    hit_face = face_rotation(lm.facing_deg).T @ (x[:3] + t * a - rp.plane_point)
+    return abs(hit_face[0]) <= 0.75 * lm.width_m and abs(hit_face[1]) <= 0.75 * lm.height_m
+
+
+def _laser_for(ctx: _Context, groups: list[_Group], x0: FloatArray) -> RangePrior | None:
+    """The laser prior on the first landmark whose face the beam meets at ``x0``."""
+    for g in groups:
+        rp = _range_prior(ctx, g.landmark)
+        if rp is not None and _laser_hits(rp, g.landmark, x0):
+            return rp
+    return None
+
+
+def _refine(ctx: _Context, pts: PointSet, priors: Priors, x0: FloatArray) -> Refined:
+    cfg = ctx.config
+    return refine_pose(
+        ctx.k, ctx.r_body_cam, pts, priors, x0, cfg.max_iterations, cfg.max_condition
+    )
+
+
+def _as_outcome(solver: str, ref: Refined, pts: PointSet) -> _Solved | _Failure:
+    """Map a failed refinement (e.g. a point behind the camera) to the landmark to drop."""
+    if not ref.reason:
+        return _Solved(solver, ref)
+    bad = int(pts.landmark_index[ref.bad_point]) if ref.bad_point >= 0 else -1
+    return _Failure(ref.reason if bad < 0 else f"landmark {bad}: {ref.reason}", bad)
+
+
+def _solve_once(ctx: _Context, groups: list[_Group]) -> _Solved | _Failure:
+    """One solve over ``groups`` with the solver their geometry and priors call for."""
+    pts = _point_set(groups)
+    spread = float(np.max(np.ptp(pts.pixels, axis=0)))
+    if pts.pixels.shape[0] > 1 and spread < ctx.config.min_point_spread_px:
+        return _Failure(f"degenerate geometry: all image points within {spread:.1f} px")
+    if len(groups) == 1 and groups[0].observation.corners_px is not None:
+        return _solve_ippe(ctx, groups[0], pts)
+    if ctx.attitude is not None:
+        return _solve_with_attitude(ctx, groups, pts)
+    return _solve_without_attitude(ctx, groups, pts)
+
+
+def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> _Solved | _Failure:
+    """Bearing least squares (known rotation), then MAP refinement with the priors."""
+    assert ctx.attitude is not None
+    rpy = np.array([ctx.attitude.roll_rad, ctx.attitude.pitch_rad, ctx.attitude.yaw_rad])
+    r_nb = rotation_from_rpy(*rpy)
+    single = len(groups) == 1
+    rng = _range_prior(ctx, groups[0].landmark) if single else None
+    b = bearings_ned(pts.pixels, ctx.k, r_nb @ ctx.r_body_cam)
+    alt = None if ctx.altitude is None else ctx.altitude.down_m
+    p0 = bearing_least_squares(pts.points_ned, b, r_nb, alt, rng)
+    if p0 is None:
+        return _Failure(
+            "one landmark centre: its distance is unobservable without corners, "
+            "a laser range or the altitude"
+            if single
+            else "degenerate geometry: bearings do not fix the position"
+        )
+    ahead = np.einsum("ij,ij->i", pts.points_ned - p0, b)
+    if np.any(ahead <= 0):
+        gi = int(pts.landmark_index[int(np.argmin(ahead))])
+        lid = groups[gi].landmark.landmark_id
+        return _Failure(f"landmark {lid!r} would be behind the camera", gi)
+    x0 = np.concatenate([p0, rpy])
+    if single and rng is not None and not _laser_hits(rng, groups[0].landmark, x0):
+        rng = None
+        if ctx.altitude is None:
+            return _Failure(f"the laser beam misses landmark {groups[0].landmark.landmark_id!r}")
+    if not single:
+        rng = _laser_for(ctx, groups, x0)
+    solver = "bearing_ls" if not single else ("range_bearing" if rng else "altitude_bearing")
+    return _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts)
+
+
+def _solve_without_attitude(
+    ctx: _Context, groups: list[_Group], pts: PointSet
+) -> _Solved | _Failure:
+    """PnP with RANSAC on every point, then MAP refinement."""
+    n = pts.points_ned.shape[0]
+    if len(groups) == 1:
+        return _Failure("one landmark without corners and no attitude: pose unobservable")
+    if n < 4:
+        return _Failure(f"{n} points and no attitude: need four or more (P3P is ambiguous)")
+    sv = np.linalg.svd(pts.points_ned - pts.points_ned.mean(axis=0), compute_uv=False)
+    if sv[1] < 1e-3 * sv[0]:
+        return _Failure("degenerate geometry: the landmark points are collinear")
+    cfg = ctx.config
+    dist_px = np.vstack([g.pixels_distorted for g in groups])
+    res = pnp_ransac(
+        pts.points_ned,
+        dist_px,
+        ctx.k,
+        ctx.dist,
+        ctx.r_body_cam,
+        cfg.ransac_threshold_px,
+        cfg.ransac_iterations,
+        cfg.ransac_confidence,
+    )
+    if res is None:
+        return _Failure("PnP RANSAC found no consistent pose")
+    cand, inlier = res
+    outliers = np.bincount(pts.landmark_index[~inlier], minlength=len(groups))
+    if outliers.max() > 0:
+        gi = int(np.argmax(outliers))
+        return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: RANSAC outlier", gi)
+    priors = _priors(ctx, _laser_for(ctx, groups, cand.x0))
+    return _as_outcome("pnp_ransac", _refine(ctx, pts, priors, cand.x0), pts)
+
+
+def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
+    """Both IPPE solutions refined with the priors; refuse an unresolved planar flip."""
+    lm = g.landmark
+    square = abs(lm.width_m - lm.height_m) <= 1e-9 * max(lm.width_m, lm.height_m)
+    cands = ippe_candidates(
+        face_corners(lm.width_m, lm.height_m),
+        g.pixels_distorted,
+        ctx.k,
+        ctx.dist,
+        face_rotation(lm.facing_deg),
+        np.asarray(lm.position_ned_m, dtype=np.float64),
+        ctx.r_body_cam,
+        square,
+    )
+    refined: list[Refined] = []
+    for c in cands:
+        priors = _priors(ctx, _laser_for(ctx, [g], c.x0))
+        best = min((r.cost for r in refined if not r.reason), default=None)
+        if best is not None and initial_cost(ctx.k, ctx.r_body_cam, pts, priors, c.x0) > (
+            best + _SKIP_CHI2
+        ):
+            continue  # far worse from the start: not a rival local minimum worth refining
+        refined.append(_refine(ctx, pts, priors, c.x0))
+    ok = sorted((r for r in refined if not r.reason), key=lambda r: r.cost)
+    solver = "ippe_square" if square else "ippe"
+    if not ok:
+        return _Failure(refined[0].reason if refined else "IPPE found no pose")
+    if len(ok) > 1 and ok[1].cost - ok[0].cost < _FLIP_CHI2:
+        gap = ok[1].position_ned_m - ok[0].position_ned_m
+        m2 = float(gap @ np.linalg.solve(ok[0].covariance[:3, :3], gap))
+        if m2 > 9.0:
+            return _Failure(
+                f"planar ambiguity: both IPPE solutions fit landmark {lm.landmark_id!r} "
+                "(no attitude or range to tell them apart)"
+            )
+    return _Solved(solver, ok[0])
+
+
+def _make_fix(
+    ctx: _Context,
+    groups: list[_Group],
+    out: _Solved,
+    time_us: int,
+    reset_counter: int,
+    dropped: int,
+    notes: list[str],
+) -> PoseFix | NoFix:
+    """The fix with quality ``100 * inlier ratio * 2^(-sigma_max / sigma_ref)``."""
+    ref = out.refined
+    values = np.concatenate([ref.position_ned_m, ref.attitude_rpy_rad, ref.covariance.ravel()])
+    if not np.all(np.isfinite(values)):
+        return NoFix(time_us, "the solution is not finite", tuple(notes))
+    sigma_max = float(np.sqrt(np.max(np.diag(ref.covariance)[:3])))
+    if sigma_max > ctx.config.max_position_sigma_m:
+        return NoFix(time_us, f"position 1-sigma {sigma_max:.1f} m is too large", tuple(notes))
+    inlier_ratio = len(groups) / (len(groups) + dropped)
+    quality = 100.0 * inlier_ratio * 2.0 ** (-sigma_max / ctx.config.quality_sigma_ref_m)
+    pts = _point_set(groups)
+    rms = math.sqrt(float(np.mean(ref.point_errors * pts.sigma_px**2)) / 2.0)
+    p, a = ref.position_ned_m, ref.attitude_rpy_rad
+    return PoseFix(
+        time_us=time_us,
+        position_ned_m=(float(p[0]), float(p[1]), float(p[2])),
+        attitude_rpy_rad=(float(a[0]), float(a[1]), float(a[2])),
+        covariance=ref.covariance,
+        quality=max(1, min(100, round(quality))),
+        landmark_ids=tuple(g.landmark.landmark_id for g in groups),
+        solver=out.solver,
+        reset_counter=reset_counter,
+        reprojection_rms_px=rms,
+        notes=tuple(notes),
+    )

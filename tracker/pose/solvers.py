@@ -1,0 +1,158 @@
+"""Initial pose estimates, each returning ``x0 = (p_ned, rpy)`` for :func:`refine_pose`.
+
+* :func:`ippe_candidates` - one planar landmark with four corners (OpenCV IPPE / IPPE_SQUARE);
+  returns both planar solutions (the flip ambiguity).
+* :func:`pnp_ransac` - three or more landmarks' points without attitude (SQPnP in RANSAC).
+* :func:`bearing_least_squares` - known camera rotation: every bearing ``b_i`` gives
+  ``[b_i]x (L_i - p) = 0``; altitude and laser add linear rows; solved by least squares.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from tracker.geometry import FloatArray, rpy_from_rotation
+from tracker.pose.refine import RangePrior
+
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """An initial pose: state (6,), and the RMS reprojection error OpenCV reported (px)."""
+
+    x0: FloatArray
+    rms_px: float
+
+
+def state_from_camera(
+    r_ned_cam: FloatArray, cam_ned: FloatArray, r_body_cam: FloatArray
+) -> FloatArray:
+    """``R_ned_body = R_ned_cam R_body_cam^T``; the vehicle sits at the camera centre."""
+    rpy = rpy_from_rotation(r_ned_cam @ r_body_cam.T)
+    return np.concatenate([cam_ned, np.asarray(rpy)])
+
+
+def _camera_from_opencv(
+    rvec: object, tvec: object, r_ned_obj: FloatArray, obj_origin_ned: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """OpenCV ``X_c = R_co X_o + t`` -> (``R_ned_cam``, camera centre in NED)."""
+    r_co, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    r_ned_cam = r_ned_obj @ r_co.T
+    cam_obj = -r_co.T @ np.asarray(tvec, dtype=np.float64).reshape(3)
+    return r_ned_cam, obj_origin_ned + r_ned_obj @ cam_obj
+
+
+def ippe_candidates(
+    face_points: FloatArray,
+    pixels_distorted: FloatArray,
+    k: FloatArray,
+    dist: FloatArray,
+    r_ned_face: FloatArray,
+    centre_ned: FloatArray,
+    r_body_cam: FloatArray,
+    square: bool,
+) -> list[Candidate]:
+    """Both IPPE solutions for one planar landmark, best first (OpenCV's order).
+
+    ``face_points`` are the 4 corners in the face frame in the IPPE_SQUARE order.
+    """
+    flags = cv2.SOLVEPNP_IPPE_SQUARE if square else cv2.SOLVEPNP_IPPE
+    n, rvecs, tvecs, errs = cv2.solvePnPGeneric(
+        face_points.reshape(-1, 1, 3), pixels_distorted.reshape(-1, 1, 2), k, dist, flags=flags
+    )
+    out = []
+    for i in range(int(n)):
+        r_nc, cam = _camera_from_opencv(rvecs[i], tvecs[i], r_ned_face, centre_ned)
+        err = float(np.asarray(errs).reshape(-1)[i]) if errs is not None else 0.0
+        out.append(Candidate(state_from_camera(r_nc, cam, r_body_cam), err))
+    return sorted(out, key=lambda c: c.rms_px)
+
+
+def pnp_ransac(
+    points_ned: FloatArray,
+    pixels_distorted: FloatArray,
+    k: FloatArray,
+    dist: FloatArray,
+    r_body_cam: FloatArray,
+    threshold_px: float,
+    iterations: int,
+    confidence: float,
+) -> tuple[Candidate, BoolArray] | None:
+    """RANSAC PnP on NED points (centred for conditioning); returns the pose and inlier mask."""
+    origin = points_ned.mean(axis=0)
+    obj = (points_ned - origin).reshape(-1, 1, 3)
+    ok, rvec, tvec, inliers = cv2.solvePnPRansac(
+        obj,
+        pixels_distorted.reshape(-1, 1, 2),
+        k,
+        dist,
+        iterationsCount=iterations,
+        reprojectionError=threshold_px,
+        confidence=confidence,
+        flags=cv2.SOLVEPNP_SQPNP,
+    )
+    if not ok or inliers is None:
+        return None
+    mask = np.zeros(points_ned.shape[0], dtype=bool)
+    mask[np.asarray(inliers).reshape(-1)] = True
+    r_nc, cam = _camera_from_opencv(rvec, tvec, np.eye(3), origin)
+    return Candidate(state_from_camera(r_nc, cam, r_body_cam), 0.0), mask
+
+
+def bearings_ned(pixels_ideal: FloatArray, k: FloatArray, r_ned_cam: FloatArray) -> FloatArray:
+    """Unit bearings in NED: ``b = R_ned_cam K^-1 [u, v, 1]^T / |.|``."""
+    rays = np.column_stack(
+        [
+            (pixels_ideal[:, 0] - k[0, 2]) / k[0, 0],
+            (pixels_ideal[:, 1] - k[1, 2]) / k[1, 1],
+            np.ones(pixels_ideal.shape[0]),
+        ]
+    )
+    b = rays @ r_ned_cam.T
+    return np.asarray(b / np.linalg.norm(b, axis=1, keepdims=True))
+
+
+def _skews(v: FloatArray) -> FloatArray:
+    """Nx3x3 cross-product matrices ``[v_i]x``."""
+    s = np.zeros((v.shape[0], 3, 3))
+    s[:, 0, 1], s[:, 0, 2], s[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    s[:, 1, 0], s[:, 2, 0], s[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return s
+
+
+def bearing_least_squares(
+    points_ned: FloatArray,
+    bearings: FloatArray,
+    r_ned_body: FloatArray,
+    altitude_down_m: float | None = None,
+    range_prior: RangePrior | None = None,
+    min_singular: float = 1e-6,
+) -> FloatArray | None:
+    """Camera position from bearings with known rotation (linear least squares).
+
+    Rows: ``[b_i]x p = [b_i]x L_i`` per point; ``p_d = d_0`` for a known altitude;
+    ``n.p = n.c - d n.(R_nb a_b)`` for a laser meeting the plane (n, c).  Returns ``None``
+    when the rows do not fix all three coordinates.
+    """
+    sk = _skews(bearings)
+    a_rows = [sk.reshape(-1, 3)]
+    b_rows = [np.einsum("nij,nj->ni", sk, points_ned).reshape(-1)]
+    if altitude_down_m is not None:
+        a_rows.append(np.array([[0.0, 0.0, 1.0]]) * 10.0)
+        b_rows.append(np.array([altitude_down_m * 10.0]))
+    if range_prior is not None:
+        n = range_prior.plane_normal
+        na = float(n @ (r_ned_body @ range_prior.axis_body))
+        a_rows.append(n[None, :] * 10.0)
+        b_rows.append(np.array([(n @ range_prior.plane_point - range_prior.distance_m * na) * 10]))
+    a = np.vstack(a_rows)
+    b = np.concatenate(b_rows)
+    sol, _res, rank, sv = np.linalg.lstsq(a, b, rcond=None)
+    if rank < 3 or sv[-1] < min_singular * sv[0]:
+        return None
+    return np.asarray(sol, dtype=np.float64)

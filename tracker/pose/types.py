@@ -1,0 +1,138 @@
+"""Value types of the pose solver: what the camera saw, the map, side sensors and the fix.
+
+All frozen dataclasses; units and frames in field names.  Pixel coordinates are the
+distorted (raw) image coordinates the detector or tracker reports.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracker.geometry import FloatArray
+
+#: Solvers the pose module may choose (``PoseFix.solver``).
+SOLVERS = ("ippe", "ippe_square", "pnp_ransac", "bearing_ls", "range_bearing", "altitude_bearing")
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One detection or track of a landmark in one frame.
+
+    ``landmark_id`` is ``None`` when only the ``category`` is known (a detector hit that
+    association must name).  ``corners_px`` are the images of the landmark's four corners
+    in the order of :func:`tracker.pose.landmarks.landmark_corners_ned` (top-left,
+    top-right, bottom-right, bottom-left as seen from the front), when known.
+    ``signature`` is an optional appearance descriptor (e.g. a normalised colour
+    histogram) compared with :attr:`MapLandmark.signature` by the Bhattacharyya distance.
+    """
+
+    centre_px: tuple[float, float]
+    box_wh_px: tuple[float, float]
+    confidence: float = 1.0
+    landmark_id: str | None = None
+    category: str | None = None
+    corners_px: tuple[tuple[float, float], ...] | None = None
+    frame_index: int = 0
+    signature: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class MapLandmark:
+    """A landmark of the practical map in local NED.
+
+    ``facing_deg``: azimuth of the face's outward normal, degrees from north; ``None`` for a
+    landmark lying flat, facing up (its top edge then points north).
+    """
+
+    landmark_id: str
+    position_ned_m: tuple[float, float, float]
+    width_m: float
+    height_m: float
+    facing_deg: float | None = None
+    category: str = ""
+    signature: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class AttitudeSample:
+    """Vehicle attitude from the autopilot (ZYX Euler, body FRD in NED) with its 1-sigma."""
+
+    time_us: int
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+    roll_pitch_sigma_rad: float = float(np.deg2rad(0.2))
+    yaw_sigma_rad: float = float(np.deg2rad(1.0))
+
+
+@dataclass(frozen=True)
+class AltitudeSample:
+    """Vehicle height as a NED down coordinate (m, local frame) with its 1-sigma."""
+
+    time_us: int
+    down_m: float
+    sigma_m: float = 0.1
+
+
+@dataclass(frozen=True)
+class RangeSample:
+    """A laser range along a fixed body axis (DISTANCE_SENSOR or a configured lidar).
+
+    ``axis_body`` is the unit direction of the beam in body FRD, e.g. (0, 0, 1) for a
+    downward rangefinder or (1, 0, 0) for a forward one.  The beam is assumed to hit the
+    plane of the landmark it is associated with (the "semantic laser": the laser gives the
+    distance, vision names the landmark).
+    """
+
+    time_us: int
+    distance_m: float
+    axis_body: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    sigma_m: float = 0.05
+
+
+@dataclass(frozen=True)
+class PosePrior:
+    """A predicted vehicle pose (e.g. last fix propagated) used to associate detections."""
+
+    position_ned_m: tuple[float, float, float]
+    attitude_rpy_rad: tuple[float, float, float]
+    position_sigma_m: float = 1.0
+    attitude_sigma_rad: float = float(np.deg2rad(2.0))
+
+
+@dataclass(frozen=True)
+class PoseFix:
+    """A vehicle position fix.
+
+    ``covariance`` is 6x6 in the order x y z (NED, m) roll pitch yaw (rad).  ``quality`` is
+    0..100 (MAVLink ODOMETRY convention, 100 = best).  ``reset_counter`` is carried for the
+    caller, which owns it.  ``notes`` say which observations were dropped and why.
+    """
+
+    time_us: int
+    position_ned_m: tuple[float, float, float]
+    attitude_rpy_rad: tuple[float, float, float]
+    covariance: FloatArray
+    quality: int
+    landmark_ids: tuple[str, ...]
+    solver: str
+    reset_counter: int = 0
+    reprojection_rms_px: float = 0.0
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def position_sigma_m(self) -> tuple[float, float, float]:
+        """1-sigma of north, east, down from the covariance diagonal."""
+        d = np.sqrt(np.diag(self.covariance)[:3])
+        return float(d[0]), float(d[1]), float(d[2])
+
+
+@dataclass(frozen=True)
+class NoFix:
+    """No position fix this time, with a one-line reason."""
+
+    time_us: int
+    reason: str
+    notes: tuple[str, ...] = field(default=())
