@@ -194,19 +194,19 @@ def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path
         import_map(repo, sample_map)
         before = _dump(db)
         good = Landmark("x0", "x", "logo", 1.0, 1.0, 0.0, 1.0, 1.0)
-        records = [dataclasses.replace(good, id=f"x{k}") for k in range(30_000)]
+        records = [dataclasses.replace(good, id=f"x{k}") for k in range(21_000)]
         records[-1] = dataclasses.replace(records[-1], width_m=-1.0)  # CHECK fails in chunk 2
         with pytest.raises(InputError, match="rejected by the database"):
             repo.import_landmarks(records)
         assert _dump(db) == before
         records[-1] = dataclasses.replace(records[-1], width_m=1.0, id="x7")  # repeated id
-        with pytest.raises(InputError, match="feature 29999: id: duplicate id 'x7'"):
+        with pytest.raises(InputError, match="feature 20999: id: duplicate id 'x7'"):
             repo.import_landmarks(records)
     assert _dump(db) == before
     with SqliteLandmarkRepository(db) as repo:
         assert repo.get("lm0003") is not None and len(repo.find_by_name("sign lm0003")) == 1
         repo.import_landmarks(records[:-1])
-        assert repo.count() == 50 + 29_999 and repo.get("x29998") is not None
+        assert repo.count() == 50 + 20_999 and repo.get("x20998") is not None
 
 
 @pytest.mark.parametrize("bulk_rows", ["1000000000", "1000"])
@@ -217,7 +217,7 @@ def test_killed_import_leaves_database_exactly_as_it_was(sample_map: Path, tmp_p
         import_map(repo, sample_map)
     before = _dump(db)
     big = write_json(tmp_path / "big.geojson", collection(
-        [feature(f"b{k}", 10.0 + k * 1e-5, 20.0) for k in range(45_000)]))
+        [feature(f"b{k}", 10.0 + k * 1e-5, 20.0) for k in range(25_000)]))
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     proc = subprocess.Popen(
         [sys.executable, str(Path(__file__).with_name("import_worker.py")), str(db), str(big),
