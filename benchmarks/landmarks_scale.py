@@ -23,20 +23,22 @@ import statistics
 import tempfile
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pymap3d
 
 from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.geojson_io import import_map, landmark_to_feature
-from companion.landmarks.record import BBox, Landmark, Scores
+from companion.landmarks.record import BBox, Category, Landmark, Scores
 from companion.landmarks.repository import LandmarkRepository
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 from companion.landmarks.sync import select_area
 
 ORIGIN = (48.8566, 2.3522)
-CATEGORIES = ("signpost", "wall_image", "logo", "other")
+CATEGORIES: tuple[Category, ...] = ("signpost", "wall_image", "logo", "other")
 
 
 def make_landmarks(n: int, region_km: float, rng: np.random.Generator) -> list[Landmark]:
@@ -90,7 +92,7 @@ def bench_geojson_import(make_repo: Callable[[], LandmarkRepository], records: l
 def bench_select(repo: LandmarkRepository, region_km: float, area_km: float, repeats: int,
                  rng: np.random.Generator, label: str) -> None:
     config = LandmarksConfig(min_spacing_m=30.0, max_count=50)
-    times, counts, query_times = [], [], []
+    times, cpus, counts, query_times = [], [], [], []
     half = (region_km - area_km) * 500.0
     for _ in range(repeats):
         n0, e0 = rng.uniform(-half, half, 2)
@@ -98,14 +100,35 @@ def bench_select(repo: LandmarkRepository, region_km: float, area_km: float, rep
             np.array([n0 - area_km * 500, n0 + area_km * 500]),
             np.array([e0 - area_km * 500, e0 + area_km * 500]), 0.0, *ORIGIN, 0.0)
         box = BBox(float(lon[0]), float(lat[0]), float(lon[1]), float(lat[1]))
-        query_times.append(timed(lambda box=box: counts.append(len(repo.query_area(box)))))
-        times.append(timed(lambda box=box: select_area(repo, box, config, ())))
+        query_times.append(timed(partial(lambda b: counts.append(len(repo.query_area(b))), box)))
+        wall, cpu = timed_cpu(partial(select_area, repo, box, config, ()))
+        times.append(wall)
+        cpus.append(cpu)
     ms = sorted(t * 1000 for t in times)
     print(f"{label}: select {area_km:g} km x {area_km:g} km (query + greedy, min spacing 30 m, "
           f"max 50) over {repeats} areas: median {statistics.median(ms):.1f} ms, "
-          f"p90 {ms[int(0.9 * (len(ms) - 1))]:.1f} ms; query alone median "
+          f"p90 {ms[int(0.9 * (len(ms) - 1))]:.1f} ms, this process's CPU median "
+          f"{statistics.median(cpus) * 1000:.1f} ms; query_area alone median "
           f"{statistics.median(query_times) * 1000:.1f} ms; "
           f"{statistics.mean(counts):,.0f} landmarks per area; {load()}")
+
+
+def server_time(repo: Any, region_km: float, area_km: float) -> None:
+    """PostgreSQL's own execution time of the candidates query (EXPLAIN ANALYZE)."""
+    rng = np.random.default_rng(3)
+    ms = []
+    for _ in range(10):
+        n0, e0 = rng.uniform(-(region_km - area_km) * 500, (region_km - area_km) * 500, 2)
+        lat, lon, _ = pymap3d.ned2geodetic(
+            np.array([n0 - area_km * 500, n0 + area_km * 500]),
+            np.array([e0 - area_km * 500, e0 + area_km * 500]), 0.0, *ORIGIN, 0.0)
+        plan = repo._conn.execute(
+            "EXPLAIN (ANALYZE, FORMAT JSON) SELECT id, lat_deg, lon_deg, impact, status, "
+            "status_reason FROM landmarks WHERE geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326)",
+            (float(lon[0]), float(lat[0]), float(lon[1]), float(lat[1]))).fetchone()[0]
+        ms.append(plan[0]["Execution Time"] + plan[0]["Planning Time"])
+    print(f"postgis: server planning + execution of the area query (GiST): median "
+          f"{statistics.median(ms):.1f} ms")
 
 
 def run_sqlite(args: argparse.Namespace, records: list[Landmark], tmp: Path) -> None:
@@ -145,6 +168,7 @@ def run_postgis(args: argparse.Namespace, records: list[Landmark], tmp: Path) ->
                 repo._conn.execute("ANALYZE landmarks")
                 bench_select(repo, args.region_km, args.area_km, args.repeats,
                              np.random.default_rng(2), "postgis")
+                server_time(repo, args.region_km, args.area_km)
     except pytest.skip.Exception as err:
         print(f"postgis: skipped ({err})")
 
