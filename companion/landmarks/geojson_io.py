@@ -133,11 +133,11 @@ def _scores(value: object) -> Scores:
         return Scores()
     if not isinstance(value, dict):
         raise _FieldError("properties.scores", f"expected an object, got {_show(value)}")
-    vals: list[float | None] = []
-    for key in _SCORE_KEYS:
-        v = value.get(key)
-        vals.append(None if v is None else _number(v, f"properties.scores.{key}", 0.0, 1.0))
-    return Scores(*vals)
+    vals = [value.get(key) for key in _SCORE_KEYS]
+    if all(v is None or (type(v) is float and 0.0 <= v <= 1.0) for v in vals):
+        return Scores(*vals)  # fast path: the usual case
+    return Scores(*(None if v is None else _number(v, f"properties.scores.{key}", 0.0, 1.0)
+                    for key, v in zip(_SCORE_KEYS, vals, strict=True)))
 
 
 def _feature_id(feature: dict[str, Any]) -> str:
@@ -157,6 +157,10 @@ def _position(geometry: object) -> tuple[float, float, float]:
     c = geometry.get("coordinates")
     if not isinstance(c, list) or len(c) != 3:
         raise _FieldError("geometry.coordinates", f"expected [lon, lat, alt_m], got {_show(c)}")
+    lon, lat, alt = c
+    if (type(lon) is float and type(lat) is float and type(alt) is float
+            and -180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0 and math.isfinite(alt)):
+        return lon, lat, alt  # fast path: the usual case
     return (
         _number(c[0], "geometry.coordinates[0] (longitude)", -180, 180),
         _number(c[1], "geometry.coordinates[1] (latitude)", -90, 90),
