@@ -154,20 +154,56 @@ def select_practical_map(candidates: Candidates | Sequence[Landmark], *, min_spa
     grid: dict[tuple[int, int], list[int]] = {}
     kept: list[int] = []
     left: list[LeftOut] = []
-    for k in order:
+    for pos, k in enumerate(order):
+        if len(kept) >= max_count:  # the map is full: the rest only need their reasons
+            left += _rest_reasons(order[pos:], kept, c, n_m, e_m, zone_of, impact,
+                                  include_candidates, min_spacing_m, max_count)
+            break
         why = _eligible(c.status[k], c.status_reason[k], include_candidates)
         if why is None and zone_of[k] is not None:
             why = f"inside busy zone {zone_of[k]!r}"
         if why is None and min_spacing_m > 0.0:
             why = _too_close(k, n_m, e_m, grid, cell, min_spacing_m, c.ids, impact)
-        if why is None and len(kept) >= max_count:
-            why = f"max count {max_count} reached (impact {impact[k]:.2f} ranks lower)"
         if why is not None:
             left.append(LeftOut(c.ids[k], why))
             continue
         kept.append(k)
         grid.setdefault((math.floor(n_m[k] / cell), math.floor(e_m[k] / cell)), []).append(k)
     return Selection(tuple(c.ids[k] for k in kept), tuple(impact[k] for k in kept), tuple(left))
+
+
+def _spacing_reason(d: float, k: int, j: int, min_spacing_m: float, ids: Sequence[str],
+                    impact: Sequence[float]) -> str:
+    return (f"{d:.1f} m from selected {ids[j]!r} (min spacing {min_spacing_m:g} m; "
+            f"impact {impact[k]:.2f} <= {impact[j]:.2f})")
+
+
+def _rest_reasons(rest: list[int], kept: list[int], c: Candidates, n_m: list[float],
+                  e_m: list[float], zone_of: list[str | None], impact: list[float],
+                  include_candidates: bool, min_spacing_m: float, max_count: int
+                  ) -> list[LeftOut]:
+    """Reasons for the candidates ranked after a full map, the same as the greedy loop
+    would give, with the nearest kept landmark found for all of them at once."""
+    n, e = np.asarray(n_m), np.asarray(e_m)
+    kept_arr = np.asarray(kept)
+    out: list[LeftOut] = []
+    for start in range(0, len(rest), 1024):  # bounded (block x kept) distance matrices
+        block = rest[start:start + 1024]
+        idx = np.asarray(block)
+        d = np.hypot(n[idx, None] - n[None, kept_arr], e[idx, None] - e[None, kept_arr])
+        nearest = d.argmin(axis=1)
+        dist = d[np.arange(len(block)), nearest].tolist()
+        for r, k in enumerate(block):
+            why = _eligible(c.status[k], c.status_reason[k], include_candidates)
+            if why is None and zone_of[k] is not None:
+                why = f"inside busy zone {zone_of[k]!r}"
+            if why is None and dist[r] < min_spacing_m:
+                why = _spacing_reason(dist[r], k, kept[int(nearest[r])], min_spacing_m,
+                                      c.ids, impact)
+            if why is None:
+                why = f"max count {max_count} reached (impact {impact[k]:.2f} ranks lower)"
+            out.append(LeftOut(c.ids[k], why))
+    return out
 
 
 def _too_close(k: int, n_m: list[float], e_m: list[float],
@@ -184,6 +220,4 @@ def _too_close(k: int, n_m: list[float], e_m: list[float],
                     best = (d, j)
     if best is None:
         return None
-    d, j = best
-    return (f"{d:.1f} m from selected {ids[j]!r} (min spacing {min_spacing_m:g} m; "
-            f"impact {impact[k]:.2f} <= {impact[j]:.2f})")
+    return _spacing_reason(best[0], k, best[1], min_spacing_m, ids, impact)

@@ -111,3 +111,50 @@ def test_unscored_landmarks_rank_with_the_unknown_score() -> None:
     assert list(sel.ids) == ["strong"]
     sel = select_practical_map(lms[:2], min_spacing_m=20.0, max_count=5, unknown_score=0.5)
     assert list(sel.ids) == ["unscored"]
+
+
+def test_reasons_match_a_brute_force_greedy_oracle() -> None:
+    rng = np.random.default_rng(23)
+    statuses = ["approved"] * 8 + ["candidate", "rejected"]
+    lms = [_at(f"o{k:03d}", float(n), float(e), float(s), statuses[int(t)])
+           for k, (n, e, s, t) in enumerate(zip(
+               rng.uniform(-400, 400, 600), rng.uniform(-400, 400, 600),
+               rng.uniform(0, 1, 600), rng.integers(0, 10, 600), strict=True))]
+    dlat, dlon = 0.0009, 0.0013  # a ~200 m x ~190 m busy square at the centre
+    zone = zones_from_config([BusyZone("plaza", (
+        ORIGIN_LON - dlon, ORIGIN_LAT - dlat, ORIGIN_LON + dlon, ORIGIN_LAT - dlat,
+        ORIGIN_LON + dlon, ORIGIN_LAT + dlat, ORIGIN_LON - dlon, ORIGIN_LAT + dlat))])
+    sel = select_practical_map(lms, min_spacing_m=45.0, max_count=25, zones=zone)
+    # oracle: rank, then the rules in order, nearest kept by brute force
+    lat0 = np.mean([lm.lat_deg for lm in lms])
+    lon0 = np.mean([lm.lon_deg for lm in lms])
+    pos = {lm.id: pymap3d.geodetic2ned(lm.lat_deg, lm.lon_deg, 0.0, lat0, lon0, 0.0)[:2]
+           for lm in lms}
+    inside = zone[0].contains(np.array([lm.lon_deg for lm in lms]),
+                              np.array([lm.lat_deg for lm in lms]))
+    in_zone = {lm.id for lm, z in zip(lms, inside.tolist(), strict=True) if z}
+    kept: list[str] = []
+    expected: dict[str, str] = {}
+    for lm in sorted(lms, key=lambda x: (-(x.scores.impact or 0.0), x.id)):
+        near = [(float(np.hypot(*(np.subtract(pos[lm.id], pos[j])))), j) for j in kept]
+        close = min((d, j) for d, j in near if d < 45.0) if any(
+            d < 45.0 for d, _ in near) else None
+        if lm.status != "approved":
+            expected[lm.id] = f"status {lm.status}"
+        elif lm.id in in_zone:
+            expected[lm.id] = "busy"
+        elif close is not None:
+            expected[lm.id] = f"near {close[1]}"
+        elif len(kept) >= 25:
+            expected[lm.id] = "max"
+        else:
+            kept.append(lm.id)
+    assert list(sel.ids) == kept
+    got = {}
+    for lo in sel.left_out:
+        r = lo.reason
+        got[lo.id] = ("busy" if r.startswith("inside busy zone") else "max" if r.startswith(
+            "max count") else f"near {r.split(chr(39))[1]}" if " m from selected " in r
+            else " ".join(r.split(" ")[:2]).rstrip(":"))
+    assert got == expected
+    assert {v.split(" ")[0] for v in expected.values()} == {"status", "busy", "near", "max"}
