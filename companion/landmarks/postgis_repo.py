@@ -29,6 +29,12 @@ from companion.landmarks.repository import (
     row_to_landmark,
 )
 
+_GEOM_INDEX = "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)"
+_NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"
+#: Imports at least this large (and larger than the table) drop the spatial and name
+#: indexes and build them again afterwards (PostGIS sorts points for a GiST build).
+BULK_ROWS = 50_000
+
 MIGRATIONS: tuple[tuple[str, ...], ...] = (
     (  # 0 -> 1
         "CREATE EXTENSION IF NOT EXISTS postgis",
@@ -52,8 +58,8 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             geom geometry(Point, 4326) GENERATED ALWAYS AS
                 (ST_SetSRID(ST_MakePoint(lon_deg, lat_deg), 4326)) STORED
         )""",
-        "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)",
-        "CREATE INDEX landmarks_name ON landmarks (name)",
+        _GEOM_INDEX,
+        _NAME_INDEX,
         """CREATE TABLE appearances (
             id text PRIMARY KEY REFERENCES landmarks (id) ON DELETE CASCADE,
             media_type text NOT NULL,
@@ -145,7 +151,14 @@ class PostgisLandmarkRepository:
                                  ([lm.id for lm in landmarks],))
                 elif self.count():
                     check_new_ids(landmarks, self._existing, source, chunk=5000)
+                bulk = len(landmarks) >= BULK_ROWS and len(landmarks) >= self.count()
+                if bulk:  # DDL is transactional: a failure restores the indexes
+                    conn.execute("DROP INDEX landmarks_geom")
+                    conn.execute("DROP INDEX landmarks_name")
                 self._copy([landmarks[i] for i in spatial_order(list(landmarks))], progress)
+                if bulk:
+                    conn.execute(_GEOM_INDEX)
+                    conn.execute(_NAME_INDEX)
         except psycopg.errors.IntegrityError as err:
             check_new_ids(landmarks, lambda ids: set(), source)  # names a repeated id
             first = str(err).strip().splitlines()[0]
