@@ -11,7 +11,7 @@ from typing import Any
 
 from companion.errors import CompanionError, InputError
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.geodesy import LocalFrame, corners_ned
+from companion.landmarks.geodesy import LocalFrame, corners_ned, pick_one
 from companion.landmarks.geojson_io import import_map, landmark_to_feature, write_map
 from companion.landmarks.record import Area, Landmark, parse_area
 from companion.landmarks.repository import LandmarkRepository
@@ -131,15 +131,8 @@ def _list(args: argparse.Namespace, repo: LandmarkRepository, config: LandmarksC
 
 
 def _find(repo: LandmarkRepository, key: str) -> Landmark:
-    lm = repo.get(key)
-    if lm is not None:
-        return lm
-    named = repo.find_by_name(key)
-    if len(named) == 1:
-        return named[0]
-    if not named:
-        raise InputError(f"landmark {key!r}: no landmark has this id or name")
-    raise InputError(f"landmark {key!r}: {len(named)} landmarks share this name; use an id")
+    by_id = repo.get(key)
+    return pick_one(key, by_id, [] if by_id is not None else repo.find_by_name(key))
 
 
 def _show(args: argparse.Namespace, repo: LandmarkRepository, config: LandmarksConfig) -> int:
