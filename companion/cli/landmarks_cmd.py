@@ -186,7 +186,8 @@ def _zones(args: argparse.Namespace, config: LandmarksConfig) -> list[Any]:
 def _print_selection(sel: Selection, as_json: bool) -> None:
     if as_json:
         json.dump({"selected": [landmark_to_feature(lm, None) for lm in sel.landmarks],
-                   "left_out": [{"id": lo.id, "reason": lo.reason} for lo in sel.left_out],
+                   "left_out": [{"id": lo.id, "kind": lo.kind, "reason": lo.reason}
+                                for lo in sel.left_out],
                    "total_impact": sel.total_impact}, sys.stdout)
         print()
         return

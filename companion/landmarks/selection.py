@@ -15,6 +15,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -48,12 +49,26 @@ class ZonePolygon:
         return inside
 
 
-@dataclass(frozen=True)
-class LeftOut:
-    """A candidate not in the practical map, and why."""
+#: How each kind of reason reads; ``LeftOut.detail`` holds the values.
+REASON_FORMATS = {
+    "status": "{0}",
+    "busy_zone": "inside busy zone {0!r}",
+    "spacing": "{0:.1f} m from selected {1!r} (min spacing {2:g} m; impact {3:.2f} <= {4:.2f})",
+    "max_count": "max count {0} reached (impact {1:.2f} ranks lower)",
+}
+
+
+class LeftOut(NamedTuple):
+    """A candidate not in the practical map, and why: ``kind`` is a key of
+    ``REASON_FORMATS``; the text is formatted only when asked (thousands per query)."""
 
     id: str
-    reason: str
+    kind: str
+    detail: tuple[object, ...]
+
+    @property
+    def reason(self) -> str:
+        return REASON_FORMATS[self.kind].format(*self.detail)
 
 
 @dataclass(frozen=True)
@@ -160,22 +175,24 @@ def select_practical_map(candidates: Candidates | Sequence[Landmark], *, min_spa
                                   include_candidates, min_spacing_m, max_count)
             break
         why = _eligible(c.status[k], c.status_reason[k], include_candidates)
-        if why is None and zone_of[k] is not None:
-            why = f"inside busy zone {zone_of[k]!r}"
-        if why is None and min_spacing_m > 0.0:
-            why = _too_close(k, n_m, e_m, grid, cell, min_spacing_m, c.ids, impact)
         if why is not None:
-            left.append(LeftOut(c.ids[k], why))
+            left.append(LeftOut(c.ids[k], "status", (why,)))
+            continue
+        if zone_of[k] is not None:
+            left.append(LeftOut(c.ids[k], "busy_zone", (zone_of[k],)))
+            continue
+        near = _too_close(k, n_m, e_m, grid, cell, min_spacing_m) if min_spacing_m > 0 else None
+        if near is not None:
+            left.append(_spacing(c.ids[k], near[0], k, near[1], min_spacing_m, c.ids, impact))
             continue
         kept.append(k)
         grid.setdefault((math.floor(n_m[k] / cell), math.floor(e_m[k] / cell)), []).append(k)
     return Selection(tuple(c.ids[k] for k in kept), tuple(impact[k] for k in kept), tuple(left))
 
 
-def _spacing_reason(d: float, k: int, j: int, min_spacing_m: float, ids: Sequence[str],
-                    impact: Sequence[float]) -> str:
-    return (f"{d:.1f} m from selected {ids[j]!r} (min spacing {min_spacing_m:g} m; "
-            f"impact {impact[k]:.2f} <= {impact[j]:.2f})")
+def _spacing(lm_id: str, d: float, k: int, j: int, min_spacing_m: float, ids: Sequence[str],
+             impact: Sequence[float]) -> LeftOut:
+    return LeftOut(lm_id, "spacing", (d, ids[j], min_spacing_m, impact[k], impact[j]))
 
 
 def _rest_reasons(rest: list[int], kept: list[int], c: Candidates, n_m: list[float],
@@ -191,25 +208,27 @@ def _rest_reasons(rest: list[int], kept: list[int], c: Candidates, n_m: list[flo
         block = rest[start:start + 1024]
         idx = np.asarray(block)
         d = np.hypot(n[idx, None] - n[None, kept_arr], e[idx, None] - e[None, kept_arr])
-        nearest = d.argmin(axis=1)
-        dist = d[np.arange(len(block)), nearest].tolist()
+        nearest_arr = d.argmin(axis=1)
+        dist = d[np.arange(len(block)), nearest_arr].tolist()
+        nearest = nearest_arr.tolist()
         for r, k in enumerate(block):
             why = _eligible(c.status[k], c.status_reason[k], include_candidates)
-            if why is None and zone_of[k] is not None:
-                why = f"inside busy zone {zone_of[k]!r}"
-            if why is None and dist[r] < min_spacing_m:
-                why = _spacing_reason(dist[r], k, kept[int(nearest[r])], min_spacing_m,
-                                      c.ids, impact)
-            if why is None:
-                why = f"max count {max_count} reached (impact {impact[k]:.2f} ranks lower)"
-            out.append(LeftOut(c.ids[k], why))
+            if why is not None:
+                out.append(LeftOut(c.ids[k], "status", (why,)))
+            elif zone_of[k] is not None:
+                out.append(LeftOut(c.ids[k], "busy_zone", (zone_of[k],)))
+            elif dist[r] < min_spacing_m:
+                out.append(_spacing(c.ids[k], dist[r], k, kept[nearest[r]],
+                                    min_spacing_m, c.ids, impact))
+            else:
+                out.append(LeftOut(c.ids[k], "max_count", (max_count, impact[k])))
     return out
 
 
 def _too_close(k: int, n_m: list[float], e_m: list[float],
-               grid: dict[tuple[int, int], list[int]], cell: float, min_spacing_m: float,
-               ids: Sequence[str], impact: Sequence[float]) -> str | None:
-    """Reason naming the nearest kept landmark closer than ``min_spacing_m``, if any."""
+               grid: dict[tuple[int, int], list[int]], cell: float, min_spacing_m: float
+               ) -> tuple[float, int] | None:
+    """(distance, index) of the nearest kept landmark closer than ``min_spacing_m``."""
     ci, cj = math.floor(n_m[k] / cell), math.floor(e_m[k] / cell)
     best: tuple[float, int] | None = None
     for di in (-1, 0, 1):
@@ -218,6 +237,4 @@ def _too_close(k: int, n_m: list[float], e_m: list[float],
                 d = math.hypot(n_m[k] - n_m[j], e_m[k] - e_m[j])
                 if d < min_spacing_m and (best is None or d < best[0]):
                     best = (d, j)
-    if best is None:
-        return None
-    return _spacing_reason(best[0], k, best[1], min_spacing_m, ids, impact)
+    return best
