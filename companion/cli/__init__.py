@@ -23,6 +23,8 @@ from companion.settings import load_settings
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES: tuple[str, ...] = (
+    "demo_cmd",
+    "run_cmd",
     "monitor_cmd",
     "dashboard_cmd",
     "router_cmd",

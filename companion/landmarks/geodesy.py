@@ -80,6 +80,20 @@ def corners_ned(lm: Landmark, frame: LocalFrame) -> FloatArray:
                      centre + half_w - half_h, centre - half_w - half_h])
 
 
+def pick_one(key: str, by_id: Landmark | None, named: list[Landmark]) -> Landmark:
+    """The landmark a user means by ``key``: the one with that id, else the only one
+    with that name; a missing or ambiguous name is an :class:`InputError`."""
+    if by_id is not None:
+        return by_id
+    if len(named) == 1:
+        return named[0]
+    if not named:
+        raise InputError(f"landmark {key!r}: no landmark has this id or name")
+    ids = ", ".join(lm.id for lm in named[:5])
+    raise InputError(f"landmark {key!r}: {len(named)} landmarks share this name "
+                     f"({ids}{', ...' if len(named) > 5 else ''}); use an id")
+
+
 class NameTable:
     """The mapping table between landmark names (or ids) and coordinates."""
 
@@ -97,16 +111,7 @@ class NameTable:
 
     def lookup(self, key: str) -> Landmark:
         """The landmark with this id, else the one landmark with this name."""
-        if key in self._by_id:
-            return self._by_id[key]
-        found = self._by_name.get(key, [])
-        if len(found) == 1:
-            return found[0]
-        if not found:
-            raise InputError(f"landmark {key!r}: no landmark has this id or name")
-        ids = ", ".join(lm.id for lm in found[:5])
-        raise InputError(f"landmark {key!r}: {len(found)} landmarks share this name "
-                         f"({ids}...); use an id")
+        return pick_one(key, self._by_id.get(key), self._by_name.get(key, []))
 
     def wgs84(self, key: str) -> tuple[float, float, float]:
         lm = self.lookup(key)

@@ -1,0 +1,44 @@
+"""``companion demo``: the embedded default -- simulated camera, fake autopilot, Zenoh."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+
+from companion.demo import print_summary, run_demo
+from companion.settings import Settings
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``companion demo``."""
+    parser = sub.add_parser(
+        "demo", help="run everything on this machine: simulated flight, fake autopilot, Zenoh",
+        description="Fly a simulated scenario over config/landmarks.geojson with the fake "
+        "autopilot on UDP loopback and monitoring on Zenoh; print a summary against truth.",
+    )
+    parser.add_argument("--seconds", type=float, default=20.0, help="flight time (default 20)")
+    parser.add_argument("--scenario", default="survey",
+                        help="scenario name in config/scenarios/ or a TOML file (default survey)")
+    parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace, settings: Settings) -> int:
+    """Run the demo with a live progress line on a terminal."""
+    live = sys.stderr.isatty() and not args.json
+
+    def progress(line: str) -> None:
+        sys.stderr.write("\r" + line)
+        sys.stderr.flush()
+
+    result = asyncio.run(run_demo(settings, args.scenario, args.seconds,
+                                  progress if live else None))
+    if live:
+        sys.stderr.write("\n")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print_summary(result)
+    return 0

@@ -1,0 +1,192 @@
+"""``companion demo``: the whole program on one machine, nothing to install or start.
+
+The simulated camera flies a scenario over the landmarks of ``config/landmarks.geojson``;
+the scripted fake autopilot flies the *same* trajectory on UDP loopback and judges every
+vision message by ArduPilot's or PX4's rules; the companion tracks, solves and sends
+fixes over MAVLink, publishes on Zenoh in-process and writes a flight log.  At the end a
+summary compares every fix with the simulated truth.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import logging
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from companion.app import CompanionApp
+from companion.autopilot import AttitudeHistory
+from companion.landmarks.geodesy import LocalFrame
+from companion.perception import Perception
+from companion.runtime import PracticalMap, bridge_for, fly, perception_for
+from companion.settings import Settings
+from companion.sim.scenario import load_scenario
+from companion.sim.simulator import Simulator
+from companion.sim.source import SimCameraSource
+from mavlink_bridge.bridge import VisionBridge
+from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from tracker.pose.types import MapLandmark, PoseFix
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DemoResult:
+    """Everything the summary needs, gathered while the demo runs."""
+
+    fixes: list[tuple[PoseFix, tuple[float, float, float], float]]  # fix, truth, distance
+
+
+class TruthRecorder:
+    """Wraps the perception to remember, for every fix, where the vehicle truly was."""
+
+    def __init__(self, perception: Perception, source: SimCameraSource,
+                 landmarks: dict[str, MapLandmark]) -> None:
+        self.perception = perception
+        self.source = source
+        self.landmarks = landmarks
+        self.result = DemoResult([])
+
+    def housekeeping(self, frame: Any) -> None:
+        self.perception.housekeeping(frame)
+
+    def process(self, frame: Any) -> Any:
+        result = self.perception.process(frame)
+        if isinstance(result.fix, PoseFix):
+            state = self.source.sim.state_at(self.source.scenario_time_s(frame))
+            truth = tuple(float(v) for v in state.position_ned_m)
+            used = [self.landmarks[i] for i in result.fix.landmark_ids if i in self.landmarks]
+            dist = float(np.mean([math.dist(truth, lm.position_ned_m) for lm in used])) \
+                if used else float("nan")
+            self.result.fixes.append((result.fix, truth, dist))  # type: ignore[arg-type]
+            if result.pose_json is not None:
+                result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
+        return result
+
+
+def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarray]]:
+    """The practical map (NED) and appearance references of the simulated world."""
+    landmarks, references = [], {}
+    for lm in sim.world.landmarks:
+        c = lm.centre_ned
+        landmarks.append(MapLandmark(lm.landmark_id, (float(c[0]), float(c[1]), float(c[2])),
+                                     lm.width_m, lm.height_m, lm.facing_deg, lm.category))
+        if lm.quad.texture is not None:
+            references[lm.landmark_id] = lm.quad.texture
+    return landmarks, references
+
+
+async def run_demo(settings: Settings, scenario: str, seconds: float,
+                   progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Run the embedded demo and return its summary (see :func:`summary`)."""
+    sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
+    landmarks, references = map_landmarks(sim)
+    o = sim.scenario.origin
+    pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
+    # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
+    fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
+                                             endpoint="udpin:127.0.0.1:0"), truth=sim.truth_fn)
+    await fake.start()
+    source = SimCameraSource(sim, realtime=True, seconds=seconds,
+                             t0_us=fake.start_ns // 1000)
+    bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+                        origin_lat_deg=o.lat, origin_lon_deg=o.lon, origin_alt_m=o.alt_m,
+                        set_origin=True)
+    recorders: list[TruthRecorder] = []
+
+    def processor(attitude: AttitudeHistory) -> TruthRecorder:
+        perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
+        recorders.append(TruthRecorder(perception, source,
+                                       {lm.landmark_id: lm for lm in landmarks}))
+        return recorders[0]
+
+    tickers: list[asyncio.Task[None]] = []
+    cpu0, wall0 = os.times(), time.monotonic()
+    try:
+        app = await fly(settings, source, bridge, processor, landmarks, seconds=seconds + 5.0,
+                        prefix="demo", on_start=lambda a: tickers.append(asyncio.create_task(
+                            _progress(a, fake, seconds, progress))))
+    finally:
+        for t in tickers:
+            t.cancel()
+        await asyncio.gather(*tickers, return_exceptions=True)
+        cpu1, wall1 = os.times(), time.monotonic()
+        await fake.stop()
+    busy = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / max(wall1 - wall0, 1e-9)
+    return summary(app, fake, bridge, recorders[0].result, source, busy)
+
+
+async def _progress(app: CompanionApp, fake: FakeAutopilot, seconds: float,
+                    progress: Callable[[str], None] | None) -> None:
+    if progress is None:
+        return
+    start = time.monotonic()
+    while True:
+        await asyncio.sleep(0.5)
+        s = app.status()
+        lat = s["latency_ms"]["p50"]
+        progress(f"{time.monotonic() - start:5.1f}/{seconds:.0f} s  {s['state']:<9} "
+                 f"frames {s['counters']['frames']:5d}  fps {s['fps']:5.1f}  "
+                 f"fixes {s['counters']['fixes_sent']:5d} (accepted "
+                 f"{len(fake.accepted()):5d})  latency p50 "
+                 f"{'-' if lat is None else f'{lat:.1f}'} ms  dropped {s['dropped_frames']}")
+
+
+def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result: DemoResult,
+            source: SimCameraSource, cpu_cores_busy: float) -> dict[str, Any]:
+    """The demo's numbers: the keys the README and the issue name, and a few more."""
+    errors = [math.dist(fix.position_ned_m, truth) for fix, truth, _ in result.fixes]
+    dists = [d for _, _, d in result.fixes if math.isfinite(d)]
+    rmse = float(np.sqrt(np.mean(np.square(errors)))) if errors else None
+    mean_dist = float(np.mean(dists)) if dists else None
+    lat = app.stats.capture_to_wire_ms
+    sent = app.counters.fixes_sent
+    accepted = len(fake.accepted())
+    return {
+        "frames": app.counters.frames,
+        "fps": round(app.counters.frames / max(source.seconds, 1e-9), 2),
+        "fixes_sent": sent,
+        "fixes_accepted": accepted,
+        "fixes_accepted_ratio": round(accepted / sent, 4) if sent else None,
+        "position_rmse_m": None if rmse is None else round(rmse, 4),
+        "mean_landmark_distance_m": None if mean_dist is None else round(mean_dist, 2),
+        "position_rmse_pct_of_distance": None if not (rmse and mean_dist)
+        else round(100 * rmse / mean_dist, 3),
+        "latency_p50_ms": lat.summary()["p50"],
+        "latency_p99_ms": lat.summary()["p99"],
+        "dropped_frames": app.dropped_frames + source.status.skipped,
+        "cpu_cores_busy": round(cpu_cores_busy, 3),
+        "stage_ms": {"capture_to_worker": app.stats.queue_ms.summary(),
+                     "process": app.stats.process_ms.summary()},
+        "no_fix_frames": app.counters.no_fix,
+        "autopilot_rejections": fake.summary()["vision_reasons"],
+        "bridge": {k: v for k, v in bridge.stats().items() if isinstance(v, int | float | str)},
+    }
+
+
+def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
+    """The human-readable end of ``companion demo``."""
+    def f(v: Any, unit: str = "") -> str:
+        return "-" if v is None else f"{v}{unit}"
+
+    lines = [
+        f"frames            {s['frames']}  ({f(s['fps'])} fps, {s['dropped_frames']} dropped)",
+        f"fixes sent        {s['fixes_sent']}",
+        f"fixes accepted    {s['fixes_accepted']} by the fake autopilot "
+        f"({f(s['fixes_accepted_ratio'] and round(100 * s['fixes_accepted_ratio'], 1), ' %')})",
+        f"position RMSE     {f(s['position_rmse_m'], ' m')} at a mean "
+        f"{f(s['mean_landmark_distance_m'], ' m')} from the landmarks "
+        f"({f(s['position_rmse_pct_of_distance'], ' %')})",
+        f"latency           p50 {f(s['latency_p50_ms'], ' ms')}  p99 "
+        f"{f(s['latency_p99_ms'], ' ms')} (capture -> on the wire)",
+        f"cpu               {s['cpu_cores_busy']} cores busy on average",
+    ]
+    print("\n".join(lines), file=out)
