@@ -151,7 +151,7 @@ class AdaptiveTracker:
         x0, x1 = _clamp(c[0] - half[0], 0, w - 1), _clamp(c[0] + half[0], 1, w)
         y0, y1 = _clamp(c[1] - half[1], 0, h - 1), _clamp(c[1] + half[1], 1, h)
         region = window.patch[y0 : max(y1, y0 + 1), x0 : max(x1, x0 + 1)]
-        return np.maximum(region.reshape(-1, 3).mean(axis=0), 1.0)
+        return np.maximum(np.asarray(cv2.mean(region)[:3], dtype=np.float64), 1.0)
 
     def _compensated(self, window: Window) -> Window:
         """The window with the illumination gain removed (per channel, clipped to 0..255)."""
@@ -175,10 +175,10 @@ class AdaptiveTracker:
 
     def _update_gain(self, raw: Window, state: FloatArray) -> None:
         """gain <- (1-r) gain + r * (first-frame target mean / current target mean)."""
-        ratio = np.clip(self._ref_mean / self._box_mean(raw, state), 0.25, 4.0)
+        current = self._box_mean(raw, state)
+        ratio = np.clip(self._ref_mean / current, 0.25, 4.0)
         if self.config.gain_mode == "grey":
-            ratio = np.full(3, float(self._ref_mean.sum() / self._box_mean(raw, state).sum()))
-            ratio = np.clip(ratio, 0.25, 4.0)
+            ratio = np.full(3, min(max(float(self._ref_mean.sum() / current.sum()), 0.25), 4.0))
         rate = self.config.gain_rate
         self._gain = (1.0 - rate) * self._gain + rate * ratio
 
