@@ -188,6 +188,9 @@ def _dense_kernel(
     return hist, region, xs_full, ys_full, (k > 0).astype(np.float64)
 
 
+MIL_MIN_SIDE_PX = 6
+
+
 class MilTracker:
     """OpenCV ``TrackerMIL`` (Babenko et al.) with this package's interface."""
 
@@ -201,10 +204,22 @@ class MilTracker:
         """Start tracking the target inside ``box`` of the first frame."""
         image = check_image(image_bgr)
         x, y, w, h = check_box(box, image.shape)
+        if w < MIL_MIN_SIDE_PX or h < MIL_MIN_SIDE_PX:
+            # OpenCV 5.0's TrackerMIL never returns from init/update on boxes of 4 px or less
+            raise ValueError(
+                f"box: TrackerMIL needs width and height >= {MIL_MIN_SIDE_PX} px, "
+                f"got w={w:g}, h={h:g}"
+            )
         self._shape = image.shape
         cv2.setRNGSeed(self.seed)
         self._tracker = cv2.TrackerMIL.create()
-        self._tracker.init(image, (round(x), round(y), max(1, round(w)), max(1, round(h))))
+        try:
+            self._tracker.init(image, (round(x), round(y), round(w), round(h)))
+        except cv2.error as err:
+            raise ValueError(
+                f"box: TrackerMIL cannot sample around (x={x:g}, y={y:g}, w={w:g}, h={h:g}); "
+                "expected a box with room around it inside the image"
+            ) from err
         self._cue: Cue = "grayscale" if is_grayscale(image, 1.0) else "colour"
 
     def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:

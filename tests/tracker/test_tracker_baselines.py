@@ -42,3 +42,13 @@ def test_baselines_reject_bad_input(make: type, moving_sign: Scene) -> None:
     tracker.init(frames[0], tuple(truth[0]))
     with pytest.raises(ValueError, match=r"^image_bgr: "):
         tracker.update(frames[1][:, :, :2])
+
+
+def test_mil_refuses_boxes_it_cannot_handle(moving_sign: Scene) -> None:
+    """Tiny boxes hang OpenCV's TrackerMIL and whole-frame boxes make it assert: ValueError."""
+    frames, _ = moving_sign
+    with pytest.raises(ValueError, match=r"^box: TrackerMIL needs width and height >= 6"):
+        MilTracker().init(frames[0], (10, 10, 4, 4))
+    h, w = frames[0].shape[:2]
+    with pytest.raises(ValueError, match=r"^box: TrackerMIL cannot sample"):
+        MilTracker().init(frames[0], (0, 0, w, h))
