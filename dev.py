@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Set up and run landmark-companion from a fresh clone, with only Python >= 3.11 and git.
 
-    python3 dev.py demo [ARGS...]   install (once) and run the main job: companion demo
+    python3 dev.py demo [ARGS...]   install (once) and run the main job: companion demo ARGS
     python3 dev.py test [ARGS...]   install (once) and run the whole test suite:
                                     ruff, mypy, then pytest (ARGS go to pytest)
     python3 dev.py lock             regenerate requirements/*.lock (maintainers)
@@ -26,6 +26,8 @@ BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
 PY = BIN / ("python.exe" if os.name == "nt" else "python")
 LOCKS = {"runtime": ROOT / "requirements" / "runtime.lock",
          "dev": ROOT / "requirements" / "dev.lock"}
+#: Test tools installed without their declared dependencies (see the file's header).
+TOOLS = ROOT / "requirements" / "tools.lock"
 PYTEST_NO_TESTS = 5
 
 
@@ -44,7 +46,7 @@ def run(*cmd: str | Path, check: bool = True) -> int:
 
 def fingerprint(kind: str) -> str:
     digest = hashlib.sha256(kind.encode())
-    for path in (LOCKS[kind], ROOT / "pyproject.toml"):
+    for path in (LOCKS[kind], ROOT / "pyproject.toml", *([TOOLS] if kind == "dev" else [])):
         digest.update(path.read_bytes())
     return digest.hexdigest()
 
@@ -63,6 +65,9 @@ def ensure_env(kind: str) -> None:
     say(f"installing locked {kind} dependencies (first run takes a few minutes)")
     run(PY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
         "--require-hashes", "-r", LOCKS[kind])
+    if kind == "dev":
+        run(PY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+            "--require-hashes", "--no-deps", "-r", TOOLS)
     say("installing landmark-companion itself (editable)")
     run(PY, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
         "--no-deps", "-e", ".")
@@ -75,7 +80,7 @@ def ensure_env(kind: str) -> None:
 
 def cmd_demo(args: list[str]) -> int:
     ensure_env("runtime")
-    return run(BIN / "companion", "--help", *args, check=False)
+    return run(BIN / "companion", "demo", *args, check=False)
 
 
 def cmd_test(args: list[str]) -> int:

@@ -66,9 +66,14 @@ class FrameResult:
 
 
 class FrameProcessor(Protocol):
-    """Synchronous per-frame work (tracking and pose); runs in the worker thread."""
+    """Synchronous per-frame work (tracking and pose); runs in the worker thread.
+
+    ``housekeeping`` runs after the frame's fix was sent: work that must not add latency
+    (looking for new landmarks).
+    """
 
     def process(self, frame: Frame) -> FrameResult: ...
+    def housekeeping(self, frame: Frame) -> None: ...
 
 
 class FixSink(Protocol):
@@ -79,12 +84,19 @@ class FixSink(Protocol):
     def set_health(self, state: State) -> None: ...
     async def send_fix(self, fix: Any) -> bool: ...
     async def statustext(self, text: str) -> None: ...
+    def autopilot_position_ned(self) -> list[float] | None: ...
 
 
 class Reporter(Protocol):
     """Where status, poses, tracks and events go (monitoring and the flight log)."""
 
     def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None: ...
+    def preview_due(self) -> bool: ...
+    def preview(self, jpeg: bytes) -> None: ...
+
+
+#: Draws a frame's preview: (frame, result) -> JPEG bytes.
+PreviewFn = Callable[["Frame", "FrameResult"], bytes]
 
 
 @dataclass
@@ -118,7 +130,8 @@ class CompanionApp:
     def __init__(self, source: FrameSource, processor: FrameProcessor, sink: FixSink,
                  reporter: Reporter, vehicle_id: str, status_period_s: float = 1.0,
                  policy: HealthPolicy | None = None,
-                 clock_s: Callable[[], float] = time.monotonic) -> None:
+                 clock_s: Callable[[], float] = time.monotonic,
+                 preview: PreviewFn | None = None) -> None:
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -127,6 +140,7 @@ class CompanionApp:
         self.status_period_s = status_period_s
         self.policy = policy or HealthPolicy()
         self.clock_s = clock_s
+        self.preview = preview
         self.counters = Counters()
         self.stats = AppStats()
         self.state: State = "starting"
@@ -201,6 +215,11 @@ class CompanionApp:
                                                     frame)
                 self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
                 await self._handle(result)
+                await loop.run_in_executor(self._executor, self.processor.housekeeping, frame)
+                if self.preview is not None and self.reporter.preview_due():
+                    jpeg = await loop.run_in_executor(self._executor, self.preview, frame,
+                                                      result)
+                    self.reporter.preview(jpeg)
         except (SlotClosedError, asyncio.CancelledError):
             pass
 
@@ -214,7 +233,8 @@ class CompanionApp:
         for event in result.events:
             self.reporter.report("events", result.capture_t_us, event)
         self.reporter.report("tracks", result.capture_t_us,
-                             {"frame": result.frame_index, "tracks": list(result.tracks)})
+                             {"frame": result.frame_index, "tracks": list(result.tracks),
+                              "no_fix_reason": result.no_fix_reason})
         if result.tracks:
             self._ever_tracked = True
         if result.fix is None:
@@ -224,7 +244,9 @@ class CompanionApp:
             self._last_fix_s = now_s
             self.stats.capture_to_wire_ms.add((now_us() - result.capture_t_us) / 1000.0)
             if result.pose_json is not None:
-                self.reporter.report("pose", result.capture_t_us, result.pose_json)
+                own = self.sink.autopilot_position_ned()  # to plot the fix against it
+                extra = {} if own is None else {"autopilot_position_ned_m": own}
+                self.reporter.report("pose", result.capture_t_us, {**result.pose_json, **extra})
         else:
             self.counters.fixes_refused += 1
         self._update_health()

@@ -18,25 +18,21 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from companion.app import CompanionApp
-from companion.autopilot import BridgeSink, attitude_sample
-from companion.flightlog import FlightLogWriter
-from companion.monitoring.publisher import MonitorPublisher
-from companion.perception import Perception, SideSensors
-from companion.reporting import Reporter
+from companion.autopilot import AttitudeHistory
+from companion.landmarks.geodesy import LocalFrame
+from companion.perception import Perception
+from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import Settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
-from companion.validate import to_plain
-from mavlink_bridge.bridge import VisionBridge, create_bridge
+from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
-from mavlink_bridge.vehicle import VehicleState as AutopilotState
 from tracker.pose.types import MapLandmark, PoseFix
 
 log = logging.getLogger(__name__)
@@ -59,6 +55,9 @@ class TruthRecorder:
         self.landmarks = landmarks
         self.result = DemoResult([])
 
+    def housekeeping(self, frame: Any) -> None:
+        self.perception.housekeeping(frame)
+
     def process(self, frame: Any) -> Any:
         result = self.perception.process(frame)
         if isinstance(result.fix, PoseFix):
@@ -77,83 +76,52 @@ def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarr
     """The practical map (NED) and appearance references of the simulated world."""
     landmarks, references = [], {}
     for lm in sim.world.landmarks:
-        landmarks.append(MapLandmark(lm.landmark_id, tuple(float(v) for v in lm.centre_ned),
+        c = lm.centre_ned
+        landmarks.append(MapLandmark(lm.landmark_id, (float(c[0]), float(c[1]), float(c[2])),
                                      lm.width_m, lm.height_m, lm.facing_deg, lm.category))
         if lm.quad.texture is not None:
             references[lm.landmark_id] = lm.quad.texture
     return landmarks, references
 
 
-def autopilot_truth(source: SimCameraSource) -> Callable[[float], AutopilotState]:
-    """The fake autopilot flies what the camera sees: the scenario clock of the source."""
-
-    def truth(_time_s: float) -> AutopilotState:
-        t0 = source.t0_us
-        t = 0.0 if t0 is None else max(0.0, (time.monotonic_ns() // 1000 - t0) / 1e6)
-        s = source.sim.state_at(t)
-        rng = source.sim.rangefinder.measure(s, np.random.default_rng(int(t * 1000)))
-        return AutopilotState(t, s.position_ned_m, s.velocity_ned_m_s, s.attitude_rpy_rad,
-                              float(rng) if rng is not None else float("nan"))
-
-    return truth
-
-
 async def run_demo(settings: Settings, scenario: str, seconds: float,
                    progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Run the embedded demo and return its summary (see :func:`summary`)."""
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
-    source = SimCameraSource(sim, realtime=True, seconds=seconds)
     landmarks, references = map_landmarks(sim)
-    origin = sim.scenario.origin
+    o = sim.scenario.origin
+    pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
+    # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                             endpoint="udpin:127.0.0.1:0"),
-                         truth=autopilot_truth(source))
+                                             endpoint="udpin:127.0.0.1:0"), truth=sim.truth_fn)
     await fake.start()
-    mav_cfg = dataclasses.replace(
-        settings.mavlink, profile=settings.vehicle.profile,
-        endpoint=f"udpout:127.0.0.1:{fake.local_port}", origin_lat_deg=origin.lat,
-        origin_lon_deg=origin.lon, origin_alt_m=origin.alt_m, set_origin=True)
-    bridge = create_bridge(mav_cfg)
-    await bridge.start()
-    await bridge.wait_link(True, timeout_s=5.0)
-    perception = Perception(sim.scenario.camera, landmarks, references,
-                            sensors=lambda: SideSensors(attitude=attitude_sample(bridge)),
-                            config=settings.perception, tracker_config=settings.tracker,
-                            pose_config=settings.pose, acquire_config=settings.acquire)
-    recorder = TruthRecorder(perception, source, {lm.landmark_id: lm for lm in landmarks})
-    reporter = _reporter(settings, landmarks)
-    app = CompanionApp(source, recorder, BridgeSink(bridge), reporter, settings.vehicle.id)
+    source = SimCameraSource(sim, realtime=True, seconds=seconds,
+                             t0_us=fake.start_ns // 1000)
+    bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+                        origin_lat_deg=o.lat, origin_lon_deg=o.lon, origin_alt_m=o.alt_m,
+                        set_origin=True)
+    recorders: list[TruthRecorder] = []
+
+    def processor(attitude: AttitudeHistory) -> TruthRecorder:
+        perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
+        recorders.append(TruthRecorder(perception, source,
+                                       {lm.landmark_id: lm for lm in landmarks}))
+        return recorders[0]
+
+    tickers: list[asyncio.Task[None]] = []
     cpu0, wall0 = os.times(), time.monotonic()
-    ticker = asyncio.create_task(_progress(app, fake, seconds, progress))
     try:
-        await app.run(seconds + 5.0)
+        app = await fly(settings, source, bridge, processor, landmarks, seconds=seconds + 5.0,
+                        prefix="demo", on_start=lambda a: tickers.append(asyncio.create_task(
+                            _progress(a, fake, seconds, progress))))
     finally:
-        ticker.cancel()
-        await asyncio.gather(ticker, return_exceptions=True)
+        for t in tickers:
+            t.cancel()
+        await asyncio.gather(*tickers, return_exceptions=True)
         cpu1, wall1 = os.times(), time.monotonic()
-        await bridge.stop()
         await fake.stop()
-        reporter.close()
     busy = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / max(wall1 - wall0, 1e-9)
-    return summary(app, fake, bridge, recorder.result, source, busy)
-
-
-def _reporter(settings: Settings, landmarks: list[MapLandmark]) -> Reporter:
-    log_dir = Path(settings.flightlog.dir)
-    name = time.strftime("demo-%Y%m%d-%H%M%S.jsonl")
-    flightlog = FlightLogWriter(log_dir / name, settings.vehicle.id,
-                                settings.flightlog.fsync_interval_s)
-    monitor = None
-    if settings.monitor.enabled:
-        providers = {
-            "config": lambda: to_plain(settings),
-            "landmarks": lambda: [{"id": lm.landmark_id, "category": lm.category,
-                                   "position_ned_m": list(lm.position_ned_m),
-                                   "width_m": lm.width_m, "height_m": lm.height_m,
-                                   "facing_deg": lm.facing_deg} for lm in landmarks],
-        }
-        monitor = MonitorPublisher(settings.monitor, settings.vehicle.id, providers)
-    return Reporter(flightlog, monitor)
+    return summary(app, fake, bridge, recorders[0].result, source, busy)
 
 
 async def _progress(app: CompanionApp, fake: FakeAutopilot, seconds: float,
@@ -196,6 +164,8 @@ def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result
         "latency_p99_ms": lat.summary()["p99"],
         "dropped_frames": app.dropped_frames + source.status.skipped,
         "cpu_cores_busy": round(cpu_cores_busy, 3),
+        "stage_ms": {"capture_to_worker": app.stats.queue_ms.summary(),
+                     "process": app.stats.process_ms.summary()},
         "no_fix_frames": app.counters.no_fix,
         "autopilot_rejections": fake.summary()["vision_reasons"],
         "bridge": {k: v for k, v in bridge.stats().items() if isinstance(v, int | float | str)},

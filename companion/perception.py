@@ -27,10 +27,19 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.app import Frame, FrameResult
+from companion.fixgate import FixGate, FixGateConfig
 from tracker import AdaptiveTracker, TrackerConfig
-from tracker.acquire import AcquireConfig, ReferenceMatcher, refine_ecc
+from tracker.acquire import (
+    AcquireConfig,
+    ReferenceMatcher,
+    homography_to,
+    project_corners,
+    refine_ecc,
+    search_template,
+)
 from tracker.camera import CameraModel
 from tracker.pose.config import PoseConfig
+from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.solve import solve_pose
 from tracker.pose.types import (
     AltitudeSample,
@@ -55,7 +64,14 @@ class PerceptionConfig:
     min_track_confidence: float = field(default=0.2, metadata={"ge": 0, "le": 1})
     refine_corners: bool = True
     min_corner_agreement: float = field(default=0.5, metadata={"gt": 0, "le": 1})
-    ecc_iterations: int = field(default=30, metadata={"ge": 1})
+    ecc_iterations: int = field(default=15, metadata={"ge": 1})
+    max_corner_misses: int = field(default=5, metadata={"ge": 1})
+    verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
+    max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
+    #: Without a fix for this long, search the whole frame for one landmark per frame.
+    search_after_s: float = field(default=0.3, metadata={"ge": 0})
+    search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
+    search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
 
 
 @dataclass(frozen=True)
@@ -78,6 +94,7 @@ class Track:
     confidence: float = 1.0
     features: tuple[int, ...] = ()
     corners: FloatArray | None = None
+    misses: int = 0
 
 
 def box_iou(a: Box, b: Box) -> float:
@@ -111,11 +128,12 @@ class Perception:
 
     def __init__(self, camera: CameraModel, landmarks: Sequence[MapLandmark],
                  references: Mapping[str, npt.NDArray[np.uint8]],
-                 sensors: Callable[[], SideSensors] = SideSensors,
+                 sensors: Callable[[int], SideSensors] = lambda _t_us: SideSensors(),
                  config: PerceptionConfig | None = None,
                  tracker_config: TrackerConfig | None = None,
                  pose_config: PoseConfig | None = None,
-                 acquire_config: AcquireConfig | None = None, seed: int = 0) -> None:
+                 acquire_config: AcquireConfig | None = None,
+                 gate_config: FixGateConfig | None = None, seed: int = 0) -> None:
         self.camera = camera
         self.landmarks = list(landmarks)
         self.config = config or PerceptionConfig()
@@ -130,13 +148,22 @@ class Perception:
             except ValueError as err:
                 self.unmatchable[lid] = str(err)
         self.tracks: dict[str, Track] = {}
+        self.gate = FixGate(gate_config or FixGateConfig())
+        self._events_next: list[dict[str, Any]] = []
+        self._last_fix: PoseFix | None = None
+        self._last_fix_us = -(2**62)
+        self._search_turn = 0
         self._seed = seed
         self._frames = 0
 
     def process(self, frame: Frame) -> FrameResult:
-        """Track, acquire, solve: one frame in, tracks and maybe a fix out."""
+        """Track and solve: one frame in, tracks and maybe a fix out.
+
+        Acquisition of new landmarks waits for :meth:`housekeeping`, after the fix is on
+        the wire, so it never adds to the capture -> fix latency.
+        """
         image = frame.image
-        events: list[dict[str, Any]] = []
+        events, self._events_next = self._events_next, []
         if image.shape[:2] != (self.camera.height, self.camera.width):
             return FrameResult(frame.index, frame.t_us, bad_frame=True,
                                no_fix_reason=f"frame {image.shape[1]}x{image.shape[0]} is "
@@ -146,10 +173,22 @@ class Perception:
             if not self._update_track(self.tracks[lid], image, gray):
                 del self.tracks[lid]
                 events.append({"event": "lost", "landmark": lid})
-        if self._should_acquire():
-            events += self._acquire(image)
         self._frames += 1
+        self._last_fix = None
         return self._solve(frame, events)
+
+    def housekeeping(self, frame: Frame) -> None:
+        """Look for untracked landmarks (feature matching now and then; prediction from
+        this frame's fix); what is found is tracked from the next frame on."""
+        if frame.image.shape[:2] != (self.camera.height, self.camera.width):
+            return
+        if self._should_acquire():
+            self._events_next += self._acquire(frame.image)
+        if self._last_fix is not None:
+            self._last_fix_us = self._last_fix.time_us
+            self._events_next += self._predict_acquire(frame.image, self._last_fix)
+        elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
+            self._events_next += self._search(frame.image)
 
     # -- tracking ---------------------------------------------------------------------
 
@@ -158,31 +197,47 @@ class Perception:
         result: TrackResult = track.tracker.update(image)
         if result.box is None or result.confidence < self.config.min_track_confidence:
             return False
-        old_box, track.box = track.box, result.box
+        track.box = result.box
         track.confidence, track.features = result.confidence, result.features
         track.corners = None
-        if self.config.refine_corners and track.homography is not None:
-            predicted = box_motion(old_box, track.box) @ track.homography
-            track.homography = self._refine(track.landmark_id, gray, predicted, track.box)
-            if track.homography is not None:
-                track.corners = self._corners(track.landmark_id, track.homography)
+        if not self.config.refine_corners:
+            return True
+        if track.homography is not None:
+            predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
+            aligned = self._align(track.landmark_id, gray, predicted, track.box)
+            track.homography = predicted if aligned is None else aligned
+            track.misses = 0 if aligned is not None else track.misses + 1
+            if aligned is not None:
+                track.corners = project_corners(self.matcher.references[track.landmark_id],
+                                                aligned)
+        if track.homography is None or track.misses >= self.config.max_corner_misses:
+            self._recover_corners(track, image)
         return True
 
-    def _refine(self, lid: str, gray: npt.NDArray[np.uint8], hom: FloatArray,
-                box: Box) -> FloatArray | None:
+    def _align(self, lid: str, gray: npt.NDArray[np.uint8], hom: FloatArray,
+               box: Box) -> FloatArray | None:
+        """ECC alignment of the reference, kept only if it agrees with the tracker's box."""
         ref = self.matcher.references[lid]
-        refined = refine_ecc(ref, gray, hom, self.config.ecc_iterations)
-        corners = self._corners(lid, refined)
+        aligned = refine_ecc(ref, gray, hom, self.config.ecc_iterations)
+        if aligned is None:
+            return None
+        corners = project_corners(ref, aligned)
         x0, y0 = corners.min(axis=0)
         x1, y1 = corners.max(axis=0)
         if box_iou((x0, y0, x1 - x0, y1 - y0), box) < self.config.min_corner_agreement:
             return None  # the alignment wandered off: keep the box, drop the corners
-        return refined
+        return aligned
 
-    def _corners(self, lid: str, hom: FloatArray) -> FloatArray:
-        w, h = self.matcher.references[lid].size_px
-        quad = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float64).reshape(-1, 1, 2)
-        return np.asarray(cv2.perspectiveTransform(quad, hom).reshape(4, 2), np.float64)
+    def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
+        """Re-match the reference around the tracked box to get the homography back."""
+        x, y, w, h = track.box
+        roi = (x - 0.5 * w, y - 0.5 * h, 2.0 * w, 2.0 * h)
+        found = self.matcher.find(image, [track.landmark_id], roi=roi)
+        if found:
+            track.homography, track.corners, track.misses = (found[0].homography,
+                                                             found[0].corners_px, 0)
+        else:
+            track.homography = None
 
     # -- acquisition ------------------------------------------------------------------
 
@@ -192,27 +247,112 @@ class Perception:
         return not self.tracks or self._frames % self.config.acquire_every_frames == 0
 
     def _acquire(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
-        wanted = [lid for lid in self.matcher.references if lid not in self.tracks]
+        wanted = [lid for lid, ref in self.matcher.references.items()
+                  if lid not in self.tracks and ref.matchable]
         events: list[dict[str, Any]] = []
         height, width = image.shape[:2]
         for match in self.matcher.find(image, wanted):
             box = clip_box(match.box, width, height)
             if box is None or len(self.tracks) >= self.config.max_tracks:
                 continue
-            tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
-            tracker.init(image, box)
-            self.tracks[match.landmark_id] = Track(match.landmark_id, tracker, box,
-                                                   match.homography, corners=match.corners_px)
-            events.append({"event": "acquired", "landmark": match.landmark_id,
-                           "box": [round(v, 1) for v in box], "inliers": match.inliers})
+            events.append(self._start(match.landmark_id, image, box, match.homography,
+                                      match.corners_px, "features"))
         return events
+
+    def _start(self, lid: str, image: npt.NDArray[np.uint8], box: Box, hom: FloatArray,
+               corners: FloatArray, by: str) -> dict[str, Any]:
+        """Start tracking landmark ``lid`` in ``box`` with a verified homography."""
+        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
+        tracker.init(image, box)
+        self.tracks[lid] = Track(lid, tracker, box, hom, corners=corners)
+        return {"event": "acquired", "landmark": lid, "by": by,
+                "box": [round(v, 1) for v in box]}
+
+    def _search(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+        """Look for one untracked landmark (round robin) by colour template search over the
+        whole frame, verified by alignment: finds distant or plain landmarks that feature
+        matching misses, while nothing gives a fix to predict from."""
+        untracked = [lid for lid in self.matcher.references if lid not in self.tracks]
+        if not untracked or len(self.tracks) >= self.config.max_tracks:
+            return []
+        lid = untracked[self._search_turn % len(untracked)]
+        self._search_turn += 1
+        ref = self.matcher.references[lid]
+        found = search_template(ref, image, self.config.search_widths_px)
+        if found is None or found[0] < self.config.search_min_score:
+            return []
+        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
+        aligned = refine_ecc(ref, gray, found[1], self.config.ecc_iterations,
+                             self.config.verify_correlation)
+        if aligned is None:
+            return []
+        quad = project_corners(ref, aligned)
+        x0, y0 = quad.min(axis=0)
+        x1, y1 = quad.max(axis=0)
+        box = clip_box((x0, y0, x1 - x0, y1 - y0), image.shape[1], image.shape[0])
+        if box is None or not inside(quad, image.shape[1], image.shape[0], margin=2.0):
+            return []
+        return [self._start(lid, image, box, aligned, quad, "search")]
+
+    def _predict_acquire(self, image: npt.NDArray[np.uint8], fix: PoseFix) -> list[dict[str, Any]]:
+        """Start tracks on map landmarks the fix says are in view, verified by alignment.
+
+        The fix predicts where each untracked landmark's corners are; aligning its
+        reference there (ECC) confirms it and gives exact corners.  This finds plain
+        plates that have too few keypoints for feature matching.
+        """
+        events: list[dict[str, Any]] = []
+        height, width = image.shape[:2]
+        gray: npt.NDArray[np.uint8] | None = None
+        for lm in self.landmarks:
+            lid = lm.landmark_id
+            if lid in self.tracks or lid not in self.matcher.references:
+                continue
+            if len(self.tracks) >= self.config.max_tracks:
+                break
+            corners = self._project(lm, fix)
+            if corners is None or not inside(corners, width, height, margin=4.0):
+                continue
+            gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8) \
+                if gray is None else gray
+            ref = self.matcher.references[lid]
+            aligned = refine_ecc(ref, gray, homography_to(ref, corners),
+                                 self.config.ecc_iterations, self.config.verify_correlation)
+            if aligned is None:
+                continue
+            quad = project_corners(ref, aligned)
+            if np.abs(quad - corners).max() > self.config.max_prediction_error_px:
+                continue
+            x0, y0 = quad.min(axis=0)
+            x1, y1 = quad.max(axis=0)
+            box = clip_box((x0, y0, x1 - x0, y1 - y0), width, height)
+            if box is None:
+                continue
+            events.append(self._start(lid, image, box, aligned, quad, "prediction"))
+        return events
+
+    def _project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
+        """The landmark's corners in the image for the vehicle pose of ``fix``."""
+        corners_ned = landmark_corners_ned(lm)
+        cam = self.camera.world_to_camera(corners_ned, np.asarray(fix.position_ned_m),
+                                          fix.attitude_rpy_rad)
+        if np.any(cam[:, 2] <= 0.1):
+            return None
+        return self.camera.project_camera_points(cam)
 
     # -- pose -------------------------------------------------------------------------
 
     def observations(self, frame_index: int) -> list[Observation]:
-        """One observation per live track (corners when the alignment holds)."""
+        """One observation per live track (corners when the alignment holds).
+
+        When some tracks have corners, box-only tracks are left out: a box centre is not
+        the landmark's centre under perspective, and mixing it in costs more than it adds.
+        """
         out = []
-        for t in self.tracks.values():
+        tracks = list(self.tracks.values())
+        if any(t.corners is not None for t in tracks):
+            tracks = [t for t in tracks if t.corners is not None]
+        for t in tracks:
             x, y, w, h = t.box
             corners = None if t.corners is None else tuple(
                 (float(u), float(v)) for u, v in t.corners)
@@ -234,14 +374,24 @@ class Perception:
         if not self.tracks:
             return FrameResult(frame.index, frame.t_us, tracks, None, "nothing tracked",
                                tuple(events))
-        side = self.sensors()
+        side = self.sensors(frame.t_us)
         fix = solve_pose(self.observations(frame.index), self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
         if isinstance(fix, NoFix):
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events))
+        if not self.gate.admit(fix):
+            return FrameResult(frame.index, frame.t_us, tracks, None,
+                               "held back: inconsistent with recent fixes", tuple(events))
+        self._last_fix = fix
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
                            pose_json=pose_json(fix))
+
+
+def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:
+    """All corners at least ``margin`` px inside the image."""
+    return bool(np.all(corners >= margin) and np.all(corners[:, 0] <= width - margin)
+                and np.all(corners[:, 1] <= height - margin))
 
 
 def pose_json(fix: PoseFix) -> dict[str, Any]:

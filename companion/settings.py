@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from companion.errors import ConfigError
+from companion.fixgate import FixGateConfig
 from companion.landmarks.config import LandmarksConfig
 from companion.monitoring.config import MonitorConfig
 from companion.perception import PerceptionConfig
@@ -75,6 +76,7 @@ class Settings:
     acquire: AcquireConfig = field(default_factory=AcquireConfig)
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     pose: PoseConfig = field(default_factory=PoseConfig)
+    fixgate: FixGateConfig = field(default_factory=FixGateConfig)
     landmarks: LandmarksConfig = field(default_factory=LandmarksConfig)
     mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     monitor: MonitorConfig = field(default_factory=MonitorConfig)

@@ -137,6 +137,11 @@ class FakeAutopilot:
     def boot_s(self) -> float:
         return (self.clock_ns() - self.boot_ns) * 1e-9
 
+    @property
+    def start_ns(self) -> int:
+        """When the flight began (``truth`` time 0) on the autopilot's clock."""
+        return self._start_ns
+
     def flight_s(self) -> float:
         return (self.clock_ns() - self._start_ns) * 1e-9
 

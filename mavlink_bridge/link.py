@@ -28,13 +28,14 @@ from mavlink_bridge.telemetry import Telemetry, convert
 
 log = logging.getLogger(__name__)
 
-HealthState = Literal["starting", "ok", "degraded", "failed"]
+HealthState = Literal["starting", "standby", "ok", "degraded", "failed"]
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
-_MAV_STATE = {"starting": 1, "ok": 4, "degraded": 5, "failed": 6}  # BOOT ACTIVE CRITICAL EMERG.
+# MAV_STATE: BOOT 1, STANDBY 3, ACTIVE 4, CRITICAL 5, EMERGENCY 6
+_MAV_STATE = {"starting": 1, "standby": 3, "ok": 4, "degraded": 5, "failed": 6}
 MAV_STATE_CRITICAL = 5
 MAV_SEVERITY_INFO = 6
-_REBOOT_BACKSTEP_MS = 500  # time_boot_ms going back this far means a reboot
+REBOOT_BACKSTEP_MS = 500  # time_boot_ms going back this far means a reboot
 
 
 class MavlinkLink:
@@ -272,7 +273,7 @@ class MavlinkLink:
         self.counters["timesync_answered"] += 1
 
     def _check_reboot(self, boot_ms: int) -> None:
-        if self._last_boot_ms >= 0 and boot_ms + _REBOOT_BACKSTEP_MS < self._last_boot_ms:
+        if self._last_boot_ms >= 0 and boot_ms + REBOOT_BACKSTEP_MS < self._last_boot_ms:
             self.reboots += 1
             self.statustext("autopilot reboot detected")
             for listener in self.reboot_listeners:

@@ -47,7 +47,7 @@ from mavlink_bridge.bridge import MAV_CMD_DO_SET_GLOBAL_ORIGIN, origin_seen
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.endpoint import Endpoint, parse_endpoint
 from mavlink_bridge.errors import BackendError
-from mavlink_bridge.link import HealthState
+from mavlink_bridge.link import REBOOT_BACKSTEP_MS, HealthState
 from mavlink_bridge.messages import (
     LandingTargetFix,
     VisionFix,
@@ -89,6 +89,8 @@ class MavsdkBridge:
         self._connected = False
         self._origin_ok = False
         self._health: HealthState = "starting"
+        self._last_boot_ms = -1
+        self.reboots = 0
         self._cache: dict[str, Telemetry] = {}
         self._subs: dict[str, set[asyncio.Queue[Telemetry]]] = {}
         self._tasks: list[asyncio.Task[Any]] = []
@@ -270,6 +272,8 @@ class MavsdkBridge:
 
     def _store(self, name: str, sysid: int, compid: int, now: int,
                fields: dict[str, Any]) -> None:
+        if compid == 1 and "time_boot_ms" in fields:
+            self._check_reboot(int(fields["time_boot_ms"]))
         value = convert(name, fields)
         if value is None:
             return
@@ -283,6 +287,16 @@ class MavsdkBridge:
                 q.get_nowait()
                 self.counters["queue_drops"] += 1
             q.put_nowait(item)
+
+    def _check_reboot(self, boot_ms: int) -> None:
+        """time_boot_ms stepping back: the autopilot rebooted and lost its origin."""
+        if self._last_boot_ms >= 0 and boot_ms + REBOOT_BACKSTEP_MS < self._last_boot_ms:
+            self.reboots += 1
+            self._origin_ok = False
+            self.vision_gate.reset()
+            self.target_gate.reset()
+            self.statustext("autopilot reboot detected")
+        self._last_boot_ms = boot_ms
 
     def latest(self, name: str) -> Telemetry | None:
         return self._cache.get(name)
@@ -316,6 +330,7 @@ class MavsdkBridge:
 
     def stats(self) -> dict[str, Any]:
         return {**self.counters, "link_up": self._connected, "origin_confirmed": self._origin_ok,
+                "reboots": self.reboots,
                 "vision": dict(self.vision_gate.counts),
                 "landing_target": dict(self.target_gate.counts)}
 

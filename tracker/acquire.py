@@ -19,6 +19,11 @@ import numpy.typing as npt
 from tracker.validation import check_image
 
 FloatArray = npt.NDArray[np.float64]
+#: A reference whose grey levels spread less than this is blank: nothing to align.
+MIN_REFERENCE_STD = 2.0
+#: Sizes (relative to the largest) at which a reference's keypoints are computed.
+REFERENCE_SCALES = (1.0, 0.55, 0.3)
+MIN_REFERENCE_SIDE_PX = 24
 
 
 @dataclass(frozen=True)
@@ -47,6 +52,8 @@ class Reference:
     keypoints_px: npt.NDArray[np.float32]
     descriptors: npt.NDArray[np.uint8]
     gray: npt.NDArray[np.float32]
+    matchable: bool = True
+    colour: npt.NDArray[np.uint8] = field(default_factory=lambda: np.zeros((1, 1, 3), np.uint8))
 
 
 @dataclass(frozen=True)
@@ -71,37 +78,66 @@ class ReferenceMatcher:
         self.references: dict[str, Reference] = {}
 
     def add(self, landmark_id: str, image_bgr: npt.NDArray[np.uint8]) -> Reference:
-        """Prepare a reference image; ValueError if it has too little texture to match."""
+        """Prepare a reference image.
+
+        A plain plate with few keypoints is kept for alignment (``matchable`` False: it is
+        found by prediction from a fix, not by feature matching); an image with no
+        texture at all is refused with ValueError.
+        """
         check_image(image_bgr, "image_bgr")
-        h, w = image_bgr.shape[:2]
-        scale = min(1.0, self.config.reference_max_side_px / max(h, w))
-        small = cv2.resize(image_bgr, (max(1, round(w * scale)), max(1, round(h * scale))),
-                           interpolation=cv2.INTER_AREA) if scale < 1.0 else image_bgr
-        kps, desc = self._orb.detectAndCompute(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), None)
-        if desc is None or len(kps) < self.config.min_inliers:
-            raise ValueError(f"image_bgr: the reference of {landmark_id!r} has "
-                             f"{0 if desc is None else len(kps)} keypoints; expected at least "
-                             f"{self.config.min_inliers} (too little texture to match)")
-        pts = np.array([kp.pt for kp in kps], np.float32) / np.float32(scale)
         gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
-        ref = Reference(landmark_id, (w, h), pts, np.asarray(desc, np.uint8), gray)
+        if float(gray.std()) < MIN_REFERENCE_STD:
+            raise ValueError(f"image_bgr: the reference of {landmark_id!r} is blank (grey "
+                             f"level spread {gray.std():.1f}); expected some texture to align")
+        h, w = image_bgr.shape[:2]
+        top = min(1.0, self.config.reference_max_side_px / max(h, w))
+        pts_all, desc_all = [], []
+        # several sizes: ORB's own pyramid spans about 4x, a landmark far away is smaller
+        for scale in (top * f for f in REFERENCE_SCALES):
+            size = (max(1, round(w * scale)), max(1, round(h * scale)))
+            if min(size) < MIN_REFERENCE_SIDE_PX:
+                break
+            small = cv2.resize(image_bgr, size, interpolation=cv2.INTER_AREA)
+            kps, desc = self._orb.detectAndCompute(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), None)
+            if desc is not None and len(kps):
+                pts_all.append(np.array([kp.pt for kp in kps], np.float32) / np.float32(scale))
+                desc_all.append(np.asarray(desc, np.uint8))
+        pts = np.concatenate(pts_all) if pts_all else np.zeros((0, 2), np.float32)
+        descriptors = np.concatenate(desc_all) if desc_all else np.zeros((0, 32), np.uint8)
+        matchable = len(pts) >= self.config.min_inliers
+        ref = Reference(landmark_id, (w, h), pts, descriptors, gray, matchable,
+                        np.ascontiguousarray(image_bgr))
         self.references[landmark_id] = ref
         return ref
 
-    def find(self, image_bgr: npt.NDArray[np.uint8],
-             landmark_ids: list[str] | None = None) -> list[Match]:
-        """Verified matches of the given references (all when None), best first."""
+    def find(self, image_bgr: npt.NDArray[np.uint8], landmark_ids: list[str] | None = None,
+             roi: tuple[float, float, float, float] | None = None) -> list[Match]:
+        """Verified matches of the given references (all when None), best first.
+
+        ``roi`` (x, y, w, h) limits the search to that part of the frame (cheaper; used to
+        recover a tracked landmark's corners); results are in frame coordinates.
+        """
         check_image(image_bgr, "image_bgr")
-        kps, desc = self._orb.detectAndCompute(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY),
-                                               None)
+        x0, y0 = 0, 0
+        view = image_bgr
+        if roi is not None:
+            height, width = image_bgr.shape[:2]
+            x0, y0 = max(0, int(roi[0])), max(0, int(roi[1]))
+            x1 = min(width, int(np.ceil(roi[0] + roi[2])))
+            y1 = min(height, int(np.ceil(roi[1] + roi[3])))
+            if x1 - x0 < 16 or y1 - y0 < 16:
+                return []
+            view = image_bgr[y0:y1, x0:x1]
+        gray = np.asarray(cv2.cvtColor(view, cv2.COLOR_BGR2GRAY), np.uint8)
+        kps, desc = self._orb.detectAndCompute(gray, None)
         if desc is None or len(kps) < self.config.min_inliers:
             return []
-        frame_pts = np.array([kp.pt for kp in kps], np.float32)
+        frame_pts = np.array([kp.pt for kp in kps], np.float32) + np.array([x0, y0], np.float32)
         frame_gray = np.asarray(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY), np.uint8)
         ids = self.references if landmark_ids is None else landmark_ids
         frame_desc = np.asarray(desc, np.uint8)
         found = [self._match_one(self.references[i], frame_pts, frame_desc, frame_gray)
-                 for i in ids if i in self.references]
+                 for i in ids if i in self.references and self.references[i].matchable]
         return sorted((m for m in found if m is not None), key=lambda m: -m.inliers)
 
     def _match_one(self, ref: Reference, frame_pts: npt.NDArray[np.float32],
@@ -129,10 +165,9 @@ class ReferenceMatcher:
         refined, _ = cv2.findHomography(src[keep], dst[keep], 0)  # least squares on inliers
         hom = np.asarray(refined if refined is not None else rough, np.float64)
         if cfg.refine_ecc:
-            hom = refine_ecc(ref, frame_gray, hom, cfg.ecc_iterations)
-        corners_ref = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float64).reshape(-1, 1, 2)
-        corners = np.asarray(cv2.perspectiveTransform(corners_ref, hom).reshape(4, 2),
-                             np.float64)
+            aligned = refine_ecc(ref, frame_gray, hom, cfg.ecc_iterations)
+            hom = hom if aligned is None else aligned
+        corners = project_corners(ref, hom)
         if not plausible_quad(corners, (w, h), cfg):
             return None
         x0, y0 = corners.min(axis=0)
@@ -142,23 +177,89 @@ class ReferenceMatcher:
                      np.asarray(hom, np.float64))
 
 
+def search_template(ref: Reference, frame_bgr: npt.NDArray[np.uint8],
+                    widths_px: tuple[float, ...], downscale: float = 0.5
+                    ) -> tuple[float, FloatArray] | None:
+    """Best normalised cross-correlation of the reference over the frame at a few sizes.
+
+    For references with too few keypoints to match (plain plates, simple graphics) and
+    for small, distant landmarks.  Returns (score, homography reference -> frame) of the
+    best fronto-parallel placement; :func:`refine_ecc` then fits the perspective.
+    """
+    small = cv2.resize(frame_bgr, None, fx=downscale, fy=downscale,
+                       interpolation=cv2.INTER_AREA).astype(np.float32)
+    w, h = ref.size_px
+    best: tuple[float, FloatArray] | None = None
+    for width in widths_px:
+        tw = max(6, round(width * downscale))
+        th = max(6, round(tw * h / w))
+        if tw >= small.shape[1] or th >= small.shape[0]:
+            continue
+        template = cv2.resize(ref.colour, (tw, th), interpolation=cv2.INTER_AREA)
+        scores = cv2.matchTemplate(small, template.astype(np.float32), cv2.TM_CCOEFF_NORMED)
+        _, score, _, (x, y) = cv2.minMaxLoc(scores)
+        if best is None or score > best[0]:
+            sx = tw / downscale / w
+            sy = th / downscale / h
+            hom = np.array([[sx, 0.0, x / downscale], [0.0, sy, y / downscale], [0, 0, 1.0]])
+            best = (float(score), hom)
+    return best
+
+
+def project_corners(ref: Reference, hom: FloatArray) -> FloatArray:
+    """The reference's corners TL, TR, BR, BL through homography ``hom`` (4x2)."""
+    w, h = ref.size_px
+    quad = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float64).reshape(-1, 1, 2)
+    return np.asarray(cv2.perspectiveTransform(quad, hom).reshape(4, 2), np.float64)
+
+
+def homography_to(ref: Reference, corners_px: FloatArray) -> FloatArray:
+    """The homography taking the reference's corners to ``corners_px`` (TL, TR, BR, BL)."""
+    w, h = ref.size_px
+    src = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float32)
+    return np.asarray(cv2.getPerspectiveTransform(src, corners_px.astype(np.float32)),
+                      np.float64)
+
+
 def refine_ecc(ref: Reference, frame_gray: npt.NDArray[np.uint8], hom: FloatArray,
-               iterations: int = 40) -> FloatArray:
-    """Sub-pixel homography by ECC image alignment, started from the feature estimate.
+               iterations: int = 40, min_correlation: float = 0.6) -> FloatArray | None:
+    """Sub-pixel homography (reference -> frame) by ECC alignment, from an estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
-    corners extrapolate that; aligning the reference's pixels themselves removes it.  The
-    feature estimate is kept when ECC does not converge.
+    corners extrapolate that; aligning the reference's pixels themselves removes it.  Only
+    the region around the predicted quadrilateral is aligned, against the reference
+    scaled to about its size in the frame, so the cost follows the landmark's size, not
+    the frame's.  None when ECC fails or the correlation stays under ``min_correlation``.
     """
-    warp = (hom / hom[2, 2]).astype(np.float32)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
+    corners = project_corners(ref, hom)
+    if not np.all(np.isfinite(corners)):
+        return None
+    height, width = frame_gray.shape[:2]
+    margin = 0.15 * float(np.ptp(corners, axis=0).max()) + 6.0
+    x0, y0 = np.floor(np.maximum(corners.min(axis=0) - margin, 0)).astype(int)
+    x1 = int(min(np.ceil(corners[:, 0].max() + margin), width))
+    y1 = int(min(np.ceil(corners[:, 1].max() + margin), height))
+    if x1 - x0 < 8 or y1 - y0 < 8:
+        return None
+    w, h = ref.size_px
+    quad_area = float(cv2.contourArea(corners.astype(np.float32)))
+    scale = float(np.clip(np.sqrt(max(quad_area, 1.0) / (w * h)), 0.05, 1.0))
+    template = cv2.resize(ref.gray, (max(8, round(w * scale)), max(8, round(h * scale))),
+                          interpolation=cv2.INTER_AREA)
+    s_ref = np.diag([template.shape[1] / w, template.shape[0] / h, 1.0])  # ref -> template
+    t_roi = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # roi -> frame
+    start = np.linalg.inv(t_roi) @ hom @ np.linalg.inv(s_ref)  # template -> roi
+    warp = (start / start[2, 2]).astype(np.float32)
+    roi = frame_gray[y0:y1, x0:x1].astype(np.float32)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-4)
     try:
-        _, warp = cv2.findTransformECC(ref.gray, frame_gray.astype(np.float32), warp,
-                                       cv2.MOTION_HOMOGRAPHY, criteria)
+        cc, found = cv2.findTransformECC(template, roi, warp, cv2.MOTION_HOMOGRAPHY, criteria)
     except cv2.error:
-        return hom
-    out = warp.astype(np.float64)
-    return out if np.all(np.isfinite(out)) else hom
+        return None
+    out = t_roi @ np.asarray(found, np.float64) @ s_ref
+    if cc < min_correlation or not np.all(np.isfinite(out)):
+        return None
+    return np.asarray(out / out[2, 2], np.float64)
 
 
 def plausible_quad(corners: FloatArray, ref_size: tuple[int, int], cfg: AcquireConfig) -> bool:

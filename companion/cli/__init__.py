@@ -24,6 +24,7 @@ from companion.settings import load_settings
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES: tuple[str, ...] = (
     "demo_cmd",
+    "run_cmd",
     "monitor_cmd",
     "dashboard_cmd",
     "router_cmd",
@@ -33,6 +34,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "record_cmd",
     "fake_autopilot_cmd",
     "landmarks_cmd",
+    "eval_cmd",
 )
 
 log = logging.getLogger("companion")

@@ -33,7 +33,7 @@ def _print_table(name: str, values: dict[str, object]) -> None:
         if key not in tables:
             print(f"{key} = {_toml_value(value)}")
     for key, value in tables.items():
-        _print_table(f"{name}.{key}", value)  # type: ignore[arg-type]
+        _print_table(f"{name}.{key}", value)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:

@@ -16,7 +16,7 @@ from companion.sources.config import SourceConfig
 from companion.sources.factory import open_source, resolve
 from companion.sources.files import RecordedStreamSource
 from companion.sources.stream_format import StreamMeta
-from companion.sources.stream_io import StreamWriter
+from companion.sources.stream_io import IMAGE_FORMATS, StreamWriter
 from tracker.camera import CameraModel
 
 log = logging.getLogger(__name__)
@@ -37,7 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="stop after this much recorded time (default: until the end or "
                         "Ctrl-C)")
     parser.add_argument("--frames", type=int, metavar="N", help="stop after N frames")
-    parser.add_argument("--format", choices=("png", "jpg"), default="png")
+    parser.add_argument("--format", choices=IMAGE_FORMATS, default="png",
+                        help="png files (lossless, default), jpg files, or one lossless "
+                        "FFV1 video (ffv1)")
     parser.add_argument("--fps", type=float, default=30.0,
                         help="frame rate written for sources without their own (default 30)")
     parser.add_argument("--stall-timeout", type=float, default=2.0, metavar="S",
@@ -82,7 +84,9 @@ async def record(config: SourceConfig, out: Path, camera: CameraModel, *, second
                 meta = _meta(source, frame.size, config.fps, config.spec, camera,
                              config.camera_id)
                 writer = StreamWriter(out, meta, image_format, overwrite=overwrite)
-            truth = source.truth(frame.index) if isinstance(source, SimCameraSource) else None
+            truth = None
+            if isinstance(source, SimCameraSource | RecordedStreamSource):
+                truth = source.truth(frame.index)
             writer.write(frame, truth)
             count += 1
     finally:

@@ -12,6 +12,7 @@ from companion.settings import Settings
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.synth import synth_stream
+from companion.sources.stream_io import IMAGE_FORMATS
 
 log = logging.getLogger(__name__)
 
@@ -32,8 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--seconds", type=float, metavar="S", help="duration (default: scenario)")
     parser.add_argument("--fps", type=float, metavar="F", help="frame rate (default: scenario)")
     parser.add_argument("--seed", type=int, metavar="N", help="random seed (default: scenario)")
-    parser.add_argument("--format", choices=("png", "jpg"), default="png",
-                        help="image files: png (lossless, default) or jpg")
+    parser.add_argument("--format", choices=IMAGE_FORMATS, default="png",
+                        help="png files (lossless, default), jpg files, or one lossless "
+                        "FFV1 video (ffv1)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace a stream already in --out")
     parser.set_defaults(handler=run)

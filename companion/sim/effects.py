@@ -200,6 +200,12 @@ class EffectStack:
         self.world = world
         self._banks: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}
 
+    def occluded_frac(self, landmark_id: str, t_s: float) -> float:
+        """Share of a landmark's box covered by active occlusion effects (the largest)."""
+        fractions = [s.fraction(t_s) for s in self.specs if s.kind == "occlusion"
+                     and s.landmark_id == landmark_id and s.active(t_s)]
+        return max(fractions, default=0.0)
+
     def world_quads(self, t_s: float) -> list[Quad]:
         """Distractor quads to draw at ``t_s``."""
         if not any(s.kind == "distractor" for s in self.specs):

@@ -39,6 +39,8 @@ class Rendered:
 
 def clip_halfspace(points: FloatArray, normal: FloatArray, offset: float) -> FloatArray:
     """Sutherland-Hodgman: the part of a convex polygon where ``p . normal >= offset``."""
+    if len(points) and float((points @ normal).min()) >= offset:
+        return points  # nothing to clip
     out: list[FloatArray] = []
     n = len(points)
     for i in range(n):
@@ -53,6 +55,9 @@ def clip_halfspace(points: FloatArray, normal: FloatArray, offset: float) -> Flo
 
 def clip_rect(poly: FloatArray, x0: float, y0: float, x1: float, y1: float) -> FloatArray:
     """A convex 2-D polygon clipped to the rectangle [x0, x1] x [y0, y1]."""
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    if lo[0] >= x0 and lo[1] >= y0 and hi[0] <= x1 and hi[1] <= y1:
+        return poly  # already inside (the common case for landmarks)
     for normal, offset in (((1, 0), x0), ((-1, 0), -x1), ((0, 1), y0), ((0, -1), -y1)):
         if len(poly) == 0:
             break
@@ -181,8 +186,8 @@ class Renderer:
         mask = np.zeros((size[1], size[0]), np.uint8)
         pts = np.round((uv - (x0, y0)) * (1 << SHIFT)).astype(np.int32)
         cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, SHIFT)
-        roi = img[y0:y1, x0:x1]
-        np.copyto(roi, patch, where=(mask & inside).astype(bool)[..., None])
+        roi = img[y0:y1, x0:x1]  # a view: cv2.copyTo writes into img in place
+        cv2.copyTo(patch, cv2.bitwise_and(mask, inside), roi)
 
     def _ones(self, width: int, height: int) -> np.ndarray:
         key = (width, height)

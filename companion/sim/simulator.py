@@ -16,6 +16,8 @@ from companion.sim.trajectory import Trajectory, VehicleState
 from companion.sim.world import World, load_landmark_map
 from companion.sources.base import ImageU8
 from companion.sources.stream_format import FrameTruth, StreamMeta
+from mavlink_bridge.vehicle import TruthFn
+from mavlink_bridge.vehicle import VehicleState as AutopilotState
 
 RANGE_STREAM = 7919  # keeps range-finder randomness apart from effect randomness
 
@@ -50,6 +52,26 @@ class Simulator:
         """The vehicle state at ``t_s`` scenario seconds (shared with the fake autopilot)."""
         return self.trajectory.state_at(t_s)
 
+    def autopilot_truth(self, t_s: float) -> AutopilotState:
+        """Truth for the fake autopilot at ``t_s``: hand ``simulator.autopilot_truth`` (a
+        ``mavlink_bridge.vehicle.TruthFn``) to ``FakeAutopilot(config, truth=...)``.
+
+        ``range_m`` is the range finder's reading (deterministic per millisecond and seed);
+        a dropout or no return reads ``max_range_m + 1``: out of range, which is how a
+        DISTANCE_SENSOR says "no reading".
+        """
+        state = self.state_at(t_s)
+        rng = np.random.default_rng([self.scenario.seed, round(t_s * 1000.0), RANGE_STREAM])
+        reading = self.rangefinder.measure(state, rng)
+        range_m = self.rangefinder.config.max_range_m + 1.0 if reading is None else reading
+        return AutopilotState(t_s, state.position_ned_m, state.velocity_ned_m_s,
+                              state.attitude_rpy_rad, range_m)
+
+    @property
+    def truth_fn(self) -> TruthFn:
+        """:meth:`autopilot_truth` typed as the fake autopilot's ``TruthFn``."""
+        return self.autopilot_truth
+
     def render(self, index: int, t_s: float | None = None) -> tuple[ImageU8, FrameTruth]:
         """Frame ``index`` at ``t_s`` (default ``index / fps``) and its truth."""
         t = index / self.fps if t_s is None else t_s
@@ -58,7 +80,11 @@ class Simulator:
         image = self.effects.apply(rendered.image, t, index, rendered.boxes)
         rng = np.random.default_rng([self.scenario.seed, index, RANGE_STREAM])
         range_m = self.rangefinder.measure(state, rng)
-        truth = FrameTruth(rendered.boxes, rendered.pose, rendered.camera, range_m)
+        boxes = tuple(
+            replace(b, occluded_frac=self.effects.occluded_frac(b.landmark_id, t))
+            for b in rendered.boxes
+        )
+        truth = FrameTruth(boxes, rendered.pose, rendered.camera, range_m)
         return image, truth
 
     def stream_meta(self, fps: float | None = None) -> StreamMeta:

@@ -6,7 +6,7 @@ import asyncio
 from collections import OrderedDict
 
 from companion.sim.simulator import Simulator
-from companion.sources.base import EndOfStream, Frame, SourceStatus, monotonic_us
+from companion.sources.base import EndOfStream, Frame, ImageU8, SourceStatus, monotonic_us
 from companion.sources.stream_format import FrameTruth
 
 TRUTH_KEPT = 256
@@ -21,6 +21,11 @@ class SimCameraSource:
     frames come as fast as they render with ``t0_us = 0`` (the scenario clock).  Either
     way ``(t_us - t0_us) / 1e6`` is the scenario time to give to ``state_at``.
     ``seconds`` (default: the scenario's) ends the stream; ``loop`` replays it instead.
+
+    ``t0_us`` anchors scenario time 0 to a given monotonic time (realtime only), so that the
+    camera and the fake autopilot share one clock: pass the autopilot's start time
+    (``FakeAutopilot._start_ns // 1000`` or the app's equivalent).  The first frame is then
+    the one due now.
     """
 
     def __init__(
@@ -30,6 +35,7 @@ class SimCameraSource:
         realtime: bool = True,
         loop: bool = False,
         seconds: float | None = None,
+        t0_us: int | None = None,
     ) -> None:
         self.sim = simulator
         self.realtime = realtime
@@ -37,11 +43,12 @@ class SimCameraSource:
         self.seconds = simulator.scenario.seconds if seconds is None else seconds
         self.camera_id = simulator.scenario.camera_id
         self.status = SourceStatus()
-        self.t0_us: int | None = None if realtime else 0
+        self.t0_us: int | None = t0_us if realtime else 0
         self._next = 0
         self._frames_per_pass = max(1, round(self.seconds * simulator.fps))
         self._truth: OrderedDict[int, FrameTruth] = OrderedDict()
         self._closed = False
+        self._prefetch: tuple[int, asyncio.Future[tuple[ImageU8, FrameTruth]]] | None = None
 
     def truth(self, index: int) -> FrameTruth | None:
         """Truth of a recent frame (the last few hundred are kept)."""
@@ -52,18 +59,25 @@ class SimCameraSource:
         return (frame.t_us - (self.t0_us or 0)) / 1e6
 
     async def recv(self) -> Frame:
-        """Render and return the next frame (EndOfStream after ``seconds`` unless looping)."""
+        """Render and return the next frame (EndOfStream after ``seconds`` unless looping).
+
+        In real time the next frame is rendered ahead while the pipeline works on this
+        one (a camera exposes and reads out while the computer processes), so a frame is
+        delivered at its due time instead of a render time later.
+        """
         if self._closed:
             raise EndOfStream("source closed")
         index = self._next
         if self.realtime:
-            index = await self._wait_due(index)
+            index = await self._wait_due(index, deliver=False)
         if index >= self._frames_per_pass and not self.loop:
             raise EndOfStream("end of scenario")
         self._next = index + 1
-        t_s = (index % self._frames_per_pass) / self.sim.fps
-        loop = asyncio.get_running_loop()
-        image, truth = await loop.run_in_executor(None, self.sim.render, index, t_s)
+        image, truth = await self._rendered(index)
+        if self.realtime:
+            await self._wait_due(index, deliver=True)
+            if self._next < self._frames_per_pass or self.loop:
+                self._prefetch = (self._next, self._render_async(self._next))
         self._truth[index] = truth
         while len(self._truth) > TRUTH_KEPT:
             self._truth.popitem(last=False)
@@ -71,18 +85,37 @@ class SimCameraSource:
         t_us = (self.t0_us or 0) + round(index * 1e6 / self.sim.fps)
         return Frame(index, t_us, image, self.camera_id)
 
-    async def _wait_due(self, index: int) -> int:
+    def _render_async(self, index: int) -> asyncio.Future[tuple[ImageU8, FrameTruth]]:
+        t_s = (index % self._frames_per_pass) / self.sim.fps
+        return asyncio.get_running_loop().run_in_executor(None, self.sim.render, index, t_s)
+
+    async def _rendered(self, index: int) -> tuple[ImageU8, FrameTruth]:
+        if self._prefetch is not None and self._prefetch[0] == index:
+            future = self._prefetch[1]
+        else:
+            if self._prefetch is not None:  # fell behind: that frame's time has passed
+                self._prefetch[1].cancel()
+            future = self._render_async(index)
+        self._prefetch = None
+        return await future
+
+    async def _wait_due(self, index: int, deliver: bool) -> int:
+        """Skip frames whose time has passed (counted late); with ``deliver``, sleep until
+        frame ``index`` is due."""
         now = monotonic_us()
         if self.t0_us is None:
             self.t0_us = now
         period_us = 1e6 / self.sim.fps
-        current = int((now - self.t0_us) // period_us)
-        if current > index:  # behind: drop the frames whose time has passed
-            for _ in range(index, current):
-                self.status.skip("late", f"rendering fell behind at frame {index}")
-            index = current
-        due = self.t0_us + index * period_us
-        delay_s = (due - monotonic_us()) / 1e6
+        if not deliver:
+            current = int((now - self.t0_us) // period_us)
+            if self.status.delivered == 0 and self.status.skipped == 0:
+                return max(index, current)  # the first frame is the one due now
+            if current > index:  # behind: drop the frames whose time has passed
+                for _ in range(index, current):
+                    self.status.skip("late", f"rendering fell behind at frame {index}")
+                return current
+            return index
+        delay_s = (self.t0_us + index * period_us - monotonic_us()) / 1e6
         if delay_s > 0:
             await asyncio.sleep(delay_s)
         return index

@@ -3,27 +3,23 @@ behind the wall images, poles under the signposts, and a ground plane."""
 
 from __future__ import annotations
 
-import base64
-import binascii
-import json
 import math
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
 
 import cv2
 import numpy as np
 import pymap3d
 
 from companion.errors import InputError
+from companion.landmarks.geojson_io import read_map
+from companion.landmarks.record import Appearance, Landmark
 from companion.sim import textures
 from companion.sources.base import ImageU8
 from companion.sources.stream_format import Origin
 from tracker.geometry import FloatArray
 
-Category = Literal["signpost", "wall_image", "logo", "other"]
-CATEGORIES = ("signpost", "wall_image", "logo", "other")
 DOWN = np.array([0.0, 0.0, 1.0])
 
 
@@ -106,86 +102,51 @@ def seeded_rng(seed: int, key: str) -> np.random.Generator:
     return np.random.default_rng([seed, zlib.crc32(key.encode("utf-8"))])
 
 
-def _appearance(value: Any, base: Path, where: str) -> ImageU8 | None:
-    if not isinstance(value, str) or not value:
-        return None
-    if value.startswith("data:"):
-        try:
-            raw = base64.b64decode(value.split(",", 1)[1], validate=False)
-        except (IndexError, binascii.Error) as err:
-            raise InputError(f"{where}: appearance data URI is not base64") from err
-        img = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR)
-    else:
-        img = cv2.imread(str(base / value), cv2.IMREAD_COLOR)
+def texture_from_appearance(app: Appearance, where: str) -> ImageU8:
+    """The face's texture from a map's reference image: its ``box_px``, or the central
+    half of the image (the landmark database's convention when there is no box)."""
+    img = cv2.imdecode(np.frombuffer(app.data, np.uint8), cv2.IMREAD_COLOR)
     if img is None:
-        raise InputError(f"{where}: appearance {value[:60]!r} is not a readable image")
-    return np.asarray(img, dtype=np.uint8)
+        raise InputError(f"{where}: appearance is not a readable image")
+    h, w = img.shape[:2]
+    x, y, bw, bh = app.box_px or (w // 4, h // 4, max(1, w // 2), max(1, h // 2))
+    face = img[y : y + bh, x : x + bw]
+    if face.size == 0:
+        raise InputError(f"{where}: appearance_box {app.box_px} lies outside the image")
+    return np.ascontiguousarray(face, dtype=np.uint8)
 
 
-def _number(props: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
-    value = props.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or value is None:
-        raise InputError(f"{where}: property '{key}' must be a number, got {value!r}")
-    return float(value)
-
-
-def parse_landmark(
-    feature: Any, n: int, origin: Origin, base: Path, seed: int
-) -> SimLandmark:
-    """One GeoJSON Feature -> :class:`SimLandmark` (raises :class:`InputError`)."""
-    where = f"feature {n}"
-    if not isinstance(feature, dict) or feature.get("type") != "Feature":
-        raise InputError(f"{where}: not a GeoJSON Feature")
-    geom = feature.get("geometry") or {}
-    coords = geom.get("coordinates")
-    if geom.get("type") != "Point" or not isinstance(coords, list) or len(coords) < 2:
-        raise InputError(f"{where}: geometry must be a Point [lon, lat, alt_m]")
-    if "id" not in feature:
-        raise InputError(f"{where}: missing Feature id (the landmark id)")
-    lid = str(feature["id"])
-    where = f"landmark {lid}"
-    props = feature.get("properties") or {}
-    category = str(props.get("category", "other"))
-    if category not in CATEGORIES:
-        raise InputError(f"{where}: category must be one of {CATEGORIES}, got {category!r}")
-    width, height = _number(props, "width_m", where), _number(props, "height_m", where)
-    if width <= 0 or height <= 0:
-        raise InputError(f"{where}: width_m and height_m must be > 0")
-    facing = None if props.get("facing_deg") is None else _number(props, "facing_deg", where)
-    lon, lat = float(coords[0]), float(coords[1])
-    alt = float(coords[2]) if len(coords) > 2 else origin.alt_m
-    n_m, e_m, d_m = pymap3d.geodetic2ned(lat, lon, alt, origin.lat, origin.lon, origin.alt_m)
+def sim_landmark(record: Landmark, origin: Origin, seed: int) -> SimLandmark:
+    """A landmark record (``companion.landmarks``) placed in NED as a textured quad."""
+    n_m, e_m, d_m = pymap3d.geodetic2ned(record.lat_deg, record.lon_deg, record.alt_m,
+                                         origin.lat, origin.lon, origin.alt_m)
     centre = np.array([n_m, e_m, d_m], dtype=np.float64)
-    name = str(props.get("name", lid))
-    texture = _appearance(props.get("appearance"), base, where)
-    if texture is None:
+    lid = record.id
+    if record.appearance is not None:
+        texture = texture_from_appearance(record.appearance, f"landmark {lid}")
+    else:
         rng = seeded_rng(seed, lid)
-        make = textures.signpost_texture if category == "signpost" else textures.poster_texture
-        texture = make(rng, width, height, name)
-    quad = Quad(face_corners(centre, width, height, facing), texture, landmark_id=lid)
-    return SimLandmark(lid, name, category, centre, width, height, facing, quad)
+        make = textures.signpost_texture if record.category == "signpost" else (
+            textures.poster_texture)
+        texture = make(rng, record.width_m, record.height_m, record.name)
+    corners = face_corners(centre, record.width_m, record.height_m, record.facing_deg)
+    quad = Quad(corners, texture, landmark_id=lid)
+    return SimLandmark(lid, record.name, record.category, centre, record.width_m,
+                       record.height_m, record.facing_deg, quad)
 
 
 def load_landmark_map(path: Path, origin: Origin, seed: int = 0) -> list[SimLandmark]:
-    """Read a GeoJSON landmark map and place every landmark in NED about ``origin``."""
+    """Read a GeoJSON landmark map (validated by ``companion.landmarks.geojson_io``) and
+    place every landmark in NED about ``origin``; the point is the face's centre."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{path}: landmark map is missing") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise InputError(f"{path}: not valid JSON ({err})") from err
-    if not isinstance(data, dict) or data.get("type") != "FeatureCollection":
-        raise InputError(f"{path}: must be a GeoJSON FeatureCollection")
+    if not path.is_file():
+        raise InputError(f"{path}: landmark map is missing")
     out = []
-    for n, feature in enumerate(data.get("features", [])):
+    for record in read_map(path):
         try:
-            out.append(parse_landmark(feature, n, origin, path.parent, seed))
+            out.append(sim_landmark(record, origin, seed))
         except InputError as err:
             raise InputError(f"{path}: {err}") from None
-    ids = [lm.landmark_id for lm in out]
-    if len(set(ids)) != len(ids):
-        raise InputError(f"{path}: landmark ids must be unique")
     return out
 
 

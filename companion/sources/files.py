@@ -3,27 +3,73 @@
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from companion.errors import InputError
 from companion.sources.base import EndOfStream, Frame, ImageU8, Pacer, SourceStatus
 from companion.sources.images import ImageProblem, read_image
-from companion.sources.stream_format import FRAMES_HEADER, StreamMeta, open_csv, read_meta
+from companion.sources.stream_format import (
+    FRAMES_HEADER,
+    FrameTruth,
+    StreamMeta,
+    open_csv,
+    read_meta,
+)
+from companion.sources.stream_io import read_truth
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 
 
 @dataclass(frozen=True)
 class Entry:
-    """One row of a frame list: recorded index, recorded time and image file."""
+    """One row of a frame list: recorded index, recorded time and image file.
+
+    ``frame_no`` is set when the frame is number ``frame_no`` (0-based) of a video file.
+    """
 
     index: int
     t_us: int
     path: Path
+    frame_no: int | None = None
+
+
+class VideoFrameReader:
+    """Reads numbered frames of video files sequentially (reopening to go backwards).
+
+    Used from one thread only (the source's own executor), as OpenCV requires.
+    """
+
+    def __init__(self) -> None:
+        self._cap: cv2.VideoCapture | None = None
+        self._path: Path | None = None
+        self._pos = 0
+
+    def read(self, path: Path, frame_no: int) -> ImageU8:
+        """Frame ``frame_no`` of ``path`` or :class:`ImageProblem`."""
+        if self._cap is None or path != self._path or frame_no < self._pos:
+            self.close()
+            if not path.is_file():
+                raise ImageProblem("missing", f"{path}: video file is missing")
+            self._cap, self._path, self._pos = cv2.VideoCapture(str(path)), path, 0
+        while self._pos < frame_no and self._cap.grab():
+            self._pos += 1
+        ok, image = self._cap.read() if self._pos == frame_no else (False, None)
+        if not ok or image is None:
+            raise ImageProblem("missing", f"{path}: has no frame {frame_no}")
+        self._pos += 1
+        return np.asarray(image, dtype=np.uint8)
+
+    def close(self) -> None:
+        """Release the open video, if any."""
+        if self._cap is not None:
+            self._cap.release()
+        self._cap = None
 
 
 class FileSequenceSource:
@@ -61,6 +107,8 @@ class FileSequenceSource:
         self._span_us = entries[-1].t_us - entries[0].t_us + frame_period_us
         self._index_step = max(e.index for e in entries) + 1
         self._closed = False
+        self._video = VideoFrameReader()
+        self._video_pool: concurrent.futures.ThreadPoolExecutor | None = None
 
     async def recv(self) -> Frame:
         """The next readable frame, paced; :class:`EndOfStream` at the end."""
@@ -72,7 +120,7 @@ class FileSequenceSource:
                 self.status.skip("time_backwards", f"{entry.path}: time {t_us} us not increasing")
                 continue
             try:
-                image = await loop.run_in_executor(None, read_image, entry.path)
+                image = await self._load(loop, entry)
             except ImageProblem as err:
                 self.status.skip(err.reason, str(err))
                 continue
@@ -84,6 +132,15 @@ class FileSequenceSource:
             self.status.delivered += 1
             index = entry.index + self._pass * self._index_step
             return Frame(index, t_us, image, self.camera_id)
+
+    async def _load(self, loop: asyncio.AbstractEventLoop, entry: Entry) -> ImageU8:
+        if entry.frame_no is None:
+            return await loop.run_in_executor(None, read_image, entry.path)
+        if self._video_pool is None:
+            self._video_pool = concurrent.futures.ThreadPoolExecutor(1, "stream-video")
+        return await loop.run_in_executor(
+            self._video_pool, self._video.read, entry.path, entry.frame_no
+        )
 
     def _next_entry(self) -> Entry:
         if self._closed:
@@ -111,8 +168,11 @@ class FileSequenceSource:
         return True
 
     def close(self) -> None:
-        """Stop delivering (files are opened per frame, so nothing else to release)."""
+        """Stop delivering and release a video file being read."""
         self._closed = True
+        if self._video_pool is not None:
+            self._video_pool.submit(self._video.close)
+            self._video_pool.shutdown(wait=False)
 
 
 class RecordedStreamSource(FileSequenceSource):
@@ -136,6 +196,17 @@ class RecordedStreamSource(FileSequenceSource):
         )
         for detail in status_skips:
             self.status.skip("bad_row", detail)
+        self._truth: dict[int, FrameTruth] | None = None
+
+    def truth(self, index: int) -> FrameTruth | None:
+        """The recorded truth of frame ``index`` (None when the stream has none for it).
+
+        Truth files are read on the first call.  In a looped replay, ``index`` is the
+        delivered index: it is mapped back to the recorded one.
+        """
+        if self._truth is None:
+            self._truth = read_truth(self.folder)
+        return self._truth.get(index % self._index_step if self.loop else index)
 
 
 def read_frame_list(folder: Path) -> tuple[list[str], list[Entry]]:
@@ -149,7 +220,9 @@ def read_frame_list(folder: Path) -> tuple[list[str], list[Entry]]:
             if not row:
                 continue
             try:
-                entries.append(Entry(int(row[0]), int(row[1]), folder / row[2].strip()))
+                name, _, number = row[2].strip().partition("#")
+                frame_no = int(number) if number else None
+                entries.append(Entry(int(row[0]), int(row[1]), folder / name, frame_no))
             except (ValueError, IndexError):
                 problems.append(f"{path}:{n}: malformed row {row}")
     if not entries:

@@ -133,6 +133,10 @@ def camera_target(spec: str) -> tuple[int | str, int]:
     return s, cv2.CAP_FFMPEG
 
 
+def _has_backend(backend: int) -> bool:
+    return backend == cv2.CAP_ANY or bool(cv2.videoio_registry.hasBackend(backend))
+
+
 def open_capture(spec: str) -> Capture:
     """``cv2.VideoCapture`` for a camera spec (see :func:`camera_target`)."""
     target, backend = camera_target(spec)
@@ -171,6 +175,10 @@ class CameraSource:
     async def open(cls, spec: str, *, open_timeout_s: float = 5.0, **kwargs: Any) -> CameraSource:
         """Open the camera and start its capture thread, or raise :class:`SourceError`."""
         source = cls(spec, **kwargs)
+        backend = camera_target(spec)[1]
+        if source._factory is open_capture and not _has_backend(backend):
+            name = cv2.videoio_registry.getBackendName(backend)
+            raise SourceError(f"camera {spec}: this OpenCV build has no {name} support")
         loop = asyncio.get_running_loop()
         pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="camera-open")
         try:
@@ -251,5 +259,8 @@ class CameraSource:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+            if self._thread.is_alive():  # stuck in a driver read: releasing now could crash
+                log.warning("camera %s: capture thread still blocked; not releasing", self.spec)
+                return
         if self._cap is not None:
             self._cap.release()

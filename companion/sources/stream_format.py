@@ -25,7 +25,8 @@ FORMAT_VERSION = 1
 
 FRAMES_HEADER = ("index", "t_us", "file")
 BOXES_HEADER = ("index", "landmark_id", "x", "y", "w", "h")
-CORNER_COLUMNS = ("u_tl", "v_tl", "u_tr", "v_tr", "u_br", "v_br", "u_bl", "v_bl", "in_view_frac")
+CORNERS = ("u_tl", "v_tl", "u_tr", "v_tr", "u_br", "v_br", "u_bl", "v_bl")
+CORNER_COLUMNS = (*CORNERS, "in_view_frac", "occluded_frac")  # optional, after BOXES_HEADER
 POSE_HEADER = ("index", "t_us", "north_m", "east_m", "down_m", "roll_rad", "pitch_rad", "yaw_rad")
 R_COLUMNS = tuple(f"r{i}{j}" for i in range(3) for j in range(3))
 CAMERA_HEADER = ("index", "t_us", "north_m", "east_m", "down_m", *R_COLUMNS)
@@ -59,7 +60,8 @@ class TruthBox:
 
     ``corners_px``: 4x2 (top-left, top-right, bottom-right, bottom-left of the face as seen
     from the front), possibly outside the image; ``in_view_frac``: share of the face's
-    projected area inside the image.
+    projected area inside the image; ``occluded_frac``: share of the box covered by a
+    scripted occluder (simulator only; 0 otherwise).
     """
 
     landmark_id: str
@@ -69,6 +71,7 @@ class TruthBox:
     h: float
     corners_px: FloatArray | None = None
     in_view_frac: float = 1.0
+    occluded_frac: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -252,7 +255,8 @@ def open_csv(
 
 
 def _f(v: float, digits: int) -> str:
-    return f"{v:.{digits}f}"
+    text = f"{v:.{digits}f}"
+    return text[1:] if text.startswith("-") and not text.strip("-0.") else text  # no "-0.0"
 
 
 def box_row(index: int, box: TruthBox) -> list[str]:
@@ -260,20 +264,22 @@ def box_row(index: int, box: TruthBox) -> list[str]:
     row = [str(index), box.landmark_id] + [_f(v, 3) for v in (box.x, box.y, box.w, box.h)]
     if box.corners_px is not None:
         row += [_f(float(v), 3) for v in np.asarray(box.corners_px).reshape(8)]
-        row.append(_f(box.in_view_frac, 4))
-    return row
+    else:
+        row += [""] * len(CORNERS)
+    return [*row, _f(box.in_view_frac, 4), _f(box.occluded_frac, 4)]
 
 
 def parse_box_row(row: list[str], names: list[str]) -> tuple[int, TruthBox]:
     """Inverse of :func:`box_row` (``names`` = the file's header)."""
     index = int(row[0])
     x, y, w, h = (float(v) for v in row[2:6])
+    extra = {n: v.strip() for n, v in zip(names[6:], row[6:], strict=False) if v.strip()}
     corners = None
-    frac = 1.0
-    if len(row) >= 15 and tuple(names[6:15]) == CORNER_COLUMNS:
-        corners = np.array([float(v) for v in row[6:14]], dtype=np.float64).reshape(4, 2)
-        frac = float(row[14])
-    return index, TruthBox(row[1], x, y, w, h, corners, frac)
+    if all(c in extra for c in CORNERS):
+        corners = np.array([float(extra[c]) for c in CORNERS], dtype=np.float64).reshape(4, 2)
+    in_view = float(extra.get("in_view_frac", 1.0))
+    occluded = float(extra.get("occluded_frac", 0.0))
+    return index, TruthBox(row[1], x, y, w, h, corners, in_view, occluded)
 
 
 def pose_row(index: int, t_us: int, pose: TruthPose) -> list[str]:

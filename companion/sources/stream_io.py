@@ -8,6 +8,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
+import cv2
+
 from companion.errors import InputError
 from companion.sources.base import Frame
 from companion.sources.images import write_image
@@ -35,13 +37,17 @@ from companion.sources.stream_format import (
 )
 
 FRAMES_DIR = "frames"
+VIDEO_NAME = "frames.mkv"
+IMAGE_FORMATS = ("png", "jpg", "ffv1")
 
 
 class StreamWriter:
     """Writes frames (and optional truth) into a new recorded stream folder.
 
-    Frames go to ``frames/NNNNNN.<image_format>``; the CSVs are written as frames arrive
-    and flushed on :meth:`close`.  ``stream.toml`` is written first, so a folder cut short
+    Frames go to ``frames/NNNNNN.<image_format>`` (``png``, lossless, or ``jpg``), or with
+    ``ffv1`` into one lossless FFV1 video ``frames.mkv`` (rows ``frames.mkv#N``, N the
+    0-based frame number in the video).  The CSVs are written as frames arrive and
+    flushed on :meth:`close`.  ``stream.toml`` is written first, so a folder cut short
     by a crash is still readable up to its last complete row.  A folder that already holds
     a stream is refused unless ``overwrite``.
     """
@@ -54,8 +60,8 @@ class StreamWriter:
         jpeg_quality: int = 95,
         overwrite: bool = False,
     ) -> None:
-        if image_format not in ("png", "jpg"):
-            raise InputError(f"image format must be png or jpg, got {image_format!r}")
+        if image_format not in IMAGE_FORMATS:
+            raise InputError(f"image format must be png, jpg or ffv1, got {image_format!r}")
         self.folder = Path(folder)
         if (self.folder / "stream.toml").exists() and not overwrite:
             raise InputError(f"{self.folder}: already holds a stream (choose another --out)")
@@ -68,6 +74,14 @@ class StreamWriter:
         (self.folder / "stream.toml").write_text(dumps_toml(meta_to_dict(self.meta)), "utf-8")
         self._files: dict[str, tuple[IO[str], Any]] = {}
         self._open("frames.csv", FRAMES_HEADER)
+        self._video: cv2.VideoWriter | None = None
+        if image_format == "ffv1":
+            cam = meta.camera
+            self._video = cv2.VideoWriter(str(self.folder / VIDEO_NAME),
+                                          cv2.VideoWriter.fourcc(*"FFV1"), float(meta.fps),
+                                          (cam.width, cam.height))
+            if not self._video.isOpened():
+                raise InputError(f"{self.folder}: OpenCV cannot write FFV1 video here")
         self.count = 0
         self._last_t_us: int | None = None
 
@@ -89,8 +103,12 @@ class StreamWriter:
             )
         if self._last_t_us is not None and frame.t_us <= self._last_t_us:
             raise InputError(f"frame {frame.index}: time {frame.t_us} us does not increase")
-        name = f"{FRAMES_DIR}/{frame.index:06d}.{self.image_format}"
-        write_image(self.folder / name, frame.image, self.jpeg_quality)
+        if self._video is not None:
+            name = f"{VIDEO_NAME}#{self.count}"
+            self._video.write(frame.image)
+        else:
+            name = f"{FRAMES_DIR}/{frame.index:06d}.{self.image_format}"
+            write_image(self.folder / name, frame.image, self.jpeg_quality)
         self._open("frames.csv", FRAMES_HEADER).writerow([frame.index, frame.t_us, name])
         self._last_t_us = frame.t_us
         self.count += 1
@@ -100,10 +118,7 @@ class StreamWriter:
     def _write_truth(self, frame: Frame, truth: FrameTruth) -> None:
         boxes = self._open("truth_boxes.csv", BOXES_HEADER + CORNER_COLUMNS)
         for box in truth.boxes:
-            row = box_row(frame.index, box)
-            if box.corners_px is None:
-                row += [""] * len(CORNER_COLUMNS)
-            boxes.writerow(row)
+            boxes.writerow(box_row(frame.index, box))
         if truth.pose is not None:
             self._open("truth_pose.csv", POSE_HEADER).writerow(
                 pose_row(frame.index, frame.t_us, truth.pose)
@@ -120,6 +135,9 @@ class StreamWriter:
         for fh, _ in self._files.values():
             fh.close()
         self._files.clear()
+        if self._video is not None:
+            self._video.release()
+            self._video = None
 
     def __enter__(self) -> StreamWriter:
         return self
@@ -196,4 +214,17 @@ def read_truth_range(folder: Path) -> dict[int, float | None]:
             out[int(row[0])] = float(row[2]) if row[2].strip() else None
         except (ValueError, IndexError):
             raise InputError(f"{path}:{n}: malformed row {row}") from None
+    return out
+
+
+def read_truth(folder: Path) -> dict[int, FrameTruth]:
+    """All truth files of a stream as {frame index: FrameTruth} (empty without truth)."""
+    folder = Path(folder)
+    boxes, poses = read_truth_boxes(folder), read_truth_pose(folder)
+    cameras, ranges = read_truth_camera(folder), read_truth_range(folder)
+    out: dict[int, FrameTruth] = {}
+    for index in sorted(set(boxes) | set(poses) | set(cameras) | set(ranges)):
+        pose = poses.get(index)
+        out[index] = FrameTruth(tuple(boxes.get(index, ())), pose[1] if pose else None,
+                                cameras.get(index), ranges.get(index))
     return out

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.acquire import ReferenceMatcher
+from tracker.acquire import ReferenceMatcher, homography_to, project_corners, refine_ecc
 
 ROOT = Path(__file__).resolve().parents[2]
 OTB = Path(os.environ.get("LMC_SHARED_DATA", ROOT.parent / "shared" / "data")) / "otb"
@@ -66,8 +66,23 @@ def test_a_frame_without_the_landmark_gives_nothing() -> None:
 
 
 def test_a_blank_reference_is_refused_with_a_reason() -> None:
-    with pytest.raises(ValueError, match="too little texture"):
+    with pytest.raises(ValueError, match="is blank"):
         ReferenceMatcher().add("blank", np.full((100, 100, 3), 128, np.uint8))
+
+
+def test_a_plain_plate_is_kept_for_alignment_but_not_matched() -> None:
+    plate = np.full((80, 120, 3), (30, 30, 200), np.uint8)
+    cv2.rectangle(plate, (10, 10), (110, 70), (255, 255, 255), 3)  # a border, no texture
+    matcher = ReferenceMatcher()
+    ref = matcher.add("plate", plate)
+    assert not ref.matchable
+    frame = place(plate, np.array([[200, 120], [380, 140], [370, 290], [210, 300]]))
+    assert matcher.find(frame) == []  # feature matching cannot find it...
+    start = homography_to(ref, np.array([[203, 118], [383, 143], [368, 292], [207, 297.0]]))
+    aligned = refine_ecc(ref, cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), start)
+    assert aligned is not None  # ...but alignment from a prediction does
+    corners = project_corners(ref, aligned)
+    assert np.abs(corners - [[200, 120], [380, 140], [370, 290], [210, 300]]).max() < 1.0
 
 
 def test_real_photo_crop_found_when_placed_in_a_real_scene() -> None:

@@ -117,3 +117,18 @@ def test_codec_signs_and_rejects_replays() -> None:
     assert len(rx.feed(frames[0], True)) == 1
     assert rx.feed(frames[0], True) == [] and rx.rx.bad_signature == 1
     assert os.environ.get("MAVLINK20") in (None, "1")
+
+
+def test_only_configured_messages_pass_unsigned() -> None:
+    """With signing on, an unsigned HEARTBEAT is dropped, an unsigned RADIO_STATUS passes."""
+    tx, rx = Codec(1, 1), Codec(1, 197)
+    rx.enable_signing(KEY, 0, ("RADIO_STATUS",))
+    frames: list[bytes] = []
+    tx.set_writer(frames.append)
+    tx.mav.heartbeat_send(2, 3, 0, 0, 4)
+    tx.mav.radio_status_send(200, 190, 80, 0, 0, 0, 0)
+    assert rx.feed(frames[0], True) == []
+    assert [m.get_type() for m in rx.feed(frames[1], True)] == ["RADIO_STATUS"]
+    assert rx.rx.bad_signature == 1
+    with pytest.raises(SigningKeyError, match="unknown message name"):
+        Codec(1, 1).enable_signing(KEY, 0, ("NOT_A_MESSAGE",))

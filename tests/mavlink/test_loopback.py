@@ -7,12 +7,13 @@ import contextlib
 import itertools
 import math
 import time
+from dataclasses import replace
 
 import pytest
 
 from mavlink_bridge.bridge import origin_seen
 from mavlink_bridge.link import MAV_AUTOPILOT_INVALID, MAV_TYPE_ONBOARD_CONTROLLER
-from mavlink_bridge.messages import LandingTargetFix, Profile
+from mavlink_bridge.messages import LandingTargetFix, Profile, odometry_fields
 from mavlink_bridge.telemetry import (
     Attitude,
     DistanceSensor,
@@ -36,11 +37,16 @@ async def test_heartbeat_identifies_an_onboard_controller_with_the_autopilots_sy
 
 
 async def test_heartbeat_status_follows_application_health() -> None:
-    """ok -> ACTIVE (4); degraded -> CRITICAL (5); no report for health_timeout_s -> CRITICAL."""
+    """ok -> ACTIVE 4, standby -> STANDBY 3, degraded -> CRITICAL 5, failed -> EMERGENCY 6;
+    no report for health_timeout_s -> CRITICAL."""
     async with wired(bridge_kw={"health_timeout_s": 0.5}) as (ap, bridge):
         assert await wait_for(lambda: bool(ap.heartbeats) and ap.heartbeats[-1].system_status == 4)
+        bridge.report_health("standby")
+        assert await wait_for(lambda: ap.heartbeats[-1].system_status == 3)
         bridge.report_health("degraded")
         assert await wait_for(lambda: ap.heartbeats[-1].system_status == 5)
+        bridge.report_health("failed")
+        assert await wait_for(lambda: ap.heartbeats[-1].system_status == 6)
         bridge.report_health("ok")
         assert await wait_for(lambda: ap.heartbeats[-1].system_status == 4)
         # stop reporting: the heartbeat must turn critical and say so
@@ -149,6 +155,13 @@ async def test_px4_odometry_local_ned_vision_with_timesync() -> None:
         assert {(r.frame_id, r.estimator_type, r.reason) for r in ap.vision} == {(1, 2, "fused")}
         # converted stamps are a few ms old, not seconds: the same clock answered TIMESYNC
         assert all(0 <= r.stamp_age_ms < 50 for r in ap.vision)
+        # a stamp from another clock (10 s off) is not in the synced time base: rejected
+        await asyncio.sleep(0.04)
+        wrong = truth_fix(ap)
+        bridge.link.send("ODOMETRY", **odometry_fields(
+            replace(wrong, time_us=wrong.time_us - 10_000_000), "px4"))
+        assert await wait_for(lambda: len(ap.vision) == 6)
+        assert ap.vision[-1].reason == "stamp_out_of_range"
 
 
 async def test_fake_enforces_frames_mocap_and_spacing() -> None:
@@ -161,16 +174,12 @@ async def test_fake_enforces_frames_mocap_and_spacing() -> None:
     )
     for profile, fields, reason in cases:
         async with wired({"profile": profile}, {"profile": profile}) as (ap, bridge):
-            from mavlink_bridge.messages import odometry_fields
-
             f = odometry_fields(truth_fix(ap), profile)
             f.update(fields)
             bridge.link.send("ODOMETRY", **f)
             assert await wait_for(lambda: len(ap.vision) == 1)
             assert (ap.vision[0].accepted, ap.vision[0].reason) == (False, reason)
     async with wired() as (ap, bridge):
-        from mavlink_bridge.messages import odometry_fields
-
         a = truth_fix(ap)
         bridge.link.send("ODOMETRY", **odometry_fields(a, "ardupilot"))
         bridge.link.send("ODOMETRY", **odometry_fields(

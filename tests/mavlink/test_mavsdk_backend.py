@@ -79,3 +79,15 @@ async def test_mavsdk_without_autopilot_fails_with_one_line() -> None:
     bridge = MavsdkBridge(bridge_config(9, backend="mavsdk", endpoint="udpout:127.0.0.1:9"))
     with pytest.raises(BackendError, match="no autopilot"):
         await bridge.start(timeout_s=0.5)
+
+
+async def test_mavsdk_link_drop_and_reboot_are_handled() -> None:
+    async with mavsdk_wired({}, {}) as (ap, bridge):
+        assert await wait_for(lambda: bridge.origin_confirmed, 5.0)
+        await asyncio.sleep(max(0.0, 1.2 - ap.boot_s()))
+        ap.reboot(silent_s=0.3)
+        assert await wait_for(lambda: bridge.reboots == 1, 5.0)
+        assert await wait_for(lambda: ap.origin is not None and bridge.origin_confirmed, 5.0)
+        ap.drop_link(8.0)
+        assert await bridge.wait_link(False, 8.0), "MAVSDK never reported the link down"
+        assert await bridge.send_fix(truth_fix(ap)) == "no_link"

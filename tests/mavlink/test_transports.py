@@ -38,6 +38,21 @@ async def test_tcp_client_reconnects_when_the_autopilot_comes_back() -> None:
         await ap.stop()
 
 
+async def test_companion_listens_udpin_and_the_autopilot_sends_udpout() -> None:
+    """The other UDP direction: the autopilot speaks first, the companion answers it."""
+    bridge = PymavlinkBridge(bridge_config(0, endpoint="udpin:127.0.0.1:0"))
+    await bridge.start()
+    try:
+        port = bridge.link.local_port
+        async with FakeAutopilot(fake_config(endpoint=f"udpout:127.0.0.1:{port}")) as ap:
+            bridge.report_health("ok")
+            assert await bridge.wait_link(True, 3.0)
+            await stream_fixes(ap, bridge, 3)
+            assert await wait_for(lambda: len(ap.accepted()) == 3)
+    finally:
+        await bridge.stop()
+
+
 async def test_serial_link_over_a_pty() -> None:
     """The bridge opens the pty's slave as ``serial:DEVICE:BAUD``; the test plays autopilot."""
     master, slave = os.openpty()

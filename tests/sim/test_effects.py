@@ -90,6 +90,8 @@ def test_occlusion_covers_the_share_of_the_box_with_its_colour(scene) -> None:
     assert cols.min() >= box.x - 1 and cols.max() <= box.x + box.w + 1
     assert rows.min() >= box.y - 1 and abs(rows.max() - (box.y + box.h / 2)) <= 1
     assert np.all(got[diff] == (1, 2, 3))
+    stack = EffectStack([spec], world, seed=5)
+    assert stack.occluded_frac("L1", 5.0) == 0.5 and stack.occluded_frac("L1", 10.0) == 0.0
 
 
 def test_noise_has_its_sigma_and_depends_only_on_seed_and_frame(scene) -> None:

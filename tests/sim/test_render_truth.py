@@ -6,11 +6,15 @@ import dataclasses
 
 import cv2
 import numpy as np
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from companion.sim.render import Renderer
 from companion.sim.trajectory import VehicleState
 from companion.sim.world import World
 from tracker.camera import CameraModel
+
+from .conftest import flat_landmark
 
 
 def landmark_mask(camera: CameraModel, world: World, state: VehicleState) -> np.ndarray:
@@ -33,11 +37,11 @@ def boundary_distance(poly: np.ndarray, pixels: np.ndarray) -> np.ndarray:
                      for y, x in pixels])
 
 
-def check_mask_matches(mask: np.ndarray, outline: np.ndarray) -> None:
+def check_mask_matches(mask: np.ndarray, outline: np.ndarray, min_pixels: int = 500) -> None:
     truth = np.zeros(mask.shape, np.uint8)
     cv2.fillPoly(truth, [np.round(outline * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
     disagree = np.argwhere(mask != truth.astype(bool))
-    assert mask.sum() > 500  # the landmark really is in the picture
+    assert mask.sum() > min_pixels  # the landmark really is in the picture
     if len(disagree):
         assert boundary_distance(outline, disagree).max() <= 1.0
 
@@ -97,3 +101,26 @@ def test_partly_in_view_is_clipped(one_landmark_world, camera) -> None:
     assert 0.0 < box.in_view_frac < 1.0
     assert box.corners_px[:, 0].max() > camera.width - 1
     assert abs(box.x + box.w - (camera.width - 1)) < 1e-6
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(
+    north=st.floats(-3.0, 3.0), east=st.floats(6.0, 20.0), down=st.floats(-6.0, -1.0),
+    yaw_deg=st.floats(70.0, 110.0), pitch_deg=st.floats(-15.0, 15.0),
+    roll_deg=st.floats(-10.0, 10.0), size=st.floats(0.5, 3.0),
+)
+def test_truth_matches_pixels_for_random_poses(
+    north: float, east: float, down: float, yaw_deg: float, pitch_deg: float,
+    roll_deg: float, size: float,
+) -> None:
+    """Property: wherever a fully visible landmark lands, its corners bound its pixels."""
+    lm = flat_landmark("P", (north, east, -3.0), (size, size * 0.7), 270.0)
+    world = World([lm], seed=0)
+    cam = CameraModel(mount_rpy_deg=(0.0, -5.0, 0.0))
+    att = (np.deg2rad(roll_deg), np.deg2rad(pitch_deg), np.deg2rad(yaw_deg))
+    state = VehicleState(0.0, (0.0, 0.0, down), (0, 0, 0), att)
+    boxes = Renderer(cam, world).render(state).boxes
+    assume(len(boxes) == 1 and boxes[0].in_view_frac == 1.0)
+    mask = landmark_mask(cam, world, state)
+    assume(mask.sum() > 60)
+    check_mask_matches(mask, boxes[0].corners_px, min_pixels=60)

@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.errors import ConfigError
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
 from companion.sim.synth import synth_stream
+from companion.sim.trajectory import VehicleState
 from companion.sources.base import EndOfStream
 from companion.sources.files import RecordedStreamSource
 from companion.sources.stream_io import read_truth_boxes, read_truth_pose
@@ -112,3 +116,71 @@ async def test_synth_writes_a_stream_that_replays_with_truth(tmp_path: Path) -> 
     _, pose = read_truth_pose(tmp_path / "s")[2]
     assert pose.east_m == pytest.approx(sim.state_at(2 / 6.0).position_ned_m[1], abs=1e-6)
     assert source.meta.origin is not None and source.meta.provenance["scenario"] == "occlusion"
+
+
+def test_occlusion_scenario_reports_the_covered_share() -> None:
+    sim = Simulator(load_scenario("occlusion"))
+    share = {t: next(b.occluded_frac for b in sim.render(0, t_s=t)[1].boxes
+                     if b.landmark_id == "wall-02") for t in (2.0, 7.0, 10.0, 13.0, 20.0)}
+    assert share[2.0] == 0.0 and share[20.0] == 0.0
+    assert share[7.0] == pytest.approx(0.4) and share[10.0] == pytest.approx(0.8)
+    assert share[13.0] == pytest.approx(0.4)
+
+
+def test_autopilot_truth_matches_the_camera_truth() -> None:
+    sim = Simulator(load_scenario("survey"))
+    _, truth = sim.render(300)  # t = 10 s
+    ap = sim.autopilot_truth(10.0)
+    assert truth.pose is not None
+    assert ap.position_ned_m == (truth.pose.north_m, truth.pose.east_m, truth.pose.down_m)
+    assert ap.attitude_rpy_rad == (truth.pose.roll_rad, truth.pose.pitch_rad, truth.pose.yaw_rad)
+    assert ap.velocity_ned_m_s[0] == pytest.approx(1.6)
+    readings = [sim.autopilot_truth(10.0 + k / 1000).range_m for k in range(200)]
+    good = [r for r in readings if r <= sim.rangefinder.config.max_range_m]
+    assert 0 < len(readings) - len(good) < 20  # 2 % dropouts read out of range
+    assert np.mean(good) == pytest.approx(4.0 / np.cos(ap.attitude_rpy_rad[1]), abs=0.01)
+
+
+async def test_sim_source_shares_a_given_clock() -> None:
+    from companion.sources.base import monotonic_us
+
+    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=60.0, fps=30.0))
+    t0 = monotonic_us() - 10_000_000  # e.g. the fake autopilot started 10 s ago
+    source = SimCameraSource(sim, realtime=True, t0_us=t0)
+    frame = await source.recv()
+    t_s = source.scenario_time_s(frame)
+    assert 10.0 <= t_s < 10.5 and frame.index == round(t_s * 30)
+    assert source.status.skipped == 0
+    truth = source.truth(frame.index)
+    assert truth is not None and truth.pose is not None
+    assert truth.pose.north_m == pytest.approx(sim.state_at(t_s).position_ned_m[0])
+
+
+async def test_sim_source_that_falls_behind_drops_late_frames() -> None:
+    sim = Simulator(dataclasses.replace(load_scenario("hover"), seconds=10.0, fps=2000.0))
+    source = SimCameraSource(sim, realtime=True)
+    frames = [await source.recv() for _ in range(3)]
+    assert frames[2].index - frames[0].index > 2  # rendering takes longer than 0.5 ms
+    assert source.status.skip_reasons["late"] == frames[2].index - 2
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(
+    pos=st.tuples(st.floats(-60, 60), st.floats(-60, 60), st.floats(-80, 2)),
+    att=st.tuples(st.floats(-3.2, 3.2), st.floats(-1.6, 1.6), st.floats(-3.2, 3.2)),
+)
+def test_any_pose_renders_without_error(
+    pos: tuple[float, float, float], att: tuple[float, float, float]
+) -> None:
+    """Looking anywhere from anywhere (even underground) gives a frame and sane truth."""
+    sim = _distorted_sim()
+    out = sim.renderer.render(VehicleState(0.0, pos, (0, 0, 0), att))
+    assert out.image.shape == (480, 640, 3) and out.image.dtype == np.uint8
+    for box in out.boxes:
+        assert 0 <= box.x <= 639 and 0 <= box.y <= 479 and 0 < box.in_view_frac <= 1
+        assert box.x + box.w <= 639 + 1e-6 and box.y + box.h <= 479 + 1e-6
+
+
+@functools.cache
+def _distorted_sim() -> Simulator:
+    return Simulator(load_scenario("survey_distorted"))

@@ -114,3 +114,18 @@ def test_real_otb_sequence_if_present() -> None:
         pytest.skip(f"shared OTB data absent at {data}")
     gt = read_otb_groundtruth(data)
     assert gt.shape == (291, 4) and gt[0].tolist() == [297, 159, 48, 80]
+
+
+def test_truncated_jpeg_and_png_are_detected(tmp_path: Path) -> None:
+    from companion.sources.images import ImageProblem, read_image
+
+    img = np.random.default_rng(0).integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    for suffix in (".jpg", ".png"):
+        path = tmp_path / f"a{suffix}"
+        write_image(path, img)
+        assert read_image(path).shape == (24, 32, 3)
+        data = path.read_bytes()
+        path.write_bytes(data[: len(data) - 40])
+        with pytest.raises(ImageProblem, match="truncated") as info:
+            read_image(path)
+        assert info.value.reason == "truncated"

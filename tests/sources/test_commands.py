@@ -30,6 +30,9 @@ async def test_synth_then_record_copy(tmp_path: Path) -> None:
     assert read_truth_boxes(tmp_path / "s")[1] and len(read_truth_range(tmp_path / "s")) == 2
     out = companion("record", "--source", str(tmp_path / "s"), "--out", str(tmp_path / "r"))
     assert out.returncode == 0, out.stderr
+    copied, original = read_truth_boxes(tmp_path / "r"), read_truth_boxes(tmp_path / "s")
+    assert {k: [(b.landmark_id, b.x, b.w) for b in v] for k, v in copied.items()} == {
+        k: [(b.landmark_id, b.x, b.w) for b in v] for k, v in original.items()}
     a = RecordedStreamSource(tmp_path / "s", realtime=False)
     b = RecordedStreamSource(tmp_path / "r", realtime=False)
     for _ in range(2):

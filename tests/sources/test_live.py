@@ -56,7 +56,7 @@ async def test_video_file_ends_and_bad_files_are_one_line_errors(tmp_path: Path)
 
 
 class FakeCapture:
-    """Delivers ``n`` frames (frame ``bad`` of another size), then blocks like a dead camera."""
+    """Delivers ``n`` frames (frame ``bad`` of another size), then reads fail like a dead camera."""
 
     def __init__(self, n: int, opened: bool = True, bad: int = -1) -> None:
         self.n, self.opened, self.bad, self.count = n, opened, bad, 0
@@ -67,8 +67,8 @@ class FakeCapture:
         return self.opened
 
     def read(self) -> tuple[bool, Any]:
-        if self.count >= self.n:
-            self.released.wait(5.0)
+        if self.count >= self.n:  # a dead camera: each read times out empty-handed
+            time.sleep(0.05)
             return False, None
         self.count += 1
         time.sleep(0.005)
@@ -100,7 +100,8 @@ async def test_camera_delivers_newest_frames_then_stalls() -> None:
         source.close()
     assert 1 <= len(got) <= 4
     assert all(b.t_us > a.t_us and b.index > a.index for a, b in itertools.pairwise(got))
-    assert source.status.stalls == 1 and source.status.skip_reasons == {"size": 1}
+    assert source.status.stalls == 1 and source.status.skip_reasons["size"] == 1
+    assert source.status.skip_reasons["read_failed"] >= 1
     assert source.status.delivered + source.status.dropped == 4
     assert fake.released.is_set()
 
@@ -127,6 +128,13 @@ async def test_camera_asks_for_the_configured_size() -> None:
 async def test_real_missing_camera_device_is_a_source_error() -> None:
     with pytest.raises(SourceError, match="cannot open"):
         await CameraSource.open("/dev/video-does-not-exist", open_timeout_s=5.0)
+
+
+async def test_gstreamer_pipeline_without_gstreamer_support_says_so() -> None:
+    if cv2.videoio_registry.hasBackend(cv2.CAP_GSTREAMER):
+        pytest.skip("this OpenCV has GStreamer")
+    with pytest.raises(SourceError, match="no GSTREAMER support"):
+        await CameraSource.open("videotestsrc ! appsink")
 
 
 def test_camera_targets() -> None:

@@ -48,7 +48,8 @@ def write_stream(folder: Path, frames: list[Frame], fmt: str = "png") -> None:
         for f in frames:
             corners = np.array([[1.0, 2.0], [11.5, 2.0], [11.5, 9.25], [1.0, 9.25]])
             truth = FrameTruth(
-                boxes=(TruthBox("sign-1", 1.0, 2.0, 10.5, 7.25, corners, 0.75),),
+                boxes=(TruthBox("sign-1", 1.0, 2.0, 10.5, 7.25, corners, 0.75, 0.5),
+                       TruthBox("wall-2", 3.0, 4.0, 5.0, 6.0)),
                 pose=TruthPose(1.5, -2.25, -10.0, 0.01, -0.02, 1.5),
                 camera=TruthCamera((1.5, -2.25, -10.0), np.eye(3)),
                 range_m=None if f.index == 1 else 10.125,
@@ -78,6 +79,27 @@ async def test_png_round_trip_is_bit_exact(tmp_path: Path) -> None:
     assert source.status.delivered == 5 and source.status.skipped == 0
 
 
+async def test_ffv1_video_stream_round_trip_is_bit_exact(tmp_path: Path) -> None:
+    frames = make_frames(4, seed=2)
+    write_stream(tmp_path / "s", frames, fmt="ffv1")
+    assert (tmp_path / "s" / "frames.csv").read_text().splitlines()[2].endswith("frames.mkv#1")
+    source = RecordedStreamSource(tmp_path / "s", realtime=False, loop=True)
+    got = [await source.recv() for _ in range(6)]  # the loop reopens the video
+    source.close()
+    for a, b in zip(got, [*frames, *frames[:2]], strict=True):
+        assert np.array_equal(a.image, b.image)
+    assert got[5].index == 5
+
+
+async def test_missing_video_frames_are_skipped(tmp_path: Path) -> None:
+    write_stream(tmp_path / "s", make_frames(2), fmt="ffv1")
+    csv = tmp_path / "s" / "frames.csv"
+    csv.write_text(csv.read_text() + "2,2000000,frames.mkv#9\n3,3000000,gone.mkv#0\n")
+    source = RecordedStreamSource(tmp_path / "s", realtime=False)
+    assert len(await read_all(source)) == 2
+    assert source.status.skip_reasons == {"missing": 2}
+
+
 async def test_jpeg_round_trip_is_close(tmp_path: Path) -> None:
     frames = [Frame(i, i * 10, np.full((48, 64, 3), 40 * i, np.uint8)) for i in range(3)]
     write_stream(tmp_path / "s", frames, fmt="jpg")
@@ -97,11 +119,18 @@ def test_meta_and_truth_round_trip(tmp_path: Path) -> None:
     box = boxes[2][0]
     assert (box.landmark_id, box.x, box.y, box.w, box.h) == ("sign-1", 1.0, 2.0, 10.5, 7.25)
     assert box.corners_px is not None and box.corners_px[2].tolist() == [11.5, 9.25]
-    assert box.in_view_frac == 0.75
+    assert box.in_view_frac == 0.75 and box.occluded_frac == 0.5
+    plain = boxes[2][1]
+    assert plain.corners_px is None and (plain.x, plain.w, plain.in_view_frac) == (3.0, 5.0, 1.0)
     t_us, pose = read_truth_pose(tmp_path / "s")[1]
     assert t_us == 1_033_333 and pose == TruthPose(1.5, -2.25, -10.0, 0.01, -0.02, 1.5)
     assert np.array_equal(read_truth_camera(tmp_path / "s")[0].r_ned_cam, np.eye(3))
     assert read_truth_range(tmp_path / "s") == {0: 10.125, 1: None, 2: 10.125}
+    source = RecordedStreamSource(tmp_path / "s", realtime=False, loop=True)
+    truth = source.truth(4)  # second pass: recorded frame 1
+    assert truth is not None and truth.range_m is None and truth.pose is not None
+    assert truth.boxes[0].landmark_id == "sign-1"
+    assert RecordedStreamSource(tmp_path / "s", realtime=False).truth(99) is None
 
 
 def test_csv_headers_are_exactly_the_documented_ones(tmp_path: Path) -> None:

@@ -1,0 +1,71 @@
+"""Temporal consistency of fixes: never pass on an invented jump.
+
+A single-landmark solution can flip to its mirror image (the planar two-fold ambiguity)
+or a track can latch onto the wrong thing for a frame.  The gate compares each fix with
+the last one it let through:
+
+* while fixes keep coming (gap <= ``max_gap_s``) a fix must lie within
+  ``max_speed_m_s * dt + n_sigma * sigma + slack_m`` of the previous one, else it is held
+  back and counted;
+* after a gap (start, a loss, a run of rejections) it needs ``confirm`` fixes in a row
+  that agree with each other before any is passed on, so a wrong first fix cannot lock
+  the gate onto itself.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracker.pose.types import PoseFix
+
+
+@dataclass(frozen=True)
+class FixGateConfig:
+    """Thresholds of the temporal gate."""
+
+    max_speed_m_s: float = field(default=15.0, metadata={"gt": 0})
+    n_sigma: float = field(default=5.0, metadata={"gt": 0})
+    slack_m: float = field(default=0.3, metadata={"ge": 0})
+    max_gap_s: float = field(default=1.0, metadata={"gt": 0})
+    confirm: int = field(default=3, metadata={"ge": 1})
+
+
+@dataclass
+class FixGate:
+    """Stateful gate; :meth:`admit` says whether a fix may go to the autopilot."""
+
+    config: FixGateConfig = field(default_factory=FixGateConfig)
+    rejected: int = 0
+    _last: PoseFix | None = None
+    _candidates: list[PoseFix] = field(default_factory=list)
+
+    def _consistent(self, a: PoseFix, b: PoseFix) -> bool:
+        cfg = self.config
+        dt = abs(b.time_us - a.time_us) / 1e6
+        sigma = math.sqrt(float(np.trace(np.asarray(a.covariance)[:3, :3]))
+                          + float(np.trace(np.asarray(b.covariance)[:3, :3])))
+        limit = cfg.max_speed_m_s * dt + cfg.n_sigma * sigma + cfg.slack_m
+        return math.dist(a.position_ned_m, b.position_ned_m) <= limit
+
+    def admit(self, fix: PoseFix) -> bool:
+        """True when ``fix`` is consistent with the recent ones."""
+        last = self._last
+        if last is not None and (fix.time_us - last.time_us) / 1e6 <= self.config.max_gap_s:
+            if self._consistent(last, fix):
+                self._last = fix
+                return True
+            self.rejected += 1
+            return False
+        # after a gap: collect agreeing candidates before trusting any
+        self._candidates = [c for c in self._candidates if self._consistent(c, fix)
+                            and (fix.time_us - c.time_us) / 1e6 <= self.config.max_gap_s]
+        self._candidates.append(fix)
+        if len(self._candidates) >= self.config.confirm:
+            self._candidates.clear()
+            self._last = fix
+            return True
+        self.rejected += 1
+        return False

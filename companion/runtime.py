@@ -1,0 +1,164 @@
+"""Assembling a flight: the parts ``companion run`` and ``companion demo`` share.
+
+:func:`load_practical_map` turns the configured landmark map into the pose solver's map
+(local NED about the EKF origin) and the appearance references the acquisition looks for;
+:func:`fly` wires a source, a perception and a bridge into a :class:`CompanionApp`, runs
+it until the source ends, a signal or a time limit, and tears everything down in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
+from companion.autopilot import AttitudeHistory, BridgeSink
+from companion.errors import ConfigError, InputError
+from companion.flightlog import FlightLogWriter
+from companion.landmarks.geodesy import LocalFrame
+from companion.landmarks.geojson_io import read_map
+from companion.landmarks.record import Landmark
+from companion.monitoring.publisher import MonitorPublisher
+from companion.perception import Perception, SideSensors
+from companion.preview import render_preview
+from companion.reporting import Reporter
+from companion.settings import Settings
+from companion.validate import to_plain
+from mavlink_bridge.bridge import VisionBridge, create_bridge
+from tracker.camera import CameraModel
+from tracker.pose.types import MapLandmark
+
+ImageU8 = npt.NDArray[np.uint8]
+
+
+@dataclass(frozen=True)
+class PracticalMap:
+    """The landmarks of this flight in local NED, and the images to look for."""
+
+    landmarks: tuple[MapLandmark, ...]
+    references: dict[str, ImageU8]
+    origin: LocalFrame
+
+
+def reference_image(lm: Landmark) -> ImageU8 | None:
+    """The landmark's appearance reference, cropped to its box, or None."""
+    if lm.appearance is None:
+        return None
+    image = cv2.imdecode(np.frombuffer(lm.appearance.data, np.uint8), cv2.IMREAD_COLOR)
+    if image is None:
+        raise InputError(f"landmark {lm.id}: appearance: cannot decode the image")
+    if lm.appearance.box_px is not None:
+        x, y, w, h = lm.appearance.box_px
+        image = image[y:y + h, x:x + w]
+    return np.asarray(image, np.uint8)
+
+
+def load_practical_map(settings: Settings) -> PracticalMap:
+    """Read ``landmarks.map_path`` and place it about the configured EKF origin."""
+    mav = settings.mavlink
+    if mav.origin_lat_deg == 0.0 and mav.origin_lon_deg == 0.0:
+        raise ConfigError("mavlink.origin_lat_deg, mavlink.origin_lon_deg: expected the EKF "
+                          "origin (WGS84) that the landmark map is placed about, got 0, 0")
+    path = settings.landmarks.map_path
+    if not path or not Path(path).is_file():
+        raise InputError(f"{path or 'landmarks.map_path'}: no landmark map (set "
+                         "landmarks.map_path to a GeoJSON file: companion landmarks export "
+                         "writes one)")
+    frame = LocalFrame(mav.origin_lat_deg, mav.origin_lon_deg, mav.origin_alt_m)
+    records = [lm for lm in read_map(path) if lm.status != "rejected"]
+    landmarks, references = [], {}
+    for lm in records:
+        n, e, d = (float(v) for v in frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m))
+        landmarks.append(MapLandmark(lm.id, (n, e, d), lm.width_m, lm.height_m,
+                                     lm.facing_deg, lm.category))
+        image = reference_image(lm)
+        if image is not None:
+            references[lm.id] = image
+    return PracticalMap(tuple(landmarks), references, frame)
+
+
+def reporter_for(settings: Settings, landmarks: tuple[MapLandmark, ...] | list[MapLandmark],
+                 prefix: str) -> Reporter:
+    """Flight log in ``flightlog.dir`` and, when enabled, Zenoh monitoring."""
+    name = time.strftime(f"{prefix}-%Y%m%d-%H%M%S.jsonl")
+    flightlog = FlightLogWriter(Path(settings.flightlog.dir) / name, settings.vehicle.id,
+                                settings.flightlog.fsync_interval_s)
+    monitor = None
+    if settings.monitor.enabled:
+        providers: dict[str, Callable[[], Any]] = {
+            "config": lambda: to_plain(settings),
+            "landmarks": lambda: [{"id": lm.landmark_id, "category": lm.category,
+                                   "position_ned_m": list(lm.position_ned_m),
+                                   "width_m": lm.width_m, "height_m": lm.height_m,
+                                   "facing_deg": lm.facing_deg} for lm in landmarks],
+        }
+        monitor = MonitorPublisher(settings.monitor, settings.vehicle.id, providers)
+    return Reporter(flightlog, monitor)
+
+
+def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
+                   attitude: AttitudeHistory) -> Perception:
+    """The per-frame work with the configured tracker, acquisition, pose and gate."""
+    return Perception(camera, pmap.landmarks, pmap.references,
+                      sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
+                      config=settings.perception, tracker_config=settings.tracker,
+                      pose_config=settings.pose, acquire_config=settings.acquire,
+                      gate_config=settings.fixgate)
+
+
+async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
+              make_processor: Callable[[AttitudeHistory], FrameProcessor],
+              landmarks: tuple[MapLandmark, ...] | list[MapLandmark], *,
+              seconds: float | None = None, prefix: str = "flight",
+              on_start: Callable[[CompanionApp], None] | None = None) -> CompanionApp:
+    """Run one flight to its end; SIGINT/SIGTERM stop it cleanly.  Returns the app."""
+    await bridge.start()
+    attitude = AttitudeHistory(bridge)
+    attitude.start()
+    reporter = reporter_for(settings, landmarks, prefix)
+    mon = settings.monitor
+
+    def preview(frame: Frame, result: FrameResult) -> bytes:
+        caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
+        return render_preview(frame.image, result.tracks, mon.preview_width_px,
+                              mon.preview_jpeg_quality, caption)
+
+    app = CompanionApp(source, make_processor(attitude), BridgeSink(bridge), reporter,
+                       settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, app.request_stop)
+    if on_start is not None:
+        on_start(app)
+    try:
+        await app.run(seconds)
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.remove_signal_handler(sig)
+        close = getattr(source, "close", None)
+        if callable(close):
+            close()
+        await attitude.stop()
+        await bridge.stop()
+        reporter.close()
+    return app
+
+
+def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
+    """The configured MAVLink backend, its profile following ``vehicle.profile``."""
+    import dataclasses
+
+    cfg = dataclasses.replace(settings.mavlink, profile=settings.vehicle.profile, **overrides)
+    return create_bridge(cfg)
