@@ -63,6 +63,8 @@ class FrameResult:
     events: tuple[dict[str, Any], ...] = ()
     bad_frame: bool = False
     pose_json: dict[str, Any] | None = None
+    #: Drawn on the preview, never logged: landmark id -> (N, 2) particle positions.
+    particles: dict[str, Any] = field(default_factory=dict)
 
 
 class FrameProcessor(Protocol):

@@ -374,18 +374,21 @@ class Perception:
         if not self.tracks:
             return FrameResult(frame.index, frame.t_us, tracks, None, "nothing tracked",
                                tuple(events))
+        particles = {t.landmark_id: t.tracker.particle_centres for t in self.tracks.values()}
         side = self.sensors(frame.t_us)
         fix = solve_pose(self.observations(frame.index), self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
         if isinstance(fix, NoFix):
-            return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events))
+            return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
+                               particles=particles)
         if not self.gate.admit(fix):
             return FrameResult(frame.index, frame.t_us, tracks, None,
-                               "held back: inconsistent with recent fixes", tuple(events))
+                               "held back: inconsistent with recent fixes", tuple(events),
+                               particles=particles)
         self._last_fix = fix
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
-                           pose_json=pose_json(fix))
+                           pose_json=pose_json(fix), particles=particles)
 
 
 def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:
