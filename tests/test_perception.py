@@ -67,12 +67,12 @@ def test_no_track_for_a_landmark_out_of_view() -> None:
 
 def test_a_detector_hit_restarts_a_track_when_the_reference_aligns_there() -> None:
     sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=60))
-    image, truth = sim.render(200)
+    _image, truth = sim.render(200)
     box = next(b for b in truth.boxes if b.in_view_frac == 1.0)
     category = next(lm.category for lm in sim.world.landmarks
                     if lm.landmark_id == box.landmark_id)
     hits = [Hit((box.x, box.y, box.w, box.h), category, 0.9)]
-    _, perception, out = flight("survey", range(200, 203), detect=lambda _img: hits)
+    _, _perception, out = flight("survey", range(200, 203), detect=lambda _img: hits)
     events = [e for r, _, _ in out for e in r.events]
     assert {"event": "acquired", "landmark": box.landmark_id, "by": "detector"}.items() <= \
         next(e for e in events if e.get("by") == "detector").items()
