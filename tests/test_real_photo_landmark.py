@@ -40,7 +40,7 @@ def test_a_real_photo_landmark_is_found_tracked_and_fixes_the_position(tmp_path:
                                 f'landmarks = "{tmp_path / "map.geojson"}"')
     (tmp_path / "photo-survey.toml").write_text(scenario)
 
-    _, perception, out = flight(str(tmp_path / "photo-survey.toml"), range(150, 200))
+    _, _, out = flight(str(tmp_path / "photo-survey.toml"), range(150, 200))
     acquired = [e for r, _, _ in out for e in r.events if e["event"] == "acquired"]
     assert acquired and acquired[0]["landmark"] == "harbour-photo"
     assert acquired[0]["by"] == "features"  # found by its photo, not predicted
