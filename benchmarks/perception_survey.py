@@ -74,7 +74,8 @@ def main() -> None:
     print(f"position RMSE {rmse:.4f} m at a mean {np.mean(dists):.2f} m "
           f"({100 * rmse / np.mean(dists):.2f} %); median error {np.median(errors):.4f} m")
     for n, errs in sorted(by_count.items()):
-        print(f"  {n} landmark(s): {len(errs)} fixes, RMSE {np.sqrt(np.mean(np.square(errs))):.4f} m")
+        r = float(np.sqrt(np.mean(np.square(errs))))
+        print(f"  {n} landmark(s): {len(errs)} fixes, RMSE {r:.4f} m")
     print(f"NEES inside the 95 % bounds: {100 * share:.1f} % (median {np.median(nees):.2f}, "
           f"ideal 2.37)")
     print(f"process ms median {np.median(process_ms):.2f} p99 {np.percentile(process_ms, 99):.2f}; "
