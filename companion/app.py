@@ -63,6 +63,8 @@ class FrameResult:
     events: tuple[dict[str, Any], ...] = ()
     bad_frame: bool = False
     pose_json: dict[str, Any] | None = None
+    #: Drawn on the preview, never logged: landmark id -> (N, 2) particle positions.
+    particles: dict[str, Any] = field(default_factory=dict)
 
 
 class FrameProcessor(Protocol):
@@ -284,6 +286,9 @@ class CompanionApp:
 
     def status(self) -> dict[str, Any]:
         """The status payload (docs/monitoring.md)."""
+        source_status = getattr(self.source, "status", None)
+        as_dict = getattr(source_status, "as_dict", None)
+        source: dict[str, Any] = as_dict() if callable(as_dict) else {}
         return {
             "vehicle": self.vehicle_id,
             "state": self.state,
@@ -291,7 +296,8 @@ class CompanionApp:
             "latency_ms": self.stats.capture_to_wire_ms.summary(),
             "link": "up" if self.sink.link_up else "down",
             "counters": self.counters.as_dict(),
-            "dropped_frames": self.dropped_frames,
+            "dropped_frames": self.dropped_frames + int(source.get("skipped", 0)),
+            "source": source,
         }
 
     async def _shutdown(self) -> None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -72,6 +72,21 @@ class PerceptionConfig:
     search_after_s: float = field(default=0.3, metadata={"ge": 0})
     search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
     search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
+
+
+class DetectionLike(Protocol):
+    """What acquisition needs of a detector hit (tracker.detector.Detection has it)."""
+
+    @property
+    def box(self) -> tuple[float, float, float, float]: ...
+    @property
+    def category(self) -> str: ...
+    @property
+    def score(self) -> float: ...
+
+
+#: A detector: image -> detections (``tracker.detector.Detector.detect``).
+DetectFn = Callable[[npt.NDArray[np.uint8]], Sequence[DetectionLike]]
 
 
 @dataclass(frozen=True)
@@ -133,7 +148,8 @@ class Perception:
                  tracker_config: TrackerConfig | None = None,
                  pose_config: PoseConfig | None = None,
                  acquire_config: AcquireConfig | None = None,
-                 gate_config: FixGateConfig | None = None, seed: int = 0) -> None:
+                 gate_config: FixGateConfig | None = None, seed: int = 0,
+                 detect: DetectFn | None = None) -> None:
         self.camera = camera
         self.landmarks = list(landmarks)
         self.config = config or PerceptionConfig()
@@ -153,6 +169,7 @@ class Perception:
         self._last_fix: PoseFix | None = None
         self._last_fix_us = -(2**62)
         self._search_turn = 0
+        self.detect = detect
         self._seed = seed
         self._frames = 0
 
@@ -188,7 +205,10 @@ class Perception:
             self._last_fix_us = self._last_fix.time_us
             self._events_next += self._predict_acquire(frame.image, self._last_fix)
         elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
-            self._events_next += self._search(frame.image)
+            if self.detect is not None:
+                self._events_next += self._detect_acquire(frame.image)
+            else:
+                self._events_next += self._search(frame.image)
 
     # -- tracking ---------------------------------------------------------------------
 
@@ -267,6 +287,31 @@ class Perception:
         self.tracks[lid] = Track(lid, tracker, box, hom, corners=corners)
         return {"event": "acquired", "landmark": lid, "by": by,
                 "box": [round(v, 1) for v in box]}
+
+    def _detect_acquire(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+        """Restart tracks from detector hits: each hit is tried against the untracked map
+        landmarks of its category, and kept only when the reference aligns there."""
+        assert self.detect is not None
+        events: list[dict[str, Any]] = []
+        category = {lm.landmark_id: lm.category for lm in self.landmarks}
+        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
+        for det in self.detect(image):
+            for lid, ref in self.matcher.references.items():
+                if lid in self.tracks or category.get(lid) not in (det.category, ""):
+                    continue
+                x, y, w, h = det.box
+                start = homography_to(ref, np.array([[x, y], [x + w, y], [x + w, y + h],
+                                                     [x, y + h]], np.float64))
+                aligned = refine_ecc(ref, gray, start, self.config.ecc_iterations,
+                                     self.config.verify_correlation)
+                if aligned is None:
+                    continue
+                quad = project_corners(ref, aligned)
+                box = clip_box(det.box, image.shape[1], image.shape[0])
+                if box is not None and inside(quad, image.shape[1], image.shape[0], 2.0):
+                    events.append(self._start(lid, image, box, aligned, quad, "detector"))
+                    break
+        return events
 
     def _search(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
         """Look for one untracked landmark (round robin) by colour template search over the
@@ -374,18 +419,21 @@ class Perception:
         if not self.tracks:
             return FrameResult(frame.index, frame.t_us, tracks, None, "nothing tracked",
                                tuple(events))
+        particles = {t.landmark_id: t.tracker.particle_centres for t in self.tracks.values()}
         side = self.sensors(frame.t_us)
         fix = solve_pose(self.observations(frame.index), self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
         if isinstance(fix, NoFix):
-            return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events))
+            return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
+                               particles=particles)
         if not self.gate.admit(fix):
             return FrameResult(frame.index, frame.t_us, tracks, None,
-                               "held back: inconsistent with recent fixes", tuple(events))
+                               "held back: inconsistent with recent fixes", tuple(events),
+                               particles=particles)
         self._last_fix = fix
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
-                           pose_json=pose_json(fix))
+                           pose_json=pose_json(fix), particles=particles)
 
 
 def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:

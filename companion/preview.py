@@ -25,7 +25,7 @@ def render_preview(image: npt.NDArray[np.uint8], tracks: Sequence[dict[str, Any]
         if t.get("corners"):
             quad = np.round(np.asarray(t["corners"], np.float64) * scale).astype(np.int32)
             cv2.polylines(out, [quad.reshape(-1, 1, 2)], True, YELLOW, 1)
-        for px, py in t.get("particles") or ():
+        for px, py in np.asarray(t.get("particles", ()), np.float64).reshape(-1, 2):
             cv2.circle(out, (round(px * scale), round(py * scale)), 1, CYAN, -1)
         label = f"{t['landmark_id']} {float(t.get('confidence', 0.0)):.2f}"
         cv2.putText(out, label, (round(x), max(10, round(y) - 3)), cv2.FONT_HERSHEY_SIMPLEX,

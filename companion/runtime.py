@@ -130,7 +130,9 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
 
     def preview(frame: Frame, result: FrameResult) -> bytes:
         caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
-        return render_preview(frame.image, result.tracks, mon.preview_width_px,
+        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
+                  for t in result.tracks]
+        return render_preview(frame.image, tracks, mon.preview_width_px,
                               mon.preview_jpeg_quality, caption)
 
     app = CompanionApp(source, make_processor(attitude), BridgeSink(bridge), reporter,

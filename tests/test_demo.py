@@ -73,3 +73,29 @@ def test_two_demos_and_a_monitor_meet_through_a_router(tmp_path: Path) -> None:
     for (out, err_d), proc in zip(results, demos, strict=True):
         assert proc.returncode == 0, err_d
         assert json.loads(out)["fixes_sent"] > 0
+
+
+def test_sigterm_mid_flight_is_a_clean_stop_with_the_log_complete(tmp_path: Path) -> None:
+    """SIGTERM: finish the frame in hand, final STATUSTEXT, flush the log, exit 0."""
+    import signal
+    import time
+
+    proc = spawn("--log-level", "info", "--set", f"flightlog.dir={json.dumps(str(tmp_path))}",
+                 "demo", "--seconds", "60", "--json")
+    assert proc.stderr is not None
+    deadline = time.monotonic() + 60
+    for line in proc.stderr:  # wait until the flight is really under way
+        if "health searching -> " in line or "-> tracking" in line:
+            break
+        assert time.monotonic() < deadline, "the demo never started tracking"
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0
+    summary = json.loads(out)
+    assert summary["frames"] > 0
+    records = [json.loads(line) for line in next(tmp_path.glob("demo-*.jsonl")).read_text()
+               .splitlines()]
+    assert records[-1]["kind"] == "status"  # the final status is the last line
+    assert any(r["kind"] == "event" and r.get("event") == "stopped" for r in records[-3:])
+    assert records[-1]["counters"]["frames"] == summary["frames"]  # nothing processed unlogged

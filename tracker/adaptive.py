@@ -98,6 +98,11 @@ class AdaptiveTracker:
         return self._model.features
 
     @property
+    def particle_centres(self) -> FloatArray:
+        """(N, 2) image positions (x, y) of the particle set after the last update."""
+        return np.asarray(self._particles[:, :2], dtype=np.float64).copy()
+
+    @property
     def cue(self) -> Cue:
         """``"colour"`` or ``"grayscale"`` (intensity and gradient fallback)."""
         return self._cue

@@ -96,10 +96,15 @@ def companion_and_dashboard() -> Iterator[tuple[FakeCompanion, str]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     fake = FakeCompanion(endpoint)
     fake.thread.start()
+    other = FakeCompanion(f"tcp/127.0.0.1:{free_port()}", vehicle="bravo")
+    other.pub.close()  # a second vehicle on the same network: it joins through the first
+    other.pub = MonitorPublisher(MonitorConfig(connect=(endpoint,)), "bravo")
+    other.thread.start()
     proc, url = start_dashboard(endpoint)
     yield fake, url
     proc.terminate()
     proc.wait(timeout=10)
+    other.stop()
     fake.stop()
 
 
@@ -115,6 +120,11 @@ def test_page_shows_live_preview_and_the_published_counters(
         browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
         page = browser.new_page()
         page.goto(url + "/")
+        page.wait_for_function("document.querySelector('#vehicle').options.length == 2",
+                               timeout=15000)
+        assert page.eval_on_selector_all("#vehicle option", "os => os.map(o => o.value)") \
+            == ["alpha", "bravo"]
+        page.select_option("#vehicle", "alpha")
         page.wait_for_function("document.querySelector('#preview').naturalWidth > 0",
                                timeout=15000)
         first = page.eval_on_selector("#preview", "e => e.src")
