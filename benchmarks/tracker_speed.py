@@ -47,21 +47,29 @@ def main() -> int:
     args = parser.parse_args()
     cv2.setNumThreads(1)
     seq, frames = _frames(args.data)
-    print(f"{seq.name}: {len(frames)} frames {frames[0].shape[1]}x{frames[0].shape[0]}, "
-          f"cv2 threads {cv2.getNumThreads()}, load avg {os.getloadavg()[0]:.1f}")
+    print(
+        f"{seq.name}: {len(frames)} frames {frames[0].shape[1]}x{frames[0].shape[0]}, "
+        f"cv2 threads {cv2.getNumThreads()}, load avg {os.getloadavg()[0]:.1f}"
+    )
     best: dict[str, float] = {}
     for name in args.trackers.split(","):
-        runs = [run_frames(make_tracker(name, seed), name, seq, frames).median_ms_per_update
-                for seed in range(args.repeats)]
+        runs = [
+            run_frames(make_tracker(name, seed), name, seq, frames).median_ms_per_update
+            for seed in range(args.repeats)
+        ]
         best[name] = min(runs)
-        print(f"{name:10s} median ms/update per run: "
-              + " ".join(f"{v:.2f}" for v in runs)
-              + f" | min {min(runs):.2f} ms = {1e3 / min(runs):.0f} updates/s"
-              + f" | median {np.median(runs):.2f} ms = {1e3 / np.median(runs):.0f} updates/s",
-              flush=True)
+        print(
+            f"{name:10s} median ms/update per run: "
+            + " ".join(f"{v:.2f}" for v in runs)
+            + f" | min {min(runs):.2f} ms = {1e3 / min(runs):.0f} updates/s"
+            + f" | median {np.median(runs):.2f} ms = {1e3 / np.median(runs):.0f} updates/s",
+            flush=True,
+        )
     if "adaptive" in best and "mil" in best:
-        print(f"adaptive is {best['mil'] / best['adaptive']:.1f}x faster than TrackerMIL "
-              f"(min of run medians)")
+        print(
+            f"adaptive is {best['mil'] / best['adaptive']:.1f}x faster than TrackerMIL "
+            f"(min of run medians)"
+        )
     print(f"load avg after: {os.getloadavg()[0]:.1f}")
     return 0
 
