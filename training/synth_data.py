@@ -99,29 +99,56 @@ def _clutter(rng: np.random.Generator, img: np.ndarray, count: int) -> None:
                      max(1, s // 6))
 
 
+def _words(rng: np.random.Generator, lo: int, hi: int) -> str:
+    """A random 'word' of ``lo``..``hi`` capitals and digits."""
+    return "".join(rng.choice(list(_TEXT_CHARS), size=int(rng.integers(lo, hi + 1))))
+
+
+def _glyph(rng: np.random.Generator, img: np.ndarray, cx: int, cy: int, r: int,
+           ink: tuple[int, int, int]) -> None:
+    """Draw an arrow, triangle, disc or star of radius ``r`` at (cx, cy) in place."""
+    kind = rng.integers(0, 4)
+    if kind == 0:
+        pts = np.array([[-1, -0.2], [0.25, -0.2], [0.25, -0.6], [1, 0], [0.25, 0.6],
+                        [0.25, 0.2], [-1, 0.2]]) * r
+        if rng.random() < 0.5:
+            pts[:, 0] = -pts[:, 0]
+    elif kind == 1:
+        pts = np.array([[0, -1], [0.9, 0.7], [-0.9, 0.7]]) * r
+    elif kind == 2:
+        cv2.circle(img, (cx, cy), r, ink, -1)
+        return
+    else:
+        ang = np.pi / 2 + np.arange(10) * np.pi / 5
+        rad = np.where(np.arange(10) % 2 == 0, 1.0, 0.45) * r
+        pts = np.stack([rad * np.cos(ang), -rad * np.sin(ang)], 1)
+    cv2.fillPoly(img, [(pts + np.array([cx, cy])).astype(np.int32)], ink)
+
+
 def _signpost_texture(rng: np.random.Generator) -> np.ndarray:
-    """A saturated plate with a light border and a white/black glyph or short text."""
-    pw, ph = int(rng.integers(90, 180)), 64
+    """A saturated plate (aspect 1..2.8): big text, a glyph, or a glyph over a caption."""
+    pw, ph = int(rng.integers(64, 180)), 64
     plate = np.full((ph, pw, 3), _rand_colour(rng, 170, 255, 120), np.uint8)
     ink = (255, 255, 255) if rng.random() < 0.75 else (20, 20, 20)
-    cv2.rectangle(plate, (3, 3), (pw - 4, ph - 4), ink, 3)
-    if rng.random() < 0.5:
-        text = "".join(rng.choice(list(_TEXT_CHARS), size=int(rng.integers(1, 4))))
+    if rng.random() < 0.6:
+        cv2.rectangle(plate, (3, 3), (pw - 4, ph - 4), ink, 3)
+    layout = rng.integers(0, 3)
+    if layout == 0:
+        text = _words(rng, 1, max(1, pw // 45))
         cv2.putText(plate, text, (10, 46), cv2.FONT_HERSHEY_SIMPLEX, 1.3, ink, 4)
-    else:  # arrow glyph
-        cx, cy = pw // 2, ph // 2
-        pts = np.array([[cx - 30, cy - 6], [cx + 8, cy - 6], [cx + 8, cy - 18], [cx + 32, cy],
-                        [cx + 8, cy + 18], [cx + 8, cy + 6], [cx - 30, cy + 6]], np.int32)
-        if rng.random() < 0.5:
-            pts[:, 0] = 2 * cx - pts[:, 0]
-        cv2.fillPoly(plate, [pts], ink)
+    elif layout == 1:
+        _glyph(rng, plate, pw // 2, ph // 2, 24, ink)
+    else:
+        _glyph(rng, plate, pw // 2, 24, 15, _rand_colour(rng, 120, 255, 120))
+        cv2.putText(plate, _words(rng, 2, max(2, pw // 14)), (6, 56),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, ink, 1)
     return plate
 
 
 def _poster_texture(rng: np.random.Generator) -> np.ndarray:
-    """A framed picture: colourful gradient with shapes, white or dark margin."""
+    """A picture: colourful gradient with shapes, maybe a caption and a white or dark margin."""
     ph = int(rng.integers(90, 140))
-    pw = int(ph * rng.uniform(0.65, 1.5))
+    pw = int(ph * rng.uniform(0.65, 1.6))
     c1 = np.array(_rand_colour(rng, 100, 255, 80), np.float32)
     c2 = np.array(_rand_colour(rng, 100, 255, 80), np.float32)
     t = np.linspace(0.0, 1.0, ph, dtype=np.float32)[:, None, None]
@@ -131,10 +158,20 @@ def _poster_texture(rng: np.random.Generator) -> np.ndarray:
         col = _rand_colour(rng, 120, 255, 60)
         cx, cy = int(rng.integers(0, pw)), int(rng.integers(0, ph))
         r = int(rng.integers(6, max(7, ph // 3)))
-        if rng.random() < 0.5:
+        kind = rng.integers(0, 4)
+        if kind == 0:
             cv2.circle(pic, (cx, cy), r, col, -1)
-        else:
+        elif kind == 1:
             cv2.rectangle(pic, (cx - r, cy - r), (cx + r, cy + r // 2), col, -1)
+        elif kind == 2:
+            cv2.rectangle(pic, (cx - r, cy - r // 2), (cx + 2 * r, cy + r // 2), col, 3)
+        else:
+            _glyph(rng, pic, cx, cy, r, col)
+    if rng.random() < 0.5:
+        cv2.putText(pic, _words(rng, 3, max(3, pw // 16)), (6, ph - 10),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2)
+    if rng.random() < 0.5:
+        return pic
     margin = max(4, ph // 12)
     frame_col = (245, 245, 245) if rng.random() < 0.7 else (25, 25, 25)
     return cv2.copyMakeBorder(pic, margin, margin, margin, margin, cv2.BORDER_CONSTANT,
@@ -237,6 +274,11 @@ def render_scene(rng: np.random.Generator, width: int = 416, height: int = 416,
             if box[2] < 6 or box[3] < 6:
                 continue
             if all(_iou_xywh(box, b) < 0.05 for b in boxes):
+                if cls == 0 and rng.random() < 0.5:  # a pole under the plate
+                    foot = corners[2:].mean(axis=0)
+                    cv2.line(img, (int(foot[0]), int(foot[1])),
+                             (int(foot[0]), int(foot[1] + size * rng.uniform(1, 3))),
+                             (110, 110, 110), max(1, int(size / 12)))
                 _paste(img, tex, corners)
                 boxes.append(box)
                 classes.append(cls)

@@ -173,6 +173,8 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--pool-only", action="store_true")
+    ap.add_argument("--init", type=Path, default=None,
+                    help="start from these weights (.pt state dict of the same variant)")
     return ap.parse_args()
 
 
@@ -196,6 +198,8 @@ def main() -> None:
     anchors = list(kmeans_anchors(wh, k, np.random.default_rng(7)).reshape(len(strides), 3, 2))
     print("anchors", [a.tolist() for a in anchors], flush=True)
     model = TinyYolo(len(CATEGORIES), 3, args.scales == 3)
+    if args.init is not None:
+        model.load_state_dict(torch.load(args.init, weights_only=True))
     n_params = sum(p.numel() for p in model.parameters())
     print("params", n_params, flush=True)
     opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=5e-4)
@@ -231,7 +235,8 @@ def main() -> None:
                   f"loss={loss.item():.3f}", flush=True)
     info = {"scales": args.scales, "steps": step, "batch": args.batch,
             "minutes": round((time.monotonic() - t0) / 60, 1), "train_size": args.train_size,
-            "pool": args.pool_count, "seed": args.seed, "params": n_params}
+            "pool": args.pool_count, "seed": args.seed, "params": n_params,
+            "init": args.init.name if args.init else None}
     print("done", info, flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     torch.save(model.state_dict(), args.out.with_suffix(".pt"))
