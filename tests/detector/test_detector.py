@@ -41,10 +41,10 @@ def test_committed_model_loads_with_landmark_categories(detector: Detector) -> N
 
 @pytest.mark.parametrize("seed", [11, 12, 13, 14, 15])
 def test_detects_generated_landmark_in_a_640x480_frame(detector: Detector, seed: int) -> None:
-    """One perspective-warped landmark (>= 24 px) is found with its category and IoU > 0.5."""
+    """One perspective-warped landmark (>= 48 px) is found with its category and IoU > 0.5."""
     rng = np.random.default_rng(seed)
     scene = render_scene(rng, 640, 480, max_size_px=150, negative_rate=0.0, max_landmarks=1)
-    while max(scene.boxes_xywh[0, 2:]) < 24:  # deterministic: keep drawing from the same rng
+    while max(scene.boxes_xywh[0, 2:]) < 48:  # deterministic: keep drawing from the same rng
         scene = render_scene(rng, 640, 480, max_size_px=150, negative_rate=0.0,
                              max_landmarks=1)
     truth = _xyxy(scene.boxes_xywh[0])
