@@ -72,6 +72,8 @@ class PerceptionConfig:
     search_after_s: float = field(default=0.3, metadata={"ge": 0})
     search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
     search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
+    #: Acquire with the landmark detector ([detector]) instead of the template search.
+    use_detector: bool = False
 
 
 class DetectionLike(Protocol):

@@ -99,3 +99,12 @@ def test_sigterm_mid_flight_is_a_clean_stop_with_the_log_complete(tmp_path: Path
     assert records[-1]["kind"] == "status"  # the final status is the last line
     assert any(r["kind"] == "event" and r.get("event") == "stopped" for r in records[-3:])
     assert records[-1]["counters"]["frames"] == summary["frames"]  # nothing processed unlogged
+
+
+def test_a_missing_detector_model_is_one_line_and_nothing_is_left_running() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "companion", "--set", "perception.use_detector=true",
+         "--set", "detector.model_path=/no/such/model.onnx", "demo", "--seconds", "5"],
+        cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines()[-1] == "/no/such/model.onnx: model file not found"
