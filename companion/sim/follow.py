@@ -105,12 +105,13 @@ def truth_sample(item: Telemetry, frame: LocalFrame) -> TruthSample | None:
 
 
 def state_at(samples: list[TruthSample] | deque[TruthSample], t_ns: int,
-             max_extrapolation_ns: int) -> VehicleState | None:
-    """The vehicle at ``t_ns`` from time-ordered samples, or None when too far past them.
+             max_extrapolation_ns: int, max_gap_ns: int | None = None) -> VehicleState | None:
+    """The vehicle at ``t_ns`` from time-ordered samples, or None when it is not known.
 
     Between samples a and b: p = pa + s (pb - pa), q = slerp(qa, qb, s),
     s = (t - ta) / (tb - ta).  Past the newest sample the last pair is extrapolated for at
-    most ``max_extrapolation_ns``; before the oldest the oldest is held.
+    most ``max_extrapolation_ns``; before the oldest the oldest is held.  Two samples more
+    than ``max_gap_ns`` apart (the truth stopped in between) are not interpolated across.
     """
     if not samples:
         return None
@@ -125,6 +126,8 @@ def state_at(samples: list[TruthSample] | deque[TruthSample], t_ns: int,
             i -= 1
         a, b = samples[i - 1], samples[i]
     span = b.t_ns - a.t_ns
+    if max_gap_ns is not None and span > max_gap_ns:
+        return None
     s = (t_ns - a.t_ns) / span if span > 0 else 0.0
     pos = a.position_ned_m + s * (b.position_ned_m - a.position_ned_m)
     vel = a.velocity_ned_m_s + min(s, 1.0) * (b.velocity_ned_m_s - a.velocity_ned_m_s)
@@ -285,7 +288,8 @@ class FollowCameraSource:
         state = None
         if age_ms <= self.config.stale_ms:
             state = state_at(self._samples, shown_ns,
-                             round(self.config.max_extrapolation_ms * 1e6))
+                             round(self.config.max_extrapolation_ms * 1e6),
+                             round(self.config.stale_ms * 1e6))
         if state is None:
             if not self._stalled:
                 self._stalled = True
