@@ -6,13 +6,16 @@ import argparse
 import asyncio
 import logging
 
-from companion.app import CompanionApp
+from companion.app import CompanionApp, FrameSource
 from companion.autopilot import AttitudeHistory
 from companion.perception import Perception
 from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
 from companion.settings import Settings
-from companion.sim.source import SimCameraSource
-from companion.sources.factory import open_source
+from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
+from companion.sim.scenario import load_scenario
+from companion.sim.simulator import Simulator
+from companion.sources.factory import open_source, resolve
+from mavlink_bridge.bridge import VisionBridge
 
 log = logging.getLogger(__name__)
 
@@ -29,23 +32,46 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
+def simulator_of(source: object) -> Simulator | None:
+    """The simulator behind a simulated camera (scripted or following SITL), else None."""
+    sim = getattr(source, "sim", None)
+    return sim if isinstance(sim, Simulator) else None
+
+
 def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
     """A simulated camera shows generated textures: use them where the map has no image."""
-    if not isinstance(source, SimCameraSource):
+    sim = simulator_of(source)
+    if sim is None:
         return pmap
-    textures = {lm.landmark_id: lm.quad.texture for lm in source.sim.world.landmarks
+    textures = {lm.landmark_id: lm.quad.texture for lm in sim.world.landmarks
                 if lm.quad.texture is not None}
     refs = {**{k: v for k, v in textures.items() if k not in pmap.references},
             **pmap.references}
     return PracticalMap(pmap.landmarks, refs, pmap.origin)
 
 
-async def _run(settings: Settings, seconds: float | None) -> CompanionApp:
+def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
+                ) -> FollowCameraSource:
+    """``source.kind = "follow"``: the scenario's world with the flight's landmark map about
+    the EKF origin, seen from the pose the autopilot simulator reports (docs/sitl.md)."""
+    c = resolve(settings.source)
+    sim = follow_simulator(load_scenario(c.spec), settings.landmarks.map_path, pmap.origin)
+    return FollowCameraSource(sim, bridge, pmap.origin, settings.vehicle.profile, c.follow,
+                              request=command_sender(bridge))
+
+
+async def _run(settings: Settings, seconds: float | None, fly_square: bool = False
+               ) -> CompanionApp:
     pmap = load_practical_map(settings)
-    source = await open_source(settings.source)
+    bridge = bridge_for(settings)
+    source: FrameSource
+    if resolve(settings.source).kind == "follow":
+        source = open_follow(settings, bridge, pmap)
+    else:
+        source = await open_source(settings.source)
     pmap = with_sim_references(pmap, source)
-    camera = source.sim.scenario.camera if isinstance(source, SimCameraSource) \
-        else settings.camera
+    sim = simulator_of(source)
+    camera = sim.scenario.camera if sim is not None else settings.camera
     log.info("flying with %d landmarks (%d with a reference image), source %s:%s",
              len(pmap.landmarks), len(pmap.references), settings.source.kind,
              settings.source.spec)
@@ -53,8 +79,12 @@ async def _run(settings: Settings, seconds: float | None) -> CompanionApp:
     def processor(attitude: AttitudeHistory) -> Perception:
         return perception_for(settings, camera, pmap, attitude)
 
-    return await fly(settings, source, bridge_for(settings), processor, pmap.landmarks,
-                     seconds=seconds, prefix="run")
+    app = await fly(settings, source, bridge, processor, pmap.landmarks, seconds=seconds,
+                    prefix="run")
+    failure = getattr(source, "failure", None)
+    if failure is not None:  # e.g. follow mode without the simulator's truth: one line
+        raise failure
+    return app
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:

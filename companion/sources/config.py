@@ -24,7 +24,7 @@ class FollowConfig:
 
     truth_timeout_s: float = field(default=10.0, metadata={"gt": 0})
     stale_ms: float = field(default=300.0, metadata={"gt": 0})
-    delay_ms: float = field(default=40.0, metadata={"ge": 0, "le": 500})
+    delay_ms: float = field(default=20.0, metadata={"ge": 0, "le": 500})
     max_extrapolation_ms: float = field(default=100.0, metadata={"ge": 0})
     request_rate_hz: float = field(default=50.0, metadata={"ge": 0, "le": 400})
     fps: float = field(default=0.0, metadata={"ge": 0})
