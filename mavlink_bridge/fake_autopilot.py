@@ -43,6 +43,7 @@ Profile = Literal["ardupilot", "px4"]
 _EARTH_RADIUS_M = 6_378_137.0
 MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED = 0, 4, 3
 _ALWAYS_ACCEPTED = {511, 512, 520}  # SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAP.
+_FLIGHT_COMMANDS = {22, 176, 400}  # NAV_TAKEOFF, DO_SET_MODE, COMPONENT_ARM_DISARM: recorded
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,7 @@ class FakeAutopilot:
         self.vision: list[VisionRecord] = []
         self.landing_targets: list[dict[str, Any]] = []
         self.commands: list[dict[str, Any]] = []
+        self.position_targets: list[dict[str, Any]] = []  # SET_POSITION_TARGET_LOCAL_NED
         self.heartbeats: list[CompanionHeartbeat] = []
         self.statustexts: list[str] = []
         self.counters: dict[str, int] = {"sysid_rejected": 0, "reboots": 0,
@@ -298,6 +300,8 @@ class FakeAutopilot:
                 msg.autopilot, msg.system_status))
         elif name in ("COMMAND_INT", "COMMAND_LONG"):
             self._on_command(name, msg)
+        elif name == "SET_POSITION_TARGET_LOCAL_NED":
+            self.position_targets.append({**msg.to_dict(), "arrival_s": self.boot_s()})
         elif name == "SET_GPS_GLOBAL_ORIGIN":
             if self.config.profile == "px4":
                 self._set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
@@ -347,12 +351,13 @@ class FakeAutopilot:
         cmd = int(msg.command)
         if cmd == 611 and name == "COMMAND_INT" and self.config.profile == "ardupilot":
             result = self._origin_command(msg)
-        elif cmd in _ALWAYS_ACCEPTED:
+        elif cmd in _ALWAYS_ACCEPTED or cmd in _FLIGHT_COMMANDS:
             result = MAV_RESULT_ACCEPTED
         else:
             result = MAV_RESULT_UNSUPPORTED
         self.commands.append({"kind": name, "command": cmd, "result": result,
-                              "arrival_s": self.boot_s()})
+                              "arrival_s": self.boot_s(), "param1": float(msg.param1),
+                              "param2": float(msg.param2)})
         self.codec.mav.command_ack_send(cmd, result, 0, 0, msg.get_srcSystem(),
                                         msg.get_srcComponent())
 

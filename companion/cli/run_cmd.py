@@ -14,6 +14,7 @@ from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
+from companion.sim.square import SquareFlight
 from companion.sources.factory import open_source, resolve
 from mavlink_bridge.bridge import VisionBridge
 
@@ -29,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md has a systemd unit.",
     )
     parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--fly", action="store_true",
+                        help="SITL only: arm (GUIDED / OFFBOARD) and fly a small square with "
+                        "position targets so the loop runs while moving (docs/sitl.md)")
     parser.set_defaults(handler=run)
 
 
@@ -79,17 +83,38 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
     def processor(attitude: AttitudeHistory) -> Perception:
         return perception_for(settings, camera, pmap, attitude)
 
-    app = await fly(settings, source, bridge, processor, pmap.landmarks, seconds=seconds,
-                    prefix="run")
+    flights: list[asyncio.Task[None]] = []
+
+    def start_flying(_app: CompanionApp) -> None:
+        link = getattr(bridge, "link", None)
+        if link is None:
+            log.error("--fly needs mavlink.backend = \"pymavlink\"; not flying")
+            return
+        square = SquareFlight(link, bridge.latest, settings.vehicle.profile)
+        flights.append(asyncio.create_task(square.run(), name="fly-square"))
+        flights[0].add_done_callback(_report_flight)
+
+    try:
+        app = await fly(settings, source, bridge, processor, pmap.landmarks, seconds=seconds,
+                        prefix="run", on_start=start_flying if fly_square else None)
+    finally:
+        for task in flights:
+            task.cancel()
+        await asyncio.gather(*flights, return_exceptions=True)
     failure = getattr(source, "failure", None)
     if failure is not None:  # e.g. follow mode without the simulator's truth: one line
         raise failure
     return app
 
 
+def _report_flight(task: asyncio.Task[None]) -> None:
+    if not task.cancelled() and task.exception() is not None:
+        log.error("%s", task.exception())
+
+
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Fly until stopped; exit status 0 on a clean stop."""
-    app = asyncio.run(_run(settings, args.seconds))
+    app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False)))
     c = app.counters
     log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
              app.dropped_frames)

@@ -238,8 +238,8 @@ class FollowCameraSource:
                 self._ask_for_truth()
                 next_ask = now + 1_000_000_000
             await asyncio.sleep(0.02)
-        log.info("follow camera: truth from %s at about %.0f Hz",
-                 FULL_TRUTH.get(self.profile), self.truth_rate_hz())
+        log.info("follow camera: the simulator's truth (%s) arrives",
+                 FULL_TRUTH.get(self.profile))
 
     def truth_rate_hz(self) -> float:
         """Mean rate of the recent truth samples (0 when fewer than two)."""
