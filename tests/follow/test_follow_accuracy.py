@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from companion.app import Frame, FrameResult
 from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks, run_demo
 from companion.landmarks.geodesy import LocalFrame
@@ -25,7 +26,6 @@ from companion.settings import Settings, load_settings
 from companion.sim.follow import FollowCameraSource, command_sender
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
-from companion.sources.base import Frame
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from tracker.pose.types import PoseFix
 
@@ -42,25 +42,25 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
     sim = Simulator(replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin
-    frame = LocalFrame(o.lat, o.lon, o.alt_m)
-    pmap = PracticalMap(tuple(landmarks), references, frame)
+    local = LocalFrame(o.lat, o.lon, o.alt_m)
+    pmap = PracticalMap(tuple(landmarks), references, local)
     profile = settings.vehicle.profile
     fake = FakeAutopilot(FakeAutopilotConfig(profile=profile), truth=sim.truth_fn)
     await fake.start()
     bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
                         origin_lat_deg=o.lat, origin_lon_deg=o.lon, origin_alt_m=o.alt_m,
                         set_origin=True)
-    source = FollowCameraSource(sim, bridge, frame, profile, request=command_sender(bridge))
+    source = FollowCameraSource(sim, bridge, local, profile, request=command_sender(bridge))
     errors: list[float] = []
 
     class Recorder:
         def __init__(self, attitude: AttitudeHistory) -> None:
             self.perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
 
-        def process(self, f: Frame) -> Any:
-            result = self.perception.process(f)
+        def process(self, frame: Frame) -> FrameResult:
+            result = self.perception.process(frame)
             if isinstance(result.fix, PoseFix):
-                truth = sim.state_at((f.t_us * 1000 - fake.start_ns) / 1e9)
+                truth = sim.state_at((frame.t_us * 1000 - fake.start_ns) / 1e9)
                 errors.append(math.dist(result.fix.position_ned_m, truth.position_ned_m))
             return result
 
