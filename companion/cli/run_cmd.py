@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import math
 
-from companion.app import CompanionApp, FrameSource
+from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory
 from companion.perception import Perception
 from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
@@ -54,6 +55,25 @@ def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
     return PracticalMap(pmap.landmarks, refs, pmap.origin)
 
 
+class TruthTagger:
+    """Follow mode: each pose message also carries the true position the frame showed
+    (``truth_position_ned_m``) and the fix's distance from it (``truth_error_m``)."""
+
+    def __init__(self, perception: Perception, source: FollowCameraSource) -> None:
+        self.perception = perception
+        self.source = source
+
+    def process(self, frame: Frame) -> FrameResult:
+        result = self.perception.process(frame)
+        state = self.source.rendered_state(frame.index)
+        if result.fix is not None and result.pose_json is not None and state is not None:
+            truth = state.position_ned_m
+            result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
+            result.pose_json["truth_error_m"] = round(
+                math.dist(result.fix.position_ned_m, truth), 4)
+        return result
+
+
 def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
                 ) -> FollowCameraSource:
     """``source.kind = "follow"``: the scenario's world with the flight's landmark map about
@@ -80,8 +100,11 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
              len(pmap.landmarks), len(pmap.references), settings.source.kind,
              settings.source.spec)
 
-    def processor(attitude: AttitudeHistory) -> Perception:
-        return perception_for(settings, camera, pmap, attitude)
+    def processor(attitude: AttitudeHistory) -> FrameProcessor:
+        perception = perception_for(settings, camera, pmap, attitude)
+        if isinstance(source, FollowCameraSource):
+            return TruthTagger(perception, source)
+        return perception
 
     flights: list[asyncio.Task[None]] = []
 

@@ -4,12 +4,14 @@ and the ``--fly`` square's messages as the fake autopilot records them."""
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from companion.cli import main
@@ -88,6 +90,10 @@ def test_companion_run_with_the_sitl_config_closes_the_loop(
     assert origin is not None and origin[0] == pytest.approx(
         -35.363261 if profile == "ardupilot" else 47.397742)
     assert accepted > 0, "no fix reached the autopilot"
+    poses = [r for log in tmp_path.glob("run-*.jsonl")
+             for r in map(json.loads, log.read_text().splitlines()) if "truth_error_m" in r]
+    assert poses, "pose records carry no truth in follow mode"
+    assert float(np.median([r["truth_error_m"] for r in poses])) < 0.3
 
 
 def test_without_the_truth_message_run_fails_with_one_line(
