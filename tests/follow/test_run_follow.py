@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 
 from companion.cli import main
+from companion.landmarks.geodesy import LocalFrame
+from companion.landmarks.geojson_io import read_map
+from companion.settings import load_settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.square import (
@@ -26,6 +29,7 @@ from companion.sim.square import (
     SquarePlan,
     square_corners,
 )
+from companion.sources.factory import resolve
 from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
@@ -78,8 +82,19 @@ def run_args(config: str, port: int, tmp_path: Path, *extra: str) -> list[str]:
             *extra]
 
 
-@pytest.mark.parametrize(("config", "profile"), [("sitl-ardupilot.toml", "ardupilot"),
-                                                 ("sitl-px4.toml", "px4")])
+def test_the_px4_config_names_px4_sitls_link_home_and_map() -> None:
+    """(The PX4 loop itself is proven against the fake in test_follow_truth.py.)"""
+    s = load_settings([ROOT / "config" / "sitl-px4.toml"])
+    assert (s.vehicle.profile, s.mavlink.endpoint, s.mavlink.output) == (
+        "px4", "udpin:0.0.0.0:14540", "odometry")
+    assert resolve(s.source).kind == "follow"
+    home = LocalFrame(s.mavlink.origin_lat_deg, s.mavlink.origin_lon_deg, s.mavlink.origin_alt_m)
+    ned = {lm.id: home.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m)
+           for lm in read_map(s.landmarks.map_path)}
+    assert ned["wall-01"] == pytest.approx([0.0, 12.0, -4.0], abs=0.01)
+
+
+@pytest.mark.parametrize(("config", "profile"), [("sitl-ardupilot.toml", "ardupilot")])
 def test_companion_run_with_the_sitl_config_closes_the_loop(
         tmp_path: Path, config: str, profile: str) -> None:
     with fake_in_thread(FakeAutopilotConfig(profile=profile)) as fake:  # type: ignore[arg-type]
