@@ -72,12 +72,14 @@ class SquareFlight:
     ``autopilot_sysid``) reading the armed state from ``latest("HEARTBEAT")``."""
 
     def __init__(self, link: Any, latest: Callable[[str], Any], profile: str,
-                 plan: SquarePlan | None = None, arm_timeout_s: float = 120.0) -> None:
+                 plan: SquarePlan | None = None, arm_timeout_s: float = 120.0,
+                 arm_retry_s: float = 2.0) -> None:
         self.link = link
         self.latest = latest
         self.profile = profile
         self.plan = plan or SquarePlan()
         self.arm_timeout_s = arm_timeout_s
+        self.arm_retry_s = arm_retry_s
         self._t0 = time.monotonic()
 
     @property
@@ -100,7 +102,8 @@ class SquareFlight:
         return hb is not None and bool(hb.value.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
 
     async def arm(self) -> None:
-        """Mode and arm, retried every 2 s until armed (the EKF needs the fixes first)."""
+        """Mode and arm, retried every ``arm_retry_s`` until armed (the EKF needs the
+        fixes first)."""
         first = square_corners(self.plan)[0]
         deadline = time.monotonic() + self.arm_timeout_s
         while not self.armed():
@@ -117,7 +120,7 @@ class SquareFlight:
                 self.command(MAV_CMD_DO_SET_MODE, MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                              ARDUCOPTER_GUIDED)
             self.command(MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
-            await asyncio.sleep(2.0)
+            await asyncio.sleep(self.arm_retry_s)
         log.info("--fly: armed")
 
     async def run(self) -> None:

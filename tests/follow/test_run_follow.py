@@ -127,7 +127,7 @@ def test_without_the_truth_message_run_fails_with_one_line(
 
 async def test_fly_square_commands_and_position_targets() -> None:
     """GUIDED, arm, takeoff, then position targets at each corner (LOCAL_NED, yaw 90)."""
-    plan = SquarePlan(side_m=5.0, altitude_m=3.0, leg_s=0.3, loops=1, climb_m_s=100.0,
+    plan = SquarePlan(side_m=5.0, altitude_m=3.0, leg_s=0.15, loops=1, climb_m_s=100.0,
                       settle_s=0.0, setpoint_rate_hz=20.0)
     async with FakeAutopilot(FakeAutopilotConfig()) as fake:
         bridge = PymavlinkBridge(MavlinkConfig(
@@ -139,7 +139,7 @@ async def test_fly_square_commands_and_position_targets() -> None:
             await asyncio.sleep(0.3)  # a HEARTBEAT with the armed bit
             flight = SquareFlight(bridge.link, bridge.latest, "ardupilot", plan)
             task = asyncio.create_task(flight.run())
-            await asyncio.sleep(2.0)
+            await asyncio.sleep(1.2)
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
             await asyncio.sleep(0.1)
@@ -155,22 +155,27 @@ async def test_fly_square_commands_and_position_targets() -> None:
                and math.isclose(t["yaw"], math.pi / 2, abs_tol=1e-6) for t in targets)
 
 
-async def test_fly_arms_in_guided_when_disarmed() -> None:
-    """A disarmed vehicle is put in GUIDED (custom mode 4) and armed, retried until armed."""
+@pytest.mark.parametrize(("profile", "mode"), [("ardupilot", 4.0), ("px4", 6.0)])
+async def test_fly_sets_the_mode_and_arms_when_disarmed(profile: str, mode: float) -> None:
+    """Disarmed: GUIDED (ArduCopter custom mode 4) or OFFBOARD (PX4 main mode 6, after a
+    setpoint stream), then arm; retried until armed or the timeout."""
     plan = SquarePlan(loops=1)
-    async with FakeAutopilot(FakeAutopilotConfig()) as fake:
+    async with FakeAutopilot(FakeAutopilotConfig(profile=profile)) as fake:  # type: ignore[arg-type]
         bridge = PymavlinkBridge(MavlinkConfig(
             endpoint=f"udpout:127.0.0.1:{fake.local_port}", origin_lat_deg=47.0,
             origin_lon_deg=8.0, heartbeat_rate_hz=5.0))
         async with bridge:
             bridge.report_health("ok")
             assert await bridge.wait_link(True, 3.0)
-            flight = SquareFlight(bridge.link, lambda _n: None, "ardupilot", plan,
-                                  arm_timeout_s=0.5)
+            flight = SquareFlight(bridge.link, lambda _n: None, profile, plan,
+                                  arm_timeout_s=0.5, arm_retry_s=0.2)
             with pytest.raises(TimeoutError, match="not armed"):
                 await flight.arm()
             await asyncio.sleep(0.1)
     modes = [c for c in fake.commands if c["command"] == MAV_CMD_DO_SET_MODE]
     arms = [c for c in fake.commands if c["command"] == MAV_CMD_COMPONENT_ARM_DISARM]
-    assert modes and modes[0]["param1"] == 1.0 and modes[0]["param2"] == 4.0
+    assert modes and modes[0]["param1"] == 1.0 and modes[0]["param2"] == mode
     assert arms and arms[0]["param1"] == 1.0
+    if profile == "px4":  # offboard refuses to engage without setpoints streaming first
+        assert fake.position_targets
+        assert fake.position_targets[0]["arrival_s"] < modes[0]["arrival_s"]
