@@ -1,21 +1,26 @@
-"""Follow mode is as accurate as the scripted camera: the same flight, two ways.
+"""Follow mode against the scripted camera, both flown live: the same flight, two ways.
+
+Run: ``PYTHONPATH=. python benchmarks/follow_equivalence.py [--seconds 12] [--fps 15]``.
 
 Scripted: ``companion demo``'s flight (the camera renders the scenario's trajectory).
 Follow: the fake autopilot flies the same trajectory and streams SIM_STATE/SIMSTATE; the
 camera renders from that telemetry, interpolated, on the companion's clock.  Both compare
-every fix with the scripted truth at the fix's time; follow mode may not be worse than
-1.5x the scripted RMSE + 2 cm (telemetry is degE7-quantised and arrives at ~40 Hz).
+every fix with the scripted truth at the fix's time.  Live flights depend on the machine's
+load (frames dropped, fixes too old), so this prints numbers; the deterministic proof is
+``tests/follow/test_follow_equivalence.py``.
 """
 
 from __future__ import annotations
 
+import argparse
+import asyncio
 import math
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
 
 from companion.app import Frame, FrameResult
 from companion.autopilot import AttitudeHistory
@@ -29,12 +34,17 @@ from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from tracker.pose.types import PoseFix
 
-SECONDS = 12.0
+SURVEY = Path(__file__).resolve().parents[1] / "config" / "scenarios" / "survey.toml"
 
 
-@pytest.fixture
-def settings(tmp_path: Path) -> Settings:
-    return load_settings(sets=["monitor.enabled=false", f'flightlog.dir="{tmp_path}"'])
+def scenario_at(fps: float, folder: Path) -> str:
+    """The survey scenario at ``fps`` frames per second (a file: run_demo takes a file)."""
+    text = SURVEY.read_text().replace("fps = 30.0", f"fps = {fps}")
+    text = text.replace('landmarks = "../landmarks.geojson"',
+                        f'landmarks = "{SURVEY.parent.parent / "landmarks.geojson"}"')
+    path = folder / "survey.toml"
+    path.write_text(text)
+    return str(path)
 
 
 async def follow_flight(settings: Settings, scenario: str, seconds: float) -> dict[str, Any]:
@@ -76,15 +86,22 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
             "refused": app.counters.fixes_refused, "bridge": bridge.stats()["vision"]}
 
 
-async def test_follow_mode_fixes_match_the_truth_like_the_scripted_camera(
-        settings: Settings) -> None:
-    scripted = await run_demo(settings, "survey", SECONDS)
-    follow = await follow_flight(settings, "survey", SECONDS)
-    print(f"\nscripted: {scripted['fixes_sent']} fixes, RMSE {scripted['position_rmse_m']} m; "
-          f"follow: {follow['fixes']} fixes, RMSE {follow['position_rmse_m']:.4f} m, "
-          f"{follow['accepted']}/{follow['sent']} accepted by the fake autopilot "
-          f"(refused by the bridge: {follow['bridge']})")
-    assert scripted["position_rmse_m"] is not None
-    assert follow["fixes"] >= 10, "too few follow-mode fixes for an RMSE"
-    assert follow["position_rmse_m"] <= 1.5 * scripted["position_rmse_m"] + 0.02
-    assert follow["accepted"] >= 0.8 * follow["sent"]
+async def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=12.0)
+    parser.add_argument("--fps", type=float, default=15.0)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        settings = load_settings(sets=["monitor.enabled=false", f'flightlog.dir="{tmp}"'])
+        scenario = scenario_at(args.fps, Path(tmp))
+        scripted = await run_demo(settings, scenario, args.seconds)
+        follow = await follow_flight(settings, scenario, args.seconds)
+    print(f"scripted: {scripted['fixes_sent']} fixes sent, RMSE "
+          f"{scripted['position_rmse_m']} m")
+    print(f"follow:   {follow['fixes']} fixes solved ({follow['sent']} sent, "
+          f"{follow['accepted']} accepted by the fake autopilot; bridge {follow['bridge']}), "
+          f"RMSE {follow['position_rmse_m']:.4f} m")
+
+
+if __name__ == "__main__":
+    asyncio.run(main())
