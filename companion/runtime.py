@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.app import CompanionApp, FrameProcessor, FrameSource
+from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory, BridgeSink
 from companion.errors import ConfigError, InputError
 from companion.flightlog import FlightLogWriter
@@ -30,6 +30,7 @@ from companion.landmarks.geojson_io import read_map
 from companion.landmarks.record import Landmark
 from companion.monitoring.publisher import MonitorPublisher
 from companion.perception import Perception, SideSensors
+from companion.preview import render_preview
 from companion.reporting import Reporter
 from companion.settings import Settings
 from companion.validate import to_plain
@@ -125,8 +126,17 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     attitude = AttitudeHistory(bridge)
     attitude.start()
     reporter = reporter_for(settings, landmarks, prefix)
+    mon = settings.monitor
+
+    def preview(frame: Frame, result: FrameResult) -> bytes:
+        caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
+        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
+                  for t in result.tracks]
+        return render_preview(frame.image, tracks, mon.preview_width_px,
+                              mon.preview_jpeg_quality, caption)
+
     app = CompanionApp(source, make_processor(attitude), BridgeSink(bridge), reporter,
-                       settings.vehicle.id, 1.0 / settings.monitor.status_rate_hz)
+                       settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError, RuntimeError):
