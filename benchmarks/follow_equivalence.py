@@ -74,6 +74,9 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
                 errors.append(math.dist(result.fix.position_ned_m, truth.position_ned_m))
             return result
 
+        def housekeeping(self, frame: Frame) -> None:
+            self.perception.housekeeping(frame)
+
     try:
         app = await fly(settings, source, bridge, Recorder, landmarks, seconds=seconds,
                         prefix="follow")

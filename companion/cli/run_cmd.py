@@ -73,6 +73,9 @@ class TruthTagger:
                 math.dist(result.fix.position_ned_m, truth), 4)
         return result
 
+    def housekeeping(self, frame: Frame) -> None:
+        self.perception.housekeeping(frame)
+
 
 def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
                 ) -> FollowCameraSource:

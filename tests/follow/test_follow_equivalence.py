@@ -82,6 +82,7 @@ def fix_errors(sim: Simulator, frames: list[tuple[Frame, float]]) -> list[float]
     errors = []
     for frame, t_s in frames:
         result = perception.process(frame)
+        perception.housekeeping(frame)  # acquisition, after the fix as in the pipeline
         if isinstance(result.fix, PoseFix):
             errors.append(math.dist(result.fix.position_ned_m,
                                     sim.state_at(t_s).position_ned_m))
