@@ -22,12 +22,13 @@ import time
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from companion.errors import SourceError
 from companion.landmarks.geodesy import LocalFrame
+from companion.sim.scenario import OriginConfig, ScenarioConfig
 from companion.sim.simulator import RANGE_STREAM, Simulator
 from companion.sim.trajectory import VehicleState
 from companion.sources.base import Frame, ImageU8, SourceStatus
@@ -343,9 +344,8 @@ def command_sender(bridge: object) -> Callable[..., None] | None:
     return send
 
 
-def follow_simulator(scenario: Any, landmarks_path: str, origin: LocalFrame) -> Simulator:
+def follow_simulator(scenario: ScenarioConfig, landmarks_path: str, origin: LocalFrame
+                     ) -> Simulator:
     """The scenario's world with the flight's landmark map placed about the EKF origin."""
-    from companion.sim.scenario import OriginConfig
-
     o = OriginConfig(origin.lat_deg, origin.lon_deg, origin.alt_m)
     return Simulator(replace(scenario, origin=o, landmarks=landmarks_path))
