@@ -44,6 +44,10 @@ FULL_TRUTH = {"ardupilot": "SIM_STATE", "px4": "HIL_STATE_QUATERNION"}
 MESSAGE_IDS = {"SIM_STATE": 108, "SIMSTATE": 164, "HIL_STATE_QUATERNION": 115}
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 SAMPLES_KEPT = 256
+#: Samples read less than this apart (and under a quarter of the requested period) came in
+#: one burst -- the companion's event loop was busy while they queued in the socket -- and
+#: only the newest of a burst is kept (see add_sample).
+BURST_NS = 5_000_000
 TRUTH_KEPT = 256
 
 
@@ -103,6 +107,23 @@ def truth_sample(item: Telemetry, frame: LocalFrame) -> TruthSample | None:
     vel = np.zeros(3) if v.velocity_ned_m_s is None else np.asarray(v.velocity_ned_m_s)
     return TruthSample(item.received_ns, np.asarray(ned, dtype=np.float64),
                        q / np.linalg.norm(q), vel.astype(np.float64))
+
+
+def add_sample(samples: deque[TruthSample], sample: TruthSample,
+               burst_ns: int = BURST_NS) -> None:
+    """Append a sample stamped with its arrival, keeping only the newest of a burst.
+
+    Arrival stamps are right when the companion reads the socket promptly.  After a stall
+    several samples sent over the stall are read within microseconds: their stamps say
+    "now" while their poses span the stall, and interpolating between two of them would
+    stretch 20 ms of motion over a few microseconds.  The newest of the burst is the one
+    whose stamp is right; the sample before the stall stays, and frames in between are
+    interpolated across the stall from those two.
+    """
+    if samples and sample.t_ns - samples[-1].t_ns < burst_ns:
+        samples[-1] = sample  # same burst: the newer value replaces the older
+    else:
+        samples.append(sample)
 
 
 def state_at(samples: list[TruthSample] | deque[TruthSample], t_ns: int,
@@ -182,6 +203,8 @@ class FollowCameraSource:
         self._request = request
         self._clock_ns = clock_ns
         self._samples: deque[TruthSample] = deque(maxlen=SAMPLES_KEPT)
+        rate = config.request_rate_hz
+        self._burst_ns = BURST_NS if rate <= 0 else min(BURST_NS, round(0.25e9 / rate))
         self._truth: dict[int, tuple[VehicleState, FrameTruth]] = {}
         self._task: asyncio.Task[None] | None = None
         self._t0_ns: int | None = None
@@ -198,12 +221,8 @@ class FollowCameraSource:
                 if item.name != FULL_TRUTH.get(self.profile):
                     continue
                 sample = truth_sample(item, self.origin)
-                if sample is None:
-                    continue
-                if self._samples and sample.t_ns <= self._samples[-1].t_ns:
-                    self._samples[-1] = sample  # same instant: keep the newer value
-                else:
-                    self._samples.append(sample)
+                if sample is not None:
+                    add_sample(self._samples, sample, self._burst_ns)
         except asyncio.CancelledError:
             pass
         finally:

@@ -46,14 +46,16 @@ SECONDS = 6.0
 FPS = 15.0
 
 
-async def follow_frames(sim: Simulator) -> list[tuple[Frame, float]]:
-    """Frames of the follow camera and the survey time each one shows."""
+async def follow_frames(sim: Simulator) -> tuple[list[tuple[Frame, float]], list[float]]:
+    """Frames of the follow camera, the survey time each one shows, and how far the pose
+    it was rendered from is from the truth at that time (m)."""
     o = sim.scenario.origin
 
     def truth(t_s: float) -> VehicleState:
         return sim.truth_fn(t_s + OFFSET_S)
 
     out: list[tuple[Frame, float]] = []
+    pose_err: list[float] = []
     async with FakeAutopilot(FakeAutopilotConfig(), truth=truth) as fake:
         bridge = PymavlinkBridge(MavlinkConfig(
             endpoint=f"udpout:127.0.0.1:{fake.local_port}", origin_lat_deg=o.lat,
@@ -65,10 +67,15 @@ async def follow_frames(sim: Simulator) -> list[tuple[Frame, float]]:
             try:
                 while not out or out[-1][1] - out[0][1] < SECONDS:
                     frame = await source.recv()
-                    out.append((frame, (frame.t_us * 1000 - fake.start_ns) / 1e9 + OFFSET_S))
+                    t_s = (frame.t_us * 1000 - fake.start_ns) / 1e9 + OFFSET_S
+                    out.append((frame, t_s))
+                    shown = source.rendered_state(frame.index)
+                    assert shown is not None
+                    pose_err.append(math.dist(shown.position_ned_m,
+                                              sim.state_at(t_s).position_ned_m))
             finally:
                 source.close()
-    return out
+    return out, pose_err
 
 
 def fix_errors(sim: Simulator, frames: list[tuple[Frame, float]]) -> list[float]:
@@ -95,11 +102,13 @@ def rmse(errors: list[float]) -> float:
 
 async def test_follow_mode_fixes_are_as_accurate_as_the_scripted_cameras() -> None:
     sim = Simulator(replace(load_scenario("survey"), fps=FPS))
-    follow = await follow_frames(sim)
+    follow, pose_err = await follow_frames(sim)
     scripted = [(Frame(f.index, f.t_us, sim.render(f.index, t_s)[0], f.camera_id), t_s)
                 for f, t_s in follow]
     follow_err, scripted_err = fix_errors(sim, follow), fix_errors(sim, scripted)
-    print(f"\n{len(follow)} frames over {follow[-1][1] - follow[0][1]:.1f} s: scripted "
+    print(f"\nfollow camera pose vs truth: median {np.median(pose_err) * 100:.2f} cm, max "
+          f"{max(pose_err) * 100:.2f} cm")
+    print(f"{len(follow)} frames over {follow[-1][1] - follow[0][1]:.1f} s: scripted "
           f"{len(scripted_err)} fixes, median {np.median(scripted_err):.4f} m, RMSE "
           f"{rmse(scripted_err):.4f} m; follow {len(follow_err)} fixes, median "
           f"{np.median(follow_err):.4f} m, RMSE {rmse(follow_err):.4f} m")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import math
 import time
+from collections import deque
 from collections.abc import AsyncIterator
 from dataclasses import replace
 from typing import Any
@@ -22,6 +23,7 @@ from companion.landmarks.geodesy import LocalFrame
 from companion.sim.follow import (
     FollowCameraSource,
     TruthSample,
+    add_sample,
     command_sender,
     slerp,
     state_at,
@@ -126,6 +128,25 @@ def test_extrapolation_is_bounded_and_gaps_are_not_bridged() -> None:
     assert st is not None and st.position_ned_m[0] == pytest.approx(1.5)
     assert state_at(s, 25_000_000, 10_000_000) is None
     assert state_at(s, 5_000_000, 0, max_gap_ns=5_000_000) is None
+
+
+def test_a_burst_read_after_a_stall_keeps_only_its_newest_sample() -> None:
+    """Samples sent over a 200 ms stall are read within microseconds: interpolating between
+    them would put 20 ms of motion into 10 us; the newest of the burst has the right stamp."""
+    samples: deque[TruthSample] = deque()
+    add_sample(samples, sample(0, (0, 0, 0), 0.0))
+    for k in range(1, 11):  # sent every 20 ms over the stall, all read at ~200 ms
+        add_sample(samples, sample(200_000_000 + k * 10_000, (0.2 * k / 10, 0, 0), 0.0))
+    assert [s.t_ns for s in samples] == [0, 200_100_000]
+    st = state_at(samples, 100_000_000, 0)
+    assert st is not None and st.position_ned_m[0] == pytest.approx(0.1, abs=1e-3)
+
+
+def test_steady_samples_are_never_merged() -> None:
+    samples: deque[TruthSample] = deque()
+    for k in range(5):
+        add_sample(samples, sample(k * 20_000_000, (k, 0, 0), 0.0))
+    assert len(samples) == 5
 
 
 def test_slerp_matches_rotation_of_intermediate_angle() -> None:
