@@ -44,6 +44,7 @@ from tracker.pose.types import PoseFix
 OFFSET_S = 3.0  # start 3 s into the survey: the first landmarks come into view
 SECONDS = 6.0
 FPS = 15.0
+GLITCH_M = 0.02  # a follow frame this far from the truth is a glitch (degE7 is ~6 mm)
 
 
 async def follow_frames(sim: Simulator) -> tuple[list[tuple[Frame, float]], list[float]]:
@@ -102,12 +103,21 @@ def rmse(errors: list[float]) -> float:
 
 async def test_follow_mode_fixes_are_as_accurate_as_the_scripted_cameras() -> None:
     sim = Simulator(replace(load_scenario("survey"), fps=FPS))
-    follow, pose_err = await follow_frames(sim)
+    frames, pose_err = await follow_frames(sim)
+    # A truth sample read late (the event loop was busy on this loaded machine) shows the
+    # world a few cm off for a frame.  Such frames are counted and bounded here, and left
+    # out of both sequences: one 8 cm glitch can throw the perception 3 m off for the rest
+    # of the run (benchmarks/follow_glitch.py), which would compare that, not the camera.
+    glitches = [e > GLITCH_M for e in pose_err]
+    print(f"\nfollow camera pose vs truth: median {np.median(pose_err) * 100:.2f} cm, max "
+          f"{max(pose_err) * 100:.2f} cm, {sum(glitches)} of {len(frames)} frames > "
+          f"{GLITCH_M * 100:.0f} cm")
+    assert np.median(pose_err) < 0.01
+    assert sum(glitches) <= 0.05 * len(frames)
+    follow = [f for f, bad in zip(frames, glitches, strict=True) if not bad]
     scripted = [(Frame(f.index, f.t_us, sim.render(f.index, t_s)[0], f.camera_id), t_s)
                 for f, t_s in follow]
     follow_err, scripted_err = fix_errors(sim, follow), fix_errors(sim, scripted)
-    print(f"\nfollow camera pose vs truth: median {np.median(pose_err) * 100:.2f} cm, max "
-          f"{max(pose_err) * 100:.2f} cm")
     print(f"{len(follow)} frames over {follow[-1][1] - follow[0][1]:.1f} s: scripted "
           f"{len(scripted_err)} fixes, median {np.median(scripted_err):.4f} m, RMSE "
           f"{rmse(scripted_err):.4f} m; follow {len(follow_err)} fixes, median "
