@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 from collections import OrderedDict
 
 from companion.sim.simulator import Simulator
@@ -49,6 +50,7 @@ class SimCameraSource:
         self._truth: OrderedDict[int, FrameTruth] = OrderedDict()
         self._closed = False
         self._prefetch: tuple[int, asyncio.Future[tuple[ImageU8, FrameTruth]]] | None = None
+        self.render_cpu_s = 0.0
 
     def truth(self, index: int) -> FrameTruth | None:
         """Truth of a recent frame (the last few hundred are kept)."""
@@ -87,7 +89,16 @@ class SimCameraSource:
 
     def _render_async(self, index: int) -> asyncio.Future[tuple[ImageU8, FrameTruth]]:
         t_s = (index % self._frames_per_pass) / self.sim.fps
-        return asyncio.get_running_loop().run_in_executor(None, self.sim.render, index, t_s)
+        return asyncio.get_running_loop().run_in_executor(None, self._render_timed, index, t_s)
+
+    def _render_timed(self, index: int, t_s: float) -> tuple[ImageU8, FrameTruth]:
+        """Render, adding the CPU time it took to ``render_cpu_s`` (the simulated camera is
+        not the companion: the demo reports the companion's CPU without it)."""
+        start = time.thread_time()
+        try:
+            return self.sim.render(index, t_s)
+        finally:
+            self.render_cpu_s += time.thread_time() - start
 
     async def _rendered(self, index: int) -> tuple[ImageU8, FrameTruth]:
         if self._prefetch is not None and self._prefetch[0] == index:
