@@ -29,7 +29,7 @@ import numpy as np
 from companion.errors import SourceError
 from companion.landmarks.geodesy import LocalFrame
 from companion.sim.scenario import OriginConfig, ScenarioConfig
-from companion.sim.simulator import RANGE_STREAM, Simulator
+from companion.sim.simulator import Simulator
 from companion.sim.trajectory import VehicleState
 from companion.sources.base import Frame, ImageU8, SourceStatus
 from companion.sources.config import FollowConfig
@@ -327,14 +327,7 @@ class FollowCameraSource:
     def _render(self, state: VehicleState, index: int, t_s: float
                 ) -> tuple[ImageU8, FrameTruth]:
         """Simulator.render for a given state (not the scripted one), effects at ``t_s``."""
-        sim = self.sim
-        rendered = sim.renderer.render(state, sim.effects.world_quads(t_s))
-        image = sim.effects.apply(rendered.image, t_s, index, rendered.boxes)
-        rng = np.random.default_rng([sim.scenario.seed, index, RANGE_STREAM])
-        range_m = sim.rangefinder.measure(state, rng)
-        boxes = tuple(replace(b, occluded_frac=sim.effects.occluded_frac(b.landmark_id, t_s))
-                      for b in rendered.boxes)
-        return image, FrameTruth(boxes, rendered.pose, rendered.camera, range_m)
+        return self.sim.render_state(state, index, t_s)
 
     def _keep(self, index: int, state: VehicleState, truth: FrameTruth) -> None:
         self._truth[index] = (state, truth)

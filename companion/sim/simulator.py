@@ -75,17 +75,20 @@ class Simulator:
     def render(self, index: int, t_s: float | None = None) -> tuple[ImageU8, FrameTruth]:
         """Frame ``index`` at ``t_s`` (default ``index / fps``) and its truth."""
         t = index / self.fps if t_s is None else t_s
-        state = self.state_at(t)
-        rendered = self.renderer.render(state, self.effects.world_quads(t))
-        image = self.effects.apply(rendered.image, t, index, rendered.boxes)
+        return self.render_state(self.state_at(t), index, t)
+
+    def render_state(self, state: VehicleState, index: int, t_s: float
+                     ) -> tuple[ImageU8, FrameTruth]:
+        """Frame ``index`` seen from ``state`` (scripted or followed), effects at ``t_s``."""
+        rendered = self.renderer.render(state, self.effects.world_quads(t_s))
+        image = self.effects.apply(rendered.image, t_s, index, rendered.boxes)
         rng = np.random.default_rng([self.scenario.seed, index, RANGE_STREAM])
         range_m = self.rangefinder.measure(state, rng)
         boxes = tuple(
-            replace(b, occluded_frac=self.effects.occluded_frac(b.landmark_id, t))
+            replace(b, occluded_frac=self.effects.occluded_frac(b.landmark_id, t_s))
             for b in rendered.boxes
         )
-        truth = FrameTruth(boxes, rendered.pose, rendered.camera, range_m)
-        return image, truth
+        return image, FrameTruth(boxes, rendered.pose, rendered.camera, range_m)
 
     def stream_meta(self, fps: float | None = None) -> StreamMeta:
         """``stream.toml`` contents for a recording of this scenario."""
