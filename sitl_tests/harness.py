@@ -69,6 +69,7 @@ class Arrival:
 
     flight_s: float
     age_ms: float  # arrival minus the message's time stamp (one monotonic clock)
+    stamp_s: float  # the message's time stamp on the flight clock (= the frame's scenario time)
     accepted: bool
     reason: str
     position_ned_m: tuple[float, float, float]
@@ -85,7 +86,8 @@ class SitlAutopilot(FakeAutopilot):
         super()._on_vision(name, msg)
         rec: VisionRecord = self.vision[-1]
         age_ms = (self.clock_ns() / 1000 - rec.time_usec) / 1000
-        self.arrivals.append(Arrival(self.flight_s(), age_ms, rec.accepted, rec.reason,
+        stamp_s = (rec.time_usec - self.start_ns / 1000) / 1e6
+        self.arrivals.append(Arrival(self.flight_s(), age_ms, stamp_s, rec.accepted, rec.reason,
                                      rec.position_ned_m))
 
     def accepted_times(self) -> list[float]:
@@ -102,7 +104,7 @@ class CameraFaults:
     stall_until_s: float = -1.0
     corrupt_left: int = 0
     corrupt_kind: str = "noise"  # noise | black | truncated | wrong_size
-    corrupted: int = 0
+    corrupted: list[int] = field(default_factory=list)  # frame indices
     stalled_s: float = 0.0
 
 
@@ -136,7 +138,7 @@ class FaultyCamera:
         if self.faults.corrupt_left <= 0:
             return frame
         self.faults.corrupt_left -= 1
-        self.faults.corrupted += 1
+        self.faults.corrupted.append(frame.index)
         return dataclasses.replace(frame, image=self._corrupt(frame.image))
 
     def _corrupt(self, image: np.ndarray) -> np.ndarray:
@@ -167,6 +169,7 @@ class FrameRecord:
     fix_sigma_m: tuple[float, float, float] | None = None
     fix_landmarks: tuple[str, ...] = ()
     bad_frame: bool = False
+    brightness: float = 0.0  # mean grey level of the image
 
 
 class RecordingPerception:
@@ -188,7 +191,7 @@ class RecordingPerception:
         state = self.camera.sim.state_at(t_s)
         rec = FrameRecord(frame.index, t_s, visible,
                           tuple(float(v) for v in state.position_ned_m),  # type: ignore[arg-type]
-                          bad_frame=result.bad_frame)
+                          bad_frame=result.bad_frame, brightness=float(frame.image.mean()))
         if isinstance(result.fix, PoseFix):
             rec = dataclasses.replace(rec, fix_ned_m=tuple(result.fix.position_ned_m),
                                       fix_sigma_m=result.fix.position_sigma_m,
@@ -316,6 +319,11 @@ class Flight:
     def errors_m(self) -> list[float]:
         return [math.dist(f.fix_ned_m, f.truth_ned_m) for f in self.fixes()
                 if f.fix_ned_m is not None]
+
+    def invented(self, min_visible: float = 0.05) -> list[FrameRecord]:
+        """Fixes that used a landmark the truth says was out of view or hidden."""
+        return [f for f in self.fixes()
+                if any(f.visible.get(lid, 0.0) < min_visible for lid in f.fix_landmarks)]
 
     def flight_log(self) -> FlightLog:
         """The flight log this flight wrote (the only one in ``flightlog.dir``)."""
