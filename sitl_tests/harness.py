@@ -320,8 +320,8 @@ class Flight:
         return [math.dist(f.fix_ned_m, f.truth_ned_m) for f in self.fixes()
                 if f.fix_ned_m is not None]
 
-    def invented(self, min_visible: float = 0.05) -> list[FrameRecord]:
-        """Fixes that used a landmark the truth says was out of view or hidden."""
+    def invented(self, min_visible: float = 1e-6) -> list[FrameRecord]:
+        """Fixes that used a landmark the truth says was entirely out of view or hidden."""
         return [f for f in self.fixes()
                 if any(f.visible.get(lid, 0.0) < min_visible for lid in f.fix_landmarks)]
 
