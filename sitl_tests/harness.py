@@ -38,8 +38,8 @@ import numpy as np
 from companion.app import CompanionApp, FrameResult
 from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks
-from companion.landmarks.geodesy import LocalFrame
 from companion.flightlog import FlightLog, read_flight_log
+from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import Settings, load_settings
@@ -89,6 +89,16 @@ class SitlAutopilot(FakeAutopilot):
         stamp_s = (rec.time_usec - self.start_ns / 1000) / 1e6
         self.arrivals.append(Arrival(self.flight_s(), age_ms, stamp_s, rec.accepted, rec.reason,
                                      rec.position_ned_m))
+
+    def inject_to_companion(self, data: bytes) -> None:
+        """Bytes onto the link towards the companion, as if this autopilot sent them (the
+        companion's UDP socket is connected to us: nothing else can reach it)."""
+        assert self.connection is not None
+        self.connection.write(data)
+
+    def inject_received(self, data: bytes) -> None:
+        """Bytes into this autopilot as if they came over its link."""
+        self._rx(data)
 
     def accepted_times(self) -> list[float]:
         return [a.flight_s for a in self.arrivals if a.accepted]
@@ -181,7 +191,7 @@ class RecordingPerception:
         self.camera = camera
         self.out = out
 
-    def process(self, frame: Frame) -> FrameResult:
+    def process(self, frame: Any) -> FrameResult:
         result = self.perception.process(frame)
         t_s = self.camera.scenario_time_s(frame)
         truth = self.camera.truth(frame.index)
@@ -193,7 +203,8 @@ class RecordingPerception:
                           tuple(float(v) for v in state.position_ned_m),  # type: ignore[arg-type]
                           bad_frame=result.bad_frame, brightness=float(frame.image.mean()))
         if isinstance(result.fix, PoseFix):
-            rec = dataclasses.replace(rec, fix_ned_m=tuple(result.fix.position_ned_m),
+            n, e, d = (float(v) for v in result.fix.position_ned_m)
+            rec = dataclasses.replace(rec, fix_ned_m=(n, e, d),
                                       fix_sigma_m=result.fix.position_sigma_m,
                                       fix_landmarks=tuple(result.fix.landmark_ids))
         self.out.append(rec)

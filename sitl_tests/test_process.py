@@ -103,7 +103,7 @@ async def test_bad_configuration(tmp_path: Path, extra: str, expected: str) -> N
     bad = tmp_path / "bad.toml"
     bad.write_text(extra + "\n", encoding="utf-8")
     proc = await companion("--config", str(bad), "run", cwd=tmp_path)
-    out, err = await asyncio.wait_for(proc.communicate(), 30.0)
+    _, err = await asyncio.wait_for(proc.communicate(), 30.0)
     lines = err.decode().strip().splitlines()
     assert proc.returncode == 2, err.decode()
     assert len(lines) == 1 and expected in lines[0], lines
@@ -122,7 +122,7 @@ async def test_missing_or_broken_landmark_map(tmp_path: Path, problem: str) -> N
     async with SitlAutopilot(FakeAutopilotConfig()) as fake:
         proc = await companion("--config", str(run_config(tmp_path, fake.local_port, map_path)),
                                "run", "--seconds", "5", cwd=tmp_path)
-        out, err = await asyncio.wait_for(proc.communicate(), 30.0)
+        _, err = await asyncio.wait_for(proc.communicate(), 30.0)
         heard = len(fake.heartbeats)
     lines = err.decode().strip().splitlines()
     assert proc.returncode == 2, err.decode()

@@ -45,7 +45,8 @@ def assert_kept_through_light_change(flight: Flight, start_s: float, end_s: floa
     lo = min(brightness(frames, t, t + 0.5) for t in np.arange(start_s, end_s - 0.5, 0.25))
     hi = max(brightness(frames, t, t + 0.5) for t in np.arange(start_s, end_s - 0.5, 0.25))
     assert lo <= dimmest * before, f"the light never dimmed: {lo:.0f} vs {before:.0f}"
-    assert brightest == 0.0 or hi >= brightest * before, f"the light never brightened: {hi:.0f} vs {before:.0f}"
+    assert brightest == 0.0 or hi >= brightest * before, \
+        f"the light never brightened: {hi:.0f} vs {before:.0f}"
     gap = max_fix_gap_s(frames, start_s, end_s)
     share = fix_share(frames, start_s, end_s)
     assert gap <= 1.0, f"fixes stopped for {gap:.2f} s during the light change"
