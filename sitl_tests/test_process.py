@@ -32,7 +32,6 @@ def run_config(tmp: Path, port: int, map_path: Path = MAP, extra: str = "") -> P
 [source]
 kind = "sim"
 spec = "hover"
-fps = 15.0
 [mavlink]
 endpoint = "udpout:127.0.0.1:{port}"
 origin_lat_deg = {o.lat}
