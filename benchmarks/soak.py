@@ -94,7 +94,7 @@ level = "warning"
 
 
 async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
-               tmp: Path | None = None) -> dict[str, Any]:
+               tmp: Path | None = None, thread_slack: int = 0) -> dict[str, Any]:
     """Fly ``seconds`` and return the samples and the verdicts."""
     tmp = tmp or Path(tempfile.mkdtemp(prefix="lmc-soak-"))
     scenario = soak_scenario(tmp, seconds + 60.0, fps)
@@ -126,11 +126,14 @@ async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
             _, err = await proc.communicate()
     return {"seconds": seconds, "sample_s": sample_s, "fps": fps,
             "exit_status": proc.returncode, "stderr_tail": err.decode()[-500:],
-            "samples": [asdict(s) for s in samples], "verdict": verdict(samples, seconds)}
+            "samples": [asdict(s) for s in samples],
+            "verdict": verdict(samples, seconds, thread_slack)}
 
 
-def verdict(samples: list[Sample], seconds: float) -> dict[str, Any]:
-    """The soak's checks on samples after the warm-up."""
+def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0) -> dict[str, Any]:
+    """The soak's checks on samples after the warm-up (``thread_slack``: threads the last
+    third may have beyond the first third's peak; the short CI form allows 1, for a pool
+    thread started late under load)."""
     warm = max(15.0, 0.1 * seconds)
     after = [s for s in samples if s.t_s >= warm]
     if len(after) < 3:
@@ -142,7 +145,7 @@ def verdict(samples: list[Sample], seconds: float) -> dict[str, Any]:
     median = statistics.median(rates)
     half = len(rates) // 2
     first_half, second_half = statistics.median(rates[:half]), statistics.median(rates[half:])
-    out = {
+    out: dict[str, Any] = {
         "warm_up_s": warm,
         "rss_mb_at_warm_up": base.rss_mb,
         "rss_mb_last": after[-1].rss_mb,
@@ -160,7 +163,8 @@ def verdict(samples: list[Sample], seconds: float) -> dict[str, Any]:
     }
     out["ok"] = bool(out["rss_growth_pct"] <= 5.0 and out["rss_peak_growth_pct"] <= 5.0
                      and max(s.fds for s in last) <= max(s.fds for s in first)
-                     and max(s.threads for s in last) <= max(s.threads for s in first)
+                     and max(s.threads for s in last)
+                     <= max(s.threads for s in first) + thread_slack
                      and min(rates) > 0 and second_half >= 0.7 * first_half)
     return out
 

@@ -54,6 +54,11 @@ from mavlink_bridge.fake_rules import VisionRecord
 from tracker.pose.types import PoseFix
 
 POLL_S = 0.02
+# A fix is stale when it reaches the autopilot older than ``mavlink.max_fix_age_ms`` (the
+# bridge never sends one older) plus this: the loopback and event-loop delay before the fake
+# autopilot (same process) reads it, up to ~200 ms on a loaded 2-core machine.  A fix held
+# over an outage is older by the outage (>= 1 s), far beyond it.
+ARRIVAL_SLACK_MS = 250.0
 # Camera rate of SITL flights: half the scenarios' 30 fps, so the whole pipeline keeps up on
 # a loaded 2-core CI machine (at 30 fps there the camera skips most frames and tracking,
 # not the property under test, decides the outcome).  Benchmarks measure the 30 fps case.
@@ -323,6 +328,11 @@ class Flight:
         await asyncio.sleep(max(0.0, flight_s - self.flight_s()))
 
     # -- results -----------------------------------------------------------------------
+
+    def stale(self, since_s: float = -1.0) -> list[Arrival]:
+        """Vision messages that arrived after ``since_s`` older than the bridge allows."""
+        limit = self.settings.mavlink.max_fix_age_ms + ARRIVAL_SLACK_MS
+        return [a for a in self.fake.arrivals if a.flight_s >= since_s and a.age_ms > limit]
 
     def fixes(self) -> list[FrameRecord]:
         return [f for f in self.frames if f.fix_ned_m is not None]
