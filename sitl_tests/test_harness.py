@@ -33,7 +33,7 @@ async def test_wait_needs_the_condition_held() -> None:
         await wait_until(clock, lambda: next(flicker), timeout_s=0.2, hold_s=0.1, what="x")
     since = await wait_until(clock, lambda: clock.flight_s() > 0.1, timeout_s=1.0,
                              hold_s=0.1, what="y")
-    assert 0.1 <= since < 0.3 and clock.flight_s() >= since + 0.1
+    assert since >= 0.1 and clock.flight_s() >= since + 0.1
 
 
 def test_gap_and_first_after() -> None:

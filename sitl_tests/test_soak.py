@@ -26,8 +26,8 @@ def soak_module() -> ModuleType:
 async def test_soak_short(tmp_path: Path) -> None:
     """45 s of flight after start-up: after a 15 s warm-up resident memory grows <= 5 %,
     file descriptors do not grow, threads by at most one (a pool thread started late), every
-    3 s interval has fused fixes and the rate does not trend down (second half's median >= 70 % of the first's); the process then
-    exits 0 by itself."""
+    3 s interval has fused fixes and the rate does not trend down (second half's median
+    >= 70 % of the first's); the process then exits 0 by itself."""
     soak = soak_module()
     result = await soak.soak(45.0, sample_s=3.0, tmp=tmp_path, thread_slack=1)
     v = result["verdict"]
