@@ -189,3 +189,22 @@ async def test_flood_of_garbage(settings: Settings) -> None:
     during = [t for t in flight.fake.accepted_times() if result["start"] <= t <= result["end"]]
     print(f"flood: {result['datagrams']} datagrams in 3 s; rx {rx}; link changes "
           f"{flight.bridge.stats().get('link_changes')}; {len(during)} fixes fused during it")
+
+
+def test_forged_future_stamp_cannot_lock_out_the_genuine_sender() -> None:
+    """Deterministic form of finding 1 (docs/reliability.md): a message signed with a wrong
+    key and a far-future timestamp on the genuine stream (link 0, sysid 1, compid 1) is
+    refused, and the genuine sender's next message is still accepted."""
+    key = bytes(range(32))
+    receiver = signed_codec(key, 255, 190)
+    genuine, forger = signed_codec(key, 1, 1), signed_codec(bytes(32 * [7]), 1, 1)
+    forger.mav.signing.timestamp = genuine.mav.signing.timestamp + 10**9  # ~2.8 h ahead
+    wire: list[bytes] = []
+    for codec in (genuine, forger):
+        codec.set_writer(wire.append)
+    genuine.mav.heartbeat_send(2, 3, 0, 0, 4)
+    forger.mav.heartbeat_send(2, 3, 0, 0, 4)
+    genuine.mav.heartbeat_send(2, 3, 0, 0, 4)
+    accepted = [len(receiver.feed(data, datagram=True)) for data in wire]
+    assert accepted == [1, 0, 1], accepted
+    assert receiver.rx.bad_signature == 1
