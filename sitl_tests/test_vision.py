@@ -136,14 +136,13 @@ async def test_occlusion_hides_every_landmark(settings: Settings) -> None:
 @pytest.fixture(scope="module")
 def leave_reenter(tmp_path_factory: pytest.TempPathFactory) -> Flight:
     """leave_reenter with shorter holds (3 s before turning away, 3 s looking south), and the
-    hover's sway and sensor noise (a still, noiseless view is never acquired: see
-    docs/reliability.md)."""
+    hover's slow sway (a perfectly still view is not acquired: see docs/reliability.md)."""
     sc = load_scenario("leave_reenter")
     w = sc.trajectory.waypoints
     waypoints = (dataclasses.replace(w[0], hold_s=3.0), dataclasses.replace(w[1], hold_s=3.0),
                  w[2])
     hover = load_scenario("hover")
-    sc = dataclasses.replace(sc, effects=hover.effects, trajectory=dataclasses.replace(
+    sc = dataclasses.replace(sc, trajectory=dataclasses.replace(
         sc.trajectory, waypoints=waypoints, sway_m=hover.trajectory.sway_m,
         sway_period_s=hover.trajectory.sway_period_s))
     settings = sitl_settings(tmp_path_factory.mktemp("leave_reenter"))
