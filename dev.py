@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Set up and run landmark-companion from a fresh clone, with only Python >= 3.11 and git.
 
-    python3 dev.py demo [ARGS...]   install (once) and run the main job: companion demo
+    python3 dev.py demo [ARGS...]   install (once) and run the main job: companion demo ARGS
     python3 dev.py test [ARGS...]   install (once) and run the whole test suite:
                                     ruff, mypy, then pytest (ARGS go to pytest)
     python3 dev.py lock             regenerate requirements/*.lock (maintainers)
@@ -80,7 +80,7 @@ def ensure_env(kind: str) -> None:
 
 def cmd_demo(args: list[str]) -> int:
     ensure_env("runtime")
-    return run(BIN / "companion", "--help", *args, check=False)
+    return run(BIN / "companion", "demo", *args, check=False)
 
 
 def cmd_test(args: list[str]) -> int:

@@ -26,12 +26,18 @@ COV = tuple(0.01 if k in (0, 6, 11) else 0.0 for k in range(21))
 
 
 async def measure(output: str, profile: str, n: int, key_file: str) -> list[float]:
-    fake_cfg = FakeAutopilotConfig(profile=profile,  # type: ignore[arg-type]
-                                   signing_key=hashlib.sha256(b"bench").digest()
-                                   if key_file else None)
+    fake_cfg = FakeAutopilotConfig(
+        profile=profile,  # type: ignore[arg-type]
+        signing_key=hashlib.sha256(b"bench").digest() if key_file else None,
+    )
     async with FakeAutopilot(fake_cfg) as ap:
-        cfg = MavlinkConfig(endpoint=f"udpout:127.0.0.1:{ap.local_port}", profile=profile,  # type: ignore[arg-type]
-                            output=output, set_origin=False, signing_key_file=key_file)  # type: ignore[arg-type]
+        cfg = MavlinkConfig(
+            endpoint=f"udpout:127.0.0.1:{ap.local_port}",
+            profile=profile,  # type: ignore[arg-type]
+            output=output,
+            set_origin=False,
+            signing_key_file=key_file,
+        )  # type: ignore[arg-type]
         async with PymavlinkBridge(cfg) as bridge:
             bridge.report_health("ok")
             assert await bridge.wait_link(True, 5.0)
@@ -40,8 +46,14 @@ async def measure(output: str, profile: str, n: int, key_file: str) -> list[floa
             t0 = time.monotonic_ns() // 1000
             times = []
             for i in range(n):
-                fix = VisionFix(t0 + 20_000 * (i + 1), (1.0, 2.0, -3.0), (0.01, 0.02, 1.0), COV,
-                                quality_percent=90, reset_counter=0)
+                fix = VisionFix(
+                    t0 + 20_000 * (i + 1),
+                    (1.0, 2.0, -3.0),
+                    (0.01, 0.02, 1.0),
+                    COV,
+                    quality_percent=90,
+                    reset_counter=0,
+                )
                 start = time.perf_counter_ns()
                 result = bridge.send_fix_now(fix)
                 times.append((time.perf_counter_ns() - start) / 1000)
@@ -65,9 +77,11 @@ def main() -> None:
         for output, profile, key in cases:
             t = asyncio.run(measure(output, profile, args.n, key))
             t.sort()
-            print(f"{output:8s} {profile:9s} {'signed' if key else 'unsigned':8s} "
-                  f"n={len(t)} median {statistics.median(t):6.1f} us  "
-                  f"p90 {t[int(0.9 * len(t))]:6.1f} us  p99 {t[int(0.99 * len(t))]:6.1f} us")
+            print(
+                f"{output:8s} {profile:9s} {'signed' if key else 'unsigned':8s} "
+                f"n={len(t)} median {statistics.median(t):6.1f} us  "
+                f"p90 {t[int(0.9 * len(t))]:6.1f} us  p99 {t[int(0.99 * len(t))]:6.1f} us"
+            )
 
 
 if __name__ == "__main__":

@@ -47,8 +47,7 @@ def tracker_load(stop: threading.Event) -> None:
 
 
 async def run_bridge(port: int, seconds: float) -> dict[str, int]:
-    cfg = MavlinkConfig(endpoint=f"udpout:127.0.0.1:{port}", set_origin=False,
-                        link_timeout_s=5.0)
+    cfg = MavlinkConfig(endpoint=f"udpout:127.0.0.1:{port}", set_origin=False, link_timeout_s=5.0)
     async with PymavlinkBridge(cfg) as bridge:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
@@ -64,16 +63,32 @@ def main() -> None:
     args = parser.parse_args()
     port = free_udp_port()
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    burners = [] if args.no_load else [
-        subprocess.Popen([sys.executable, "-c", BURN]) for _ in range(os.cpu_count() or 2)]
+    burners = (
+        []
+        if args.no_load
+        else [subprocess.Popen([sys.executable, "-c", BURN]) for _ in range(os.cpu_count() or 2)]
+    )
     stop = threading.Event()
     tracker = threading.Thread(target=tracker_load, args=(stop,), daemon=True)
     with tempfile.TemporaryDirectory() as tmp:
         summary = Path(tmp) / "fake.json"
         fake = subprocess.Popen(
-            [sys.executable, "-m", "companion", "fake-autopilot", "--endpoint",
-             f"udpin:127.0.0.1:{port}", "--seconds", str(args.seconds + 4), "--summary",
-             str(summary)], cwd=ROOT, env=env, stderr=subprocess.DEVNULL)
+            [
+                sys.executable,
+                "-m",
+                "companion",
+                "fake-autopilot",
+                "--endpoint",
+                f"udpin:127.0.0.1:{port}",
+                "--seconds",
+                str(args.seconds + 4),
+                "--summary",
+                str(summary),
+            ],
+            cwd=ROOT,
+            env=env,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             time.sleep(2.0)  # let the fake start
             if not args.no_load:
@@ -87,8 +102,10 @@ def main() -> None:
         stats = json.loads(summary.read_text())["heartbeat_period_s"]
     load = "no load" if args.no_load else f"{len(burners)} burners + tracker thread"
     print(f"heartbeat over {args.seconds:.0f} s with {load}: sent {counters['heartbeats_sent']}")
-    print("period median {median:.4f} s, min {min:.4f} s, max {max:.4f} s, "
-          "jitter p99 {jitter_p99:.4f} s, jitter max {jitter_max:.4f} s".format(**stats))
+    print(
+        "period median {median:.4f} s, min {min:.4f} s, max {max:.4f} s, "
+        "jitter p99 {jitter_p99:.4f} s, jitter max {jitter_max:.4f} s".format(**stats)
+    )
 
 
 if __name__ == "__main__":

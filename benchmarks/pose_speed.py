@@ -11,9 +11,12 @@ solving, refinement and covariance.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
+from dataclasses import replace
 
+import cv2
 import numpy as np
 
 from tracker.camera import CameraModel
@@ -38,33 +41,69 @@ def landmarks(n: int) -> tuple[MapLandmark, ...]:
     return tuple(out)
 
 
-def time_fixes(n: int, use_attitude: bool, repeats: int) -> tuple[float, str]:
-    """Median microseconds per fix and the solver used."""
+#: A map landmark far from everything in view: naming a detection after it is an outlier.
+DECOY = MapLandmark("X", (30.0, 25.0, 5.0), 1.5, 1.5, 200.0, "sign")
+
+
+def time_fixes(
+    n: int, use_attitude: bool, repeats: int, outlier: bool = False
+) -> tuple[float, float, float, str]:
+    """Median wall, median CPU and minimum wall microseconds per fix, and the solver.
+
+    ``outlier``: one detection is named after :data:`DECOY` (a misassociation).
+    """
     lms = landmarks(n)
     rng = np.random.default_rng(0)
     obs = [observe_landmark(lm, CAMERA, P, RPY, rng, SensorNoise()) for lm in lms]
     seen = [o for o in obs if o is not None]
     assert len(seen) == n, f"only {len(seen)} of {n} landmarks in view"
+    if outlier:
+        seen[n // 2] = replace(seen[n // 2], landmark_id=DECOY.landmark_id)
+        lms = (*lms, DECOY)
     att = AttitudeSample(0, *RPY) if use_attitude else None
     fix = solve_pose(seen, lms, CAMERA, 0, attitude=att)
     assert isinstance(fix, PoseFix), fix
-    times = []
+    assert not outlier or DECOY.landmark_id not in fix.landmark_ids
+    wall, cpu = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter_ns(), time.process_time_ns()
         solve_pose(seen, lms, CAMERA, 0, attitude=att)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times) * 1e6, fix.solver
+        cpu.append(time.process_time_ns() - c0)
+        wall.append(time.perf_counter_ns() - t0)
+    med_wall, med_cpu = statistics.median(wall) / 1e3, statistics.median(cpu) / 1e3
+    return med_wall, med_cpu, min(wall) / 1e3, fix.solver
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=300)
+    parser.add_argument("--repeats", type=int, default=1000)
+    parser.add_argument("--cv-threads", type=int, default=1, help="cv2.setNumThreads")
     args = parser.parse_args()
-    print("landmarks  no attitude (us, solver)      attitude (us, solver)")
+    cv2.setNumThreads(args.cv_threads)
+    load = os.getloadavg()[0]
+    print(
+        f"median per fix over {args.repeats} runs (OpenCV threads: {cv2.getNumThreads()}, "
+        f"{os.cpu_count()} CPUs, 1-min load average {load:.1f} at start)"
+    )
+    print(
+        "| landmarks | no attitude: solver | median wall us | median CPU us | min wall us "
+        "| attitude: solver | median wall us | median CPU us | min wall us |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
     for n in (1, 2, 4, 8):
-        a_us, a_solver = time_fixes(n, False, args.repeats)
-        b_us, b_solver = time_fixes(n, True, args.repeats)
-        print(f"{n:9d}  {a_us:8.0f}  {a_solver:18s}  {b_us:8.0f}  {b_solver}")
+        a_wall, a_cpu, a_min, a_solver = time_fixes(n, False, args.repeats)
+        b_wall, b_cpu, b_min, b_solver = time_fixes(n, True, args.repeats)
+        print(
+            f"| {n} | {a_solver} | {a_wall:.0f} | {a_cpu:.0f} | {a_min:.0f} "
+            f"| {b_solver} | {b_wall:.0f} | {b_cpu:.0f} | {b_min:.0f} |"
+        )
+    a_wall, a_cpu, a_min, a_solver = time_fixes(8, False, args.repeats, outlier=True)
+    b_wall, b_cpu, b_min, b_solver = time_fixes(8, True, args.repeats, outlier=True)
+    print(
+        f"| 8, one misnamed | {a_solver} | {a_wall:.0f} | {a_cpu:.0f} | {a_min:.0f} "
+        f"| {b_solver} | {b_wall:.0f} | {b_cpu:.0f} | {b_min:.0f} |"
+    )
+    print(f"1-min load average at the end: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

@@ -63,12 +63,19 @@ class FrameResult:
     events: tuple[dict[str, Any], ...] = ()
     bad_frame: bool = False
     pose_json: dict[str, Any] | None = None
+    #: Drawn on the preview, never logged: landmark id -> (N, 2) particle positions.
+    particles: dict[str, Any] = field(default_factory=dict)
 
 
 class FrameProcessor(Protocol):
-    """Synchronous per-frame work (tracking and pose); runs in the worker thread."""
+    """Synchronous per-frame work (tracking and pose); runs in the worker thread.
+
+    ``housekeeping`` runs after the frame's fix was sent: work that must not add latency
+    (looking for new landmarks).
+    """
 
     def process(self, frame: Frame) -> FrameResult: ...
+    def housekeeping(self, frame: Frame) -> None: ...
 
 
 class FixSink(Protocol):
@@ -79,12 +86,19 @@ class FixSink(Protocol):
     def set_health(self, state: State) -> None: ...
     async def send_fix(self, fix: Any) -> bool: ...
     async def statustext(self, text: str) -> None: ...
+    def autopilot_position_ned(self) -> list[float] | None: ...
 
 
 class Reporter(Protocol):
     """Where status, poses, tracks and events go (monitoring and the flight log)."""
 
     def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None: ...
+    def preview_due(self) -> bool: ...
+    def preview(self, jpeg: bytes) -> None: ...
+
+
+#: Draws a frame's preview: (frame, result) -> JPEG bytes.
+PreviewFn = Callable[["Frame", "FrameResult"], bytes]
 
 
 @dataclass
@@ -118,7 +132,8 @@ class CompanionApp:
     def __init__(self, source: FrameSource, processor: FrameProcessor, sink: FixSink,
                  reporter: Reporter, vehicle_id: str, status_period_s: float = 1.0,
                  policy: HealthPolicy | None = None,
-                 clock_s: Callable[[], float] = time.monotonic) -> None:
+                 clock_s: Callable[[], float] = time.monotonic,
+                 preview: PreviewFn | None = None) -> None:
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -127,6 +142,7 @@ class CompanionApp:
         self.status_period_s = status_period_s
         self.policy = policy or HealthPolicy()
         self.clock_s = clock_s
+        self.preview = preview
         self.counters = Counters()
         self.stats = AppStats()
         self.state: State = "starting"
@@ -201,6 +217,11 @@ class CompanionApp:
                                                     frame)
                 self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
                 await self._handle(result)
+                await loop.run_in_executor(self._executor, self.processor.housekeeping, frame)
+                if self.preview is not None and self.reporter.preview_due():
+                    jpeg = await loop.run_in_executor(self._executor, self.preview, frame,
+                                                      result)
+                    self.reporter.preview(jpeg)
         except (SlotClosedError, asyncio.CancelledError):
             pass
 
@@ -225,7 +246,9 @@ class CompanionApp:
             self._last_fix_s = now_s
             self.stats.capture_to_wire_ms.add((now_us() - result.capture_t_us) / 1000.0)
             if result.pose_json is not None:
-                self.reporter.report("pose", result.capture_t_us, result.pose_json)
+                own = self.sink.autopilot_position_ned()  # to plot the fix against it
+                extra = {} if own is None else {"autopilot_position_ned_m": own}
+                self.reporter.report("pose", result.capture_t_us, {**result.pose_json, **extra})
         else:
             self.counters.fixes_refused += 1
         self._update_health()
@@ -263,6 +286,9 @@ class CompanionApp:
 
     def status(self) -> dict[str, Any]:
         """The status payload (docs/monitoring.md)."""
+        source_status = getattr(self.source, "status", None)
+        as_dict = getattr(source_status, "as_dict", None)
+        source: dict[str, Any] = as_dict() if callable(as_dict) else {}
         return {
             "vehicle": self.vehicle_id,
             "state": self.state,
@@ -270,7 +296,8 @@ class CompanionApp:
             "latency_ms": self.stats.capture_to_wire_ms.summary(),
             "link": "up" if self.sink.link_up else "down",
             "counters": self.counters.as_dict(),
-            "dropped_frames": self.dropped_frames,
+            "dropped_frames": self.dropped_frames + int(source.get("skipped", 0)),
+            "source": source,
         }
 
     async def _shutdown(self) -> None:

@@ -98,6 +98,14 @@ class BridgeSink:
     async def statustext(self, text: str) -> None:
         self.bridge.statustext(text)
 
+    def autopilot_position_ned(self) -> list[float] | None:
+        """The autopilot's own estimate (LOCAL_POSITION_NED), for plots; None if unknown."""
+        item = self.bridge.latest("LOCAL_POSITION_NED")
+        if item is None:
+            return None
+        v = item.value
+        return [round(float(v.north_m), 3), round(float(v.east_m), 3), round(float(v.down_m), 3)]
+
 
 class AttitudeHistory:
     """The autopilot's recent ATTITUDE messages, to look up the attitude at a frame's time.

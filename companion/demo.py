@@ -55,6 +55,9 @@ class TruthRecorder:
         self.landmarks = landmarks
         self.result = DemoResult([])
 
+    def housekeeping(self, frame: Any) -> None:
+        self.perception.housekeeping(frame)
+
     def process(self, frame: Any) -> Any:
         result = self.perception.process(frame)
         if isinstance(result.fix, PoseFix):

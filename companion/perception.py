@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -35,6 +35,7 @@ from tracker.acquire import (
     homography_to,
     project_corners,
     refine_ecc,
+    search_template,
 )
 from tracker.camera import CameraModel
 from tracker.pose.config import PoseConfig
@@ -67,6 +68,27 @@ class PerceptionConfig:
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
+    #: Without a fix for this long, search the whole frame for one landmark per frame.
+    search_after_s: float = field(default=0.3, metadata={"ge": 0})
+    search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
+    search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
+    #: Acquire with the landmark detector ([detector]) instead of the template search.
+    use_detector: bool = False
+
+
+class DetectionLike(Protocol):
+    """What acquisition needs of a detector hit (tracker.detector.Detection has it)."""
+
+    @property
+    def box(self) -> tuple[float, float, float, float]: ...
+    @property
+    def category(self) -> str: ...
+    @property
+    def score(self) -> float: ...
+
+
+#: A detector: image -> detections (``tracker.detector.Detector.detect``).
+DetectFn = Callable[[npt.NDArray[np.uint8]], Sequence[DetectionLike]]
 
 
 @dataclass(frozen=True)
@@ -128,7 +150,8 @@ class Perception:
                  tracker_config: TrackerConfig | None = None,
                  pose_config: PoseConfig | None = None,
                  acquire_config: AcquireConfig | None = None,
-                 gate_config: FixGateConfig | None = None, seed: int = 0) -> None:
+                 gate_config: FixGateConfig | None = None, seed: int = 0,
+                 detect: DetectFn | None = None) -> None:
         self.camera = camera
         self.landmarks = list(landmarks)
         self.config = config or PerceptionConfig()
@@ -144,13 +167,22 @@ class Perception:
                 self.unmatchable[lid] = str(err)
         self.tracks: dict[str, Track] = {}
         self.gate = FixGate(gate_config or FixGateConfig())
+        self._events_next: list[dict[str, Any]] = []
+        self._last_fix: PoseFix | None = None
+        self._last_fix_us = -(2**62)
+        self._search_turn = 0
+        self.detect = detect
         self._seed = seed
         self._frames = 0
 
     def process(self, frame: Frame) -> FrameResult:
-        """Track, acquire, solve: one frame in, tracks and maybe a fix out."""
+        """Track and solve: one frame in, tracks and maybe a fix out.
+
+        Acquisition of new landmarks waits for :meth:`housekeeping`, after the fix is on
+        the wire, so it never adds to the capture -> fix latency.
+        """
         image = frame.image
-        events: list[dict[str, Any]] = []
+        events, self._events_next = self._events_next, []
         if image.shape[:2] != (self.camera.height, self.camera.width):
             return FrameResult(frame.index, frame.t_us, bad_frame=True,
                                no_fix_reason=f"frame {image.shape[1]}x{image.shape[0]} is "
@@ -160,10 +192,25 @@ class Perception:
             if not self._update_track(self.tracks[lid], image, gray):
                 del self.tracks[lid]
                 events.append({"event": "lost", "landmark": lid})
-        if self._should_acquire():
-            events += self._acquire(image)
         self._frames += 1
+        self._last_fix = None
         return self._solve(frame, events)
+
+    def housekeeping(self, frame: Frame) -> None:
+        """Look for untracked landmarks (feature matching now and then; prediction from
+        this frame's fix); what is found is tracked from the next frame on."""
+        if frame.image.shape[:2] != (self.camera.height, self.camera.width):
+            return
+        if self._should_acquire():
+            self._events_next += self._acquire(frame.image)
+        if self._last_fix is not None:
+            self._last_fix_us = self._last_fix.time_us
+            self._events_next += self._predict_acquire(frame.image, self._last_fix)
+        elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
+            if self.detect is not None:
+                self._events_next += self._detect_acquire(frame.image)
+            else:
+                self._events_next += self._search(frame.image)
 
     # -- tracking ---------------------------------------------------------------------
 
@@ -230,13 +277,69 @@ class Perception:
             box = clip_box(match.box, width, height)
             if box is None or len(self.tracks) >= self.config.max_tracks:
                 continue
-            tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
-            tracker.init(image, box)
-            self.tracks[match.landmark_id] = Track(match.landmark_id, tracker, box,
-                                                   match.homography, corners=match.corners_px)
-            events.append({"event": "acquired", "landmark": match.landmark_id,
-                           "box": [round(v, 1) for v in box], "inliers": match.inliers})
+            events.append(self._start(match.landmark_id, image, box, match.homography,
+                                      match.corners_px, "features"))
         return events
+
+    def _start(self, lid: str, image: npt.NDArray[np.uint8], box: Box, hom: FloatArray,
+               corners: FloatArray, by: str) -> dict[str, Any]:
+        """Start tracking landmark ``lid`` in ``box`` with a verified homography."""
+        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
+        tracker.init(image, box)
+        self.tracks[lid] = Track(lid, tracker, box, hom, corners=corners)
+        return {"event": "acquired", "landmark": lid, "by": by,
+                "box": [round(v, 1) for v in box]}
+
+    def _detect_acquire(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+        """Restart tracks from detector hits: each hit is tried against the untracked map
+        landmarks of its category, and kept only when the reference aligns there."""
+        assert self.detect is not None
+        events: list[dict[str, Any]] = []
+        category = {lm.landmark_id: lm.category for lm in self.landmarks}
+        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
+        for det in self.detect(image):
+            for lid, ref in self.matcher.references.items():
+                if lid in self.tracks or category.get(lid) not in (det.category, ""):
+                    continue
+                x, y, w, h = det.box
+                start = homography_to(ref, np.array([[x, y], [x + w, y], [x + w, y + h],
+                                                     [x, y + h]], np.float64))
+                aligned = refine_ecc(ref, gray, start, self.config.ecc_iterations,
+                                     self.config.verify_correlation)
+                if aligned is None:
+                    continue
+                quad = project_corners(ref, aligned)
+                box = clip_box(det.box, image.shape[1], image.shape[0])
+                if box is not None and inside(quad, image.shape[1], image.shape[0], 2.0):
+                    events.append(self._start(lid, image, box, aligned, quad, "detector"))
+                    break
+        return events
+
+    def _search(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+        """Look for one untracked landmark (round robin) by colour template search over the
+        whole frame, verified by alignment: finds distant or plain landmarks that feature
+        matching misses, while nothing gives a fix to predict from."""
+        untracked = [lid for lid in self.matcher.references if lid not in self.tracks]
+        if not untracked or len(self.tracks) >= self.config.max_tracks:
+            return []
+        lid = untracked[self._search_turn % len(untracked)]
+        self._search_turn += 1
+        ref = self.matcher.references[lid]
+        found = search_template(ref, image, self.config.search_widths_px)
+        if found is None or found[0] < self.config.search_min_score:
+            return []
+        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
+        aligned = refine_ecc(ref, gray, found[1], self.config.ecc_iterations,
+                             self.config.verify_correlation)
+        if aligned is None:
+            return []
+        quad = project_corners(ref, aligned)
+        x0, y0 = quad.min(axis=0)
+        x1, y1 = quad.max(axis=0)
+        box = clip_box((x0, y0, x1 - x0, y1 - y0), image.shape[1], image.shape[0])
+        if box is None or not inside(quad, image.shape[1], image.shape[0], margin=2.0):
+            return []
+        return [self._start(lid, image, box, aligned, quad, "search")]
 
     def _predict_acquire(self, image: npt.NDArray[np.uint8], fix: PoseFix) -> list[dict[str, Any]]:
         """Start tracks on map landmarks the fix says are in view, verified by alignment.
@@ -272,11 +375,7 @@ class Perception:
             box = clip_box((x0, y0, x1 - x0, y1 - y0), width, height)
             if box is None:
                 continue
-            tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
-            tracker.init(image, box)
-            self.tracks[lid] = Track(lid, tracker, box, aligned, corners=quad)
-            events.append({"event": "acquired", "landmark": lid, "by": "prediction",
-                           "box": [round(v, 1) for v in box]})
+            events.append(self._start(lid, image, box, aligned, quad, "prediction"))
         return events
 
     def _project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
@@ -322,18 +421,21 @@ class Perception:
         if not self.tracks:
             return FrameResult(frame.index, frame.t_us, tracks, None, "nothing tracked",
                                tuple(events))
+        particles = {t.landmark_id: t.tracker.particle_centres for t in self.tracks.values()}
         side = self.sensors(frame.t_us)
         fix = solve_pose(self.observations(frame.index), self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
         if isinstance(fix, NoFix):
-            return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events))
+            return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
+                               particles=particles)
         if not self.gate.admit(fix):
             return FrameResult(frame.index, frame.t_us, tracks, None,
-                               "held back: inconsistent with recent fixes", tuple(events))
-        events += self._predict_acquire(frame.image, fix)
+                               "held back: inconsistent with recent fixes", tuple(events),
+                               particles=particles)
+        self._last_fix = fix
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
-                           pose_json=pose_json(fix))
+                           pose_json=pose_json(fix), particles=particles)
 
 
 def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:

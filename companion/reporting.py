@@ -38,6 +38,19 @@ class Reporter:
                 self.failures += 1
                 log.warning("monitor publish failed: %s", err)
 
+    def preview_due(self) -> bool:
+        """True when a preview would be published now (so it is only drawn when needed)."""
+        return self.monitor is not None and self.monitor.preview_due()
+
+    def preview(self, jpeg: bytes) -> None:
+        """Publish a preview JPEG (rate-limited by the publisher)."""
+        if self.monitor is not None:
+            try:
+                self.monitor.publish_preview(jpeg)
+            except Exception as err:  # zenoh raises its own ZError
+                self.failures += 1
+                log.warning("preview publish failed: %s", err)
+
     def close(self) -> None:
         """Flush and close both."""
         if self.flightlog is not None:

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.app import CompanionApp, FrameProcessor, FrameSource
+from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory, BridgeSink
 from companion.errors import ConfigError, InputError
 from companion.flightlog import FlightLogWriter
@@ -29,12 +29,14 @@ from companion.landmarks.geodesy import LocalFrame
 from companion.landmarks.geojson_io import read_map
 from companion.landmarks.record import Landmark
 from companion.monitoring.publisher import MonitorPublisher
-from companion.perception import Perception, SideSensors
+from companion.perception import DetectFn, Perception, SideSensors
+from companion.preview import render_preview
 from companion.reporting import Reporter
 from companion.settings import Settings
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
 from tracker.camera import CameraModel
+from tracker.detector import Detector, DetectorError
 from tracker.pose.types import MapLandmark
 
 ImageU8 = npt.NDArray[np.uint8]
@@ -105,10 +107,20 @@ def reporter_for(settings: Settings, landmarks: tuple[MapLandmark, ...] | list[M
     return Reporter(flightlog, monitor)
 
 
+def detector_for(settings: Settings) -> DetectFn | None:
+    """The landmark detector when ``perception.use_detector``; a bad model is one line."""
+    if not settings.perception.use_detector:
+        return None
+    try:
+        return Detector(config=settings.detector).detect
+    except DetectorError as err:
+        raise InputError(str(err)) from None
+
+
 def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
                    attitude: AttitudeHistory) -> Perception:
     """The per-frame work with the configured tracker, acquisition, pose and gate."""
-    return Perception(camera, pmap.landmarks, pmap.references,
+    return Perception(camera, pmap.landmarks, pmap.references, detect=detector_for(settings),
                       sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
                       config=settings.perception, tracker_config=settings.tracker,
                       pose_config=settings.pose, acquire_config=settings.acquire,
@@ -120,20 +132,34 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
               landmarks: tuple[MapLandmark, ...] | list[MapLandmark], *,
               seconds: float | None = None, prefix: str = "flight",
               on_start: Callable[[CompanionApp], None] | None = None) -> CompanionApp:
-    """Run one flight to its end; SIGINT/SIGTERM stop it cleanly.  Returns the app."""
-    await bridge.start()
+    """Run one flight to its end; SIGINT/SIGTERM stop it cleanly.  Returns the app.
+
+    Everything that can fail on bad input (the processor: a detector model, references)
+    is built before anything is started, so such a failure leaves nothing running.
+    """
     attitude = AttitudeHistory(bridge)
-    attitude.start()
+    processor = make_processor(attitude)
+    mon = settings.monitor
+
+    def preview(frame: Frame, result: FrameResult) -> bytes:
+        caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
+        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
+                  for t in result.tracks]
+        return render_preview(frame.image, tracks, mon.preview_width_px,
+                              mon.preview_jpeg_quality, caption)
+
     reporter = reporter_for(settings, landmarks, prefix)
-    app = CompanionApp(source, make_processor(attitude), BridgeSink(bridge), reporter,
-                       settings.vehicle.id, 1.0 / settings.monitor.status_rate_hz)
     loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        with contextlib.suppress(NotImplementedError, RuntimeError):
-            loop.add_signal_handler(sig, app.request_stop)
-    if on_start is not None:
-        on_start(app)
     try:
+        await bridge.start()
+        attitude.start()
+        app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
+                           settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.add_signal_handler(sig, app.request_stop)
+        if on_start is not None:
+            on_start(app)
         await app.run(seconds)
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):

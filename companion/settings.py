@@ -34,6 +34,7 @@ from mavlink_bridge.config import MavlinkConfig
 from tracker.acquire import AcquireConfig
 from tracker.camera import CameraModel
 from tracker.config import TrackerConfig
+from tracker.detector import DetectorConfig
 from tracker.pose.config import PoseConfig
 
 PROFILES = ("ardupilot", "px4")
@@ -75,6 +76,7 @@ class Settings:
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     acquire: AcquireConfig = field(default_factory=AcquireConfig)
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
     pose: PoseConfig = field(default_factory=PoseConfig)
     fixgate: FixGateConfig = field(default_factory=FixGateConfig)
     landmarks: LandmarksConfig = field(default_factory=LandmarksConfig)

@@ -7,6 +7,9 @@ It is first-class code: tests, ``companion demo`` and ``companion fake-autopilot
   origin is set, like ArduPilot), SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT,
   HOME_POSITION (once the origin is set), STATUSTEXT on events, and in PX4 mode TIMESYNC
   requests at 10 Hz.
+* Like a simulator, streams the *true* pose (``send_truth``): SIMSTATE and SIM_STATE in
+  ArduPilot mode (SITL), HIL_STATE_QUATERNION in PX4 mode, at 50 Hz, as WGS84 about
+  ``home`` (default: the EKF origin once set).  ``send_truth=False`` is a real vehicle.
 * ACKs COMMAND_LONG/COMMAND_INT; the EKF origin (COMMAND_INT 611 for ArduPilot,
   SET_GPS_GLOBAL_ORIGIN for PX4) is accepted once, optionally after ``origin_fail_first``
   MAV_RESULT_FAILED answers as ArduPilot SITL gives while its EKF is not ready.
@@ -27,17 +30,20 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+import pymap3d
 
 from mavlink_bridge.codec import Codec, MAVLinkMessage
 from mavlink_bridge.endpoint import Connection, open_connection, parse_endpoint
 from mavlink_bridge.fake_faults import FaultInjector
 from mavlink_bridge.fake_rules import FakeRules, VisionJudge, VisionRecord, judge_landing_target
+from mavlink_bridge.telemetry import quaternion_from_rpy
 from mavlink_bridge.vehicle import TruthFn, VehicleState, hover_then_circle
 
 Profile = Literal["ardupilot", "px4"]
 _EARTH_RADIUS_M = 6_378_137.0
 MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED = 0, 4, 3
 _ALWAYS_ACCEPTED = {511, 512, 520}  # SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAP.
+_FLIGHT_COMMANDS = {22, 176, 400}  # NAV_TAKEOFF, DO_SET_MODE, COMPONENT_ARM_DISARM: recorded
 
 
 @dataclass(frozen=True)
@@ -57,7 +63,19 @@ class FakeAutopilotConfig:
         ("HEARTBEAT", 1.0), ("ATTITUDE", 0.05), ("LOCAL_POSITION_NED", 0.1),
         ("GLOBAL_POSITION_INT", 0.2), ("SYSTEM_TIME", 1.0), ("DISTANCE_SENSOR", 0.1),
         ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.1), ("HOME_POSITION", 1.0),
+        ("SIMSTATE", 0.02), ("SIM_STATE", 0.02), ("HIL_STATE_QUATERNION", 0.02),
     )
+    # the simulator's true pose (SIMSTATE/SIM_STATE or HIL_STATE_QUATERNION); off = a real
+    # vehicle, which sends no truth
+    send_truth: bool = True
+    # where truth NED (0, 0, 0) is (lat_deg, lon_deg, alt_m); None: the EKF origin once set
+    home: tuple[float, float, float] | None = None
+
+
+_TRUTH_BY_PROFILE: dict[str, tuple[str, ...]] = {
+    "ardupilot": ("SIMSTATE", "SIM_STATE"), "px4": ("HIL_STATE_QUATERNION",),
+}
+_TRUTH_STREAMS = frozenset(n for names in _TRUTH_BY_PROFILE.values() for n in names)
 
 
 @dataclass
@@ -83,6 +101,7 @@ class FakeAutopilot:
         self.vision: list[VisionRecord] = []
         self.landing_targets: list[dict[str, Any]] = []
         self.commands: list[dict[str, Any]] = []
+        self.position_targets: list[dict[str, Any]] = []  # SET_POSITION_TARGET_LOCAL_NED
         self.heartbeats: list[CompanionHeartbeat] = []
         self.statustexts: list[str] = []
         self.counters: dict[str, int] = {"sysid_rejected": 0, "reboots": 0,
@@ -173,12 +192,41 @@ class FakeAutopilot:
                 for name, period in self.config.periods_s:
                     if name == "TIMESYNC" and self.config.profile != "px4":
                         continue
+                    if name in _TRUTH_STREAMS and not self._sends_truth(name):
+                        continue
                     if now >= self._next_due.get(name, 0.0):
                         self._next_due[name] = now + period
                         self._send_stream(name, self.truth(self.flight_s()))
             await asyncio.sleep(0.01)
 
+    def _sends_truth(self, name: str) -> bool:
+        return (self.config.send_truth and name in _TRUTH_BY_PROFILE[self.config.profile]
+                and (self.config.home or self.origin) is not None)
+
+    def _send_truth(self, name: str, s: VehicleState) -> None:
+        """The simulator's true pose as WGS84 (pymap3d, the same geodesy as the companion)."""
+        home = self.config.home or self.origin
+        assert home is not None
+        lat, lon, alt = (float(v) for v in pymap3d.ned2geodetic(*s.position_ned_m, *home))
+        r, p, y = s.attitude_rpy_rad
+        vn, ve, vd = s.velocity_ned_m_s
+        q = quaternion_from_rpy(r, p, y)
+        mav = self.codec.mav
+        lat7, lon7 = round(lat * 1e7), round(lon * 1e7)
+        if name == "SIMSTATE":
+            mav.simstate_send(r, p, y, 0.0, 0.0, -9.80665, 0.0, 0.0, 0.0, lat7, lon7)
+        elif name == "SIM_STATE":
+            mav.sim_state_send(*q, r, p, y, 0.0, 0.0, -9.80665, 0.0, 0.0, 0.0, lat, lon, alt,
+                               0.0, 0.0, vn, ve, vd, lat7, lon7)
+        else:
+            mav.hil_state_quaternion_send(
+                self._local_ns() // 1000, list(q), 0.0, 0.0, 0.0, lat7, lon7, round(alt * 1000),
+                round(vn * 100), round(ve * 100), round(vd * 100), 0, 0, 0, 0, -1000)
+
     def _send_stream(self, name: str, s: VehicleState) -> None:
+        if name in _TRUTH_STREAMS:
+            self._send_truth(name, s)
+            return
         mav = self.codec.mav
         boot_ms = int(self.boot_s() * 1000) & 0xFFFFFFFF
         n, e, d = s.position_ned_m
@@ -252,6 +300,8 @@ class FakeAutopilot:
                 msg.autopilot, msg.system_status))
         elif name in ("COMMAND_INT", "COMMAND_LONG"):
             self._on_command(name, msg)
+        elif name == "SET_POSITION_TARGET_LOCAL_NED":
+            self.position_targets.append({**msg.to_dict(), "arrival_s": self.boot_s()})
         elif name == "SET_GPS_GLOBAL_ORIGIN":
             if self.config.profile == "px4":
                 self._set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
@@ -301,12 +351,13 @@ class FakeAutopilot:
         cmd = int(msg.command)
         if cmd == 611 and name == "COMMAND_INT" and self.config.profile == "ardupilot":
             result = self._origin_command(msg)
-        elif cmd in _ALWAYS_ACCEPTED:
+        elif cmd in _ALWAYS_ACCEPTED or cmd in _FLIGHT_COMMANDS:
             result = MAV_RESULT_ACCEPTED
         else:
             result = MAV_RESULT_UNSUPPORTED
         self.commands.append({"kind": name, "command": cmd, "result": result,
-                              "arrival_s": self.boot_s()})
+                              "arrival_s": self.boot_s(), "param1": float(msg.param1),
+                              "param2": float(msg.param2)})
         self.codec.mav.command_ack_send(cmd, result, 0, 0, msg.get_srcSystem(),
                                         msg.get_srcComponent())
 

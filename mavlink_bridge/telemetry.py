@@ -6,6 +6,7 @@ MavlinkDirect plugin gives the fields as JSON.  Field names carry units.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -13,8 +14,10 @@ from typing import Any
 TELEMETRY_NAMES = (
     "HEARTBEAT", "ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME",
     "TIMESYNC", "HOME_POSITION", "EKF_STATUS_REPORT", "DISTANCE_SENSOR", "STATUSTEXT",
-    "GPS_GLOBAL_ORIGIN", "COMMAND_ACK",
+    "GPS_GLOBAL_ORIGIN", "COMMAND_ACK", "SIMSTATE", "SIM_STATE", "HIL_STATE_QUATERNION",
 )
+#: Messages that carry a simulator's true pose (never a real vehicle's estimate).
+TRUTH_NAMES = ("SIM_STATE", "SIMSTATE", "HIL_STATE_QUATERNION")
 
 
 @dataclass(frozen=True)
@@ -115,6 +118,25 @@ class CommandAck:
 
 
 @dataclass(frozen=True)
+class SimTruth:
+    """A simulator's true vehicle state (SIM_STATE, SIMSTATE or HIL_STATE_QUATERNION).
+
+    ``quaternion_wxyz``: body FRD -> NED rotation (None for SIMSTATE, which has Euler angles
+    only); ``alt_m``: metres above mean sea level, None for SIMSTATE (it has no altitude);
+    ``velocity_ned_m_s``: None where the message has none; ``time_usec``: the simulator's
+    stamp (HIL_STATE_QUATERNION only, else 0).
+    """
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float | None
+    attitude_rpy_rad: tuple[float, float, float]
+    quaternion_wxyz: tuple[float, float, float, float] | None
+    velocity_ned_m_s: tuple[float, float, float] | None
+    time_usec: int = 0
+
+
+@dataclass(frozen=True)
 class Telemetry:
     """One received message: who sent it, when (companion monotonic ns), and its value."""
 
@@ -138,6 +160,54 @@ def _text(d: Mapping[str, Any]) -> str:
     if isinstance(t, bytes | bytearray):
         t = t.decode("utf-8", errors="replace")
     return str(t).rstrip("\x00")
+
+
+def quaternion_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, ...]:
+    """(w, x, y, z) of the body -> NED rotation R = Rz(yaw) Ry(pitch) Rx(roll) (ZYX)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+
+
+def _simstate(d: Mapping[str, Any]) -> SimTruth:
+    """ArduPilot SIMSTATE: Euler angles (rad), lat/lng in degE7, no altitude."""
+    return SimTruth(_i(d, "lat") * 1e-7, _i(d, "lng") * 1e-7, None,
+                    (_f(d, "roll"), _f(d, "pitch"), _f(d, "yaw")), None, None)
+
+
+def _sim_state(d: Mapping[str, Any]) -> SimTruth:
+    """SIM_STATE: prefer the degE7 extension fields ``lat_int``/``lon_int``.
+
+    Without them (MAVLink 1, ArduPilot before 4.5) the float ``lat``/``lon`` are used;
+    ArduPilot wrote degE7 into those floats (|lat| > 90 gives it away), a float32 keeps
+    only ~0.4 m of either.
+    """
+    lat_i, lon_i = _i(d, "lat_int"), _i(d, "lon_int")
+    if lat_i != 0 or lon_i != 0:
+        lat, lon = lat_i * 1e-7, lon_i * 1e-7
+    else:
+        lat, lon = _f(d, "lat"), _f(d, "lon")
+        if abs(lat) > 90.0 or abs(lon) > 180.0:
+            lat, lon = lat * 1e-7, lon * 1e-7
+    q = (_f(d, "q1"), _f(d, "q2"), _f(d, "q3"), _f(d, "q4"))
+    return SimTruth(lat, lon, _f(d, "alt"), (_f(d, "roll"), _f(d, "pitch"), _f(d, "yaw")),
+                    q if any(q) else None, (_f(d, "vn"), _f(d, "ve"), _f(d, "vd")))
+
+
+def _hil_state_quaternion(d: Mapping[str, Any]) -> SimTruth:
+    """PX4 HIL_STATE_QUATERNION: lat/lon degE7, alt mm, quaternion (w, x, y, z), v cm/s."""
+    q = tuple(float(v) for v in d.get("attitude_quaternion", (1.0, 0.0, 0.0, 0.0)))
+    w, x, y, z = q
+    # ZYX Euler from the quaternion (only for display; the quaternion is what is used)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return SimTruth(_i(d, "lat") * 1e-7, _i(d, "lon") * 1e-7, _i(d, "alt") * 1e-3,
+                    (roll, pitch, yaw), (w, x, y, z),
+                    (_i(d, "vx") * 0.01, _i(d, "vy") * 0.01, _i(d, "vz") * 0.01),
+                    _i(d, "time_usec"))
 
 
 _CONVERTERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
@@ -169,6 +239,9 @@ _CONVERTERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
                                                 _i(d, "orientation"), _i(d, "id")),
     "STATUSTEXT": lambda d: StatusText(_i(d, "severity"), _text(d)),
     "COMMAND_ACK": lambda d: CommandAck(_i(d, "command"), _i(d, "result")),
+    "SIMSTATE": _simstate,
+    "SIM_STATE": _sim_state,
+    "HIL_STATE_QUATERNION": _hil_state_quaternion,
 }
 
 

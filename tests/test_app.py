@@ -44,6 +44,10 @@ class Processor:
         self.track_from = track_from
         self.seen: list[int] = []
         self.thread_names: set[str] = set()
+        self.housekept: list[int] = []
+
+    def housekeeping(self, frame: Any) -> None:
+        self.housekept.append(frame.index)
 
     def process(self, frame: Any) -> FrameResult:
         time.sleep(self.delay_s)
@@ -76,6 +80,9 @@ class Sink:
     async def statustext(self, text: str) -> None:
         self.texts.append(text)
 
+    def autopilot_position_ned(self) -> list[float] | None:
+        return [1.0, 2.0, -3.0]
+
 
 class Recorder:
     def __init__(self) -> None:
@@ -83,6 +90,12 @@ class Recorder:
 
     def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None:
         self.items.append((topic, data))
+
+    def preview_due(self) -> bool:
+        return True
+
+    def preview(self, jpeg: bytes) -> None:
+        self.items.append(("preview", {"bytes": len(jpeg)}))
 
     def topic(self, name: str) -> list[dict[str, Any]]:
         return [d for t, d in self.items if t == name]
@@ -94,6 +107,7 @@ async def test_every_frame_processed_when_the_worker_keeps_up() -> None:
                        status_period_s=0.05)
     await asyncio.wait_for(app.run(), timeout=10)
     assert proc.seen == list(range(1, 11))
+    assert proc.housekept == proc.seen  # after every frame, once its fix is out
     assert app.counters.frames == 10
     assert app.counters.fixes_sent == 8
     assert [f["n"] for f in sink.fixes] == list(range(3, 11))
@@ -104,6 +118,7 @@ async def test_every_frame_processed_when_the_worker_keeps_up() -> None:
     events = [e["event"] for e in rec.topic("events")]
     assert events[-2:] == ["source-ended", "stopped"] or events[-1] == "stopped"
     assert rec.topic("status")[-1]["counters"]["frames"] == 10
+    assert rec.topic("pose")[-1]["autopilot_position_ned_m"] == [1.0, 2.0, -3.0]
 
 
 async def test_a_slow_worker_sees_the_newest_frames_and_drops_are_counted() -> None:

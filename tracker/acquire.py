@@ -21,6 +21,9 @@ from tracker.validation import check_image
 FloatArray = npt.NDArray[np.float64]
 #: A reference whose grey levels spread less than this is blank: nothing to align.
 MIN_REFERENCE_STD = 2.0
+#: Sizes (relative to the largest) at which a reference's keypoints are computed.
+REFERENCE_SCALES = (1.0, 0.55, 0.3)
+MIN_REFERENCE_SIDE_PX = 24
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,7 @@ class Reference:
     descriptors: npt.NDArray[np.uint8]
     gray: npt.NDArray[np.float32]
     matchable: bool = True
+    colour: npt.NDArray[np.uint8] = field(default_factory=lambda: np.zeros((1, 1, 3), np.uint8))
 
 
 @dataclass(frozen=True)
@@ -86,14 +90,23 @@ class ReferenceMatcher:
             raise ValueError(f"image_bgr: the reference of {landmark_id!r} is blank (grey "
                              f"level spread {gray.std():.1f}); expected some texture to align")
         h, w = image_bgr.shape[:2]
-        scale = min(1.0, self.config.reference_max_side_px / max(h, w))
-        small = cv2.resize(image_bgr, (max(1, round(w * scale)), max(1, round(h * scale))),
-                           interpolation=cv2.INTER_AREA) if scale < 1.0 else image_bgr
-        kps, desc = self._orb.detectAndCompute(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), None)
-        matchable = desc is not None and len(kps) >= self.config.min_inliers
-        pts = np.array([kp.pt for kp in kps], np.float32).reshape(-1, 2) / np.float32(scale)
-        descriptors = np.asarray(desc if desc is not None else np.zeros((0, 32)), np.uint8)
-        ref = Reference(landmark_id, (w, h), pts, descriptors, gray, matchable)
+        top = min(1.0, self.config.reference_max_side_px / max(h, w))
+        pts_all, desc_all = [], []
+        # several sizes: ORB's own pyramid spans about 4x, a landmark far away is smaller
+        for scale in (top * f for f in REFERENCE_SCALES):
+            size = (max(1, round(w * scale)), max(1, round(h * scale)))
+            if min(size) < MIN_REFERENCE_SIDE_PX:
+                break
+            small = cv2.resize(image_bgr, size, interpolation=cv2.INTER_AREA)
+            kps, desc = self._orb.detectAndCompute(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), None)
+            if desc is not None and len(kps):
+                pts_all.append(np.array([kp.pt for kp in kps], np.float32) / np.float32(scale))
+                desc_all.append(np.asarray(desc, np.uint8))
+        pts = np.concatenate(pts_all) if pts_all else np.zeros((0, 2), np.float32)
+        descriptors = np.concatenate(desc_all) if desc_all else np.zeros((0, 32), np.uint8)
+        matchable = len(pts) >= self.config.min_inliers
+        ref = Reference(landmark_id, (w, h), pts, descriptors, gray, matchable,
+                        np.ascontiguousarray(image_bgr))
         self.references[landmark_id] = ref
         return ref
 
@@ -162,6 +175,35 @@ class ReferenceMatcher:
         box = (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
         return Match(ref.landmark_id, corners, box, inliers, inliers / len(good),
                      np.asarray(hom, np.float64))
+
+
+def search_template(ref: Reference, frame_bgr: npt.NDArray[np.uint8],
+                    widths_px: tuple[float, ...], downscale: float = 0.5
+                    ) -> tuple[float, FloatArray] | None:
+    """Best normalised cross-correlation of the reference over the frame at a few sizes.
+
+    For references with too few keypoints to match (plain plates, simple graphics) and
+    for small, distant landmarks.  Returns (score, homography reference -> frame) of the
+    best fronto-parallel placement; :func:`refine_ecc` then fits the perspective.
+    """
+    small = cv2.resize(frame_bgr, None, fx=downscale, fy=downscale,
+                       interpolation=cv2.INTER_AREA).astype(np.float32)
+    w, h = ref.size_px
+    best: tuple[float, FloatArray] | None = None
+    for width in widths_px:
+        tw = max(6, round(width * downscale))
+        th = max(6, round(tw * h / w))
+        if tw >= small.shape[1] or th >= small.shape[0]:
+            continue
+        template = cv2.resize(ref.colour, (tw, th), interpolation=cv2.INTER_AREA)
+        scores = cv2.matchTemplate(small, template.astype(np.float32), cv2.TM_CCOEFF_NORMED)
+        _, score, _, (x, y) = cv2.minMaxLoc(scores)
+        if best is None or score > best[0]:
+            sx = tw / downscale / w
+            sy = th / downscale / h
+            hom = np.array([[sx, 0.0, x / downscale], [0.0, sy, y / downscale], [0, 0, 1.0]])
+            best = (float(score), hom)
+    return best
 
 
 def project_corners(ref: Reference, hom: FloatArray) -> FloatArray:

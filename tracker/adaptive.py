@@ -20,9 +20,10 @@ import numpy.typing as npt
 
 from tracker.appearance import (
     bhattacharyya,
+    histograms_from_samples,
     joint_planes,
-    kernel_histograms,
     particle_likelihood,
+    sample_bins,
 )
 from tracker.config import TrackerConfig, check_config
 from tracker.features import GRAY_FEATURES, colour_weights, feature_bins, is_grayscale
@@ -81,6 +82,7 @@ class AdaptiveTracker:
         self._candidates = GRAY_FEATURES if self._cue == "grayscale" else tuple(range(49))
         self._first = (window, self._state.copy())
         self._ref_mean = self._box_mean(window, self._state)
+        self._ref_frame_mean = _frame_mean(image)
         self._gain = np.ones(3)
         self._p_first: FloatArray | None = None
         self._model = self._rank(window, self._state)
@@ -94,6 +96,11 @@ class AdaptiveTracker:
     def features(self) -> tuple[int, ...]:
         """Ids of the features in use (best first)."""
         return self._model.features
+
+    @property
+    def particle_centres(self) -> FloatArray:
+        """(N, 2) image positions (x, y) of the particle set after the last update."""
+        return np.asarray(self._particles[:, :2], dtype=np.float64).copy()
 
     @property
     def cue(self) -> Cue:
@@ -142,31 +149,41 @@ class AdaptiveTracker:
         return cut_window(image, (state[0], state[1]), extent, factor)
 
     def _box_mean(self, window: Window, state: FloatArray) -> FloatArray:
-        """Mean BGR of the box ``state`` inside the window's patch."""
+        """Mean BGR of the central part (``gain_core_frac`` of the size) of the box ``state``."""
         c = window.to_patch(state[None, :2])[0]
-        half = self._half(state[2], window)[0]
+        half = self._half(state[2], window)[0] * self.config.gain_core_frac
         h, w = window.patch.shape[:2]
-        x0, x1 = int(np.clip(c[0] - half[0], 0, w - 1)), int(np.clip(c[0] + half[0], 1, w))
-        y0, y1 = int(np.clip(c[1] - half[1], 0, h - 1)), int(np.clip(c[1] + half[1], 1, h))
+        x0, x1 = _clamp(c[0] - half[0], 0, w - 1), _clamp(c[0] + half[0], 1, w)
+        y0, y1 = _clamp(c[1] - half[1], 0, h - 1), _clamp(c[1] + half[1], 1, h)
         region = window.patch[y0 : max(y1, y0 + 1), x0 : max(x1, x0 + 1)]
-        return np.maximum(region.reshape(-1, 3).mean(axis=0), 1.0)
+        return np.maximum(np.asarray(cv2.mean(region)[:3], dtype=np.float64), 1.0)
 
     def _compensated(self, window: Window) -> Window:
         """The window with the illumination gain removed (per channel, clipped to 0..255)."""
         band = self.config.gain_deadband
         excess = np.sign(self._gain - 1.0) * np.maximum(np.abs(self._gain - 1.0) - band, 0.0)
-        if not self.config.gain_compensation or np.abs(excess).max() < 0.01:
+        mode = self.config.gain_compensation
+        off = mode == "never" or (mode == "colour" and self._cue != "colour")
+        if off or np.abs(excess).max() < 0.01:
             return window
         gain = (1.0 + excess).astype(np.float32)  # a dead band keeps small drifts uncorrected
         patch = np.clip(window.patch * gain, 0, 255).astype(np.uint8)
         return Window(window.x0, window.y0, window.fx, window.fy, patch)
 
+    def _frame_gain(self, image: npt.NDArray[np.uint8]) -> None:
+        """gain <- (1-r) gain + r * (first frame's mean / this frame's mean), on a 1/8 grid."""
+        ratio = self._ref_frame_mean / _frame_mean(image)
+        if self.config.gain_mode == "grey":
+            ratio = np.full(3, float(self._ref_frame_mean.sum() / _frame_mean(image).sum()))
+        rate = self.config.gain_rate
+        self._gain = (1.0 - rate) * self._gain + rate * np.clip(ratio, 0.25, 4.0)
+
     def _update_gain(self, raw: Window, state: FloatArray) -> None:
         """gain <- (1-r) gain + r * (first-frame target mean / current target mean)."""
-        ratio = np.clip(self._ref_mean / self._box_mean(raw, state), 0.25, 4.0)
+        current = self._box_mean(raw, state)
+        ratio = np.clip(self._ref_mean / current, 0.25, 4.0)
         if self.config.gain_mode == "grey":
-            ratio = np.full(3, float(self._ref_mean.sum() / self._box_mean(raw, state).sum()))
-            ratio = np.clip(ratio, 0.25, 4.0)
+            ratio = np.full(3, min(max(float(self._ref_mean.sum() / current.sum()), 0.25), 4.0))
         rate = self.config.gain_rate
         self._gain = (1.0 - rate) * self._gain + rate * ratio
 
@@ -181,8 +198,13 @@ class AdaptiveTracker:
             image = image + llr[i][planes[i]]
         return planes, (image / len(planes)).astype(np.float32)
 
-    def _rank(self, window: Window, state: FloatArray) -> _Model:
-        """Select the top features by variance ratio (eq. 6-8) and rebuild the model."""
+    def _rank(self, window: Window, state: FloatArray, trusted: bool = True) -> _Model:
+        """Select the top features by variance ratio (eq. 6-8) and rebuild the model.
+
+        The object histograms mix the first frame's with the current estimate's
+        (``anchor_weight``); when the estimate is not ``trusted`` (low confidence) only the
+        first frame's are used, so a drifting estimate cannot redefine the target.
+        """
         cfg = self.config
         centre = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0]
@@ -193,10 +215,16 @@ class AdaptiveTracker:
         q = masked_histograms(planes, ring, cfg.bins)
         if self._p_first is None:
             self._p_first = p_now
-        p = cfg.anchor_weight * self._p_first + (1.0 - cfg.anchor_weight) * p_now
+        anchor = cfg.anchor_weight if trusted else 1.0
+        p = anchor * self._p_first + (1.0 - anchor) * p_now
         directions = colour_weights().astype(np.float64) if self._cue == "colour" else None
         top, _ = rank_features(
-            p, q, self._candidates, cfg.loglik_floor, cfg.top_features, directions,
+            p,
+            q,
+            self._candidates,
+            cfg.loglik_floor,
+            cfg.top_features,
+            directions,
             cfg.max_feature_cosine,
         )
         rows = [self._candidates.index(f) for f in top]
@@ -204,7 +232,7 @@ class AdaptiveTracker:
         first_window, first_state = self._first
         first = self._hist(first_window, first_state[None], top)[0]
         sel = planes[rows]
-        recent = self._kernel(sel, centre[None], half[None])[0]
+        recent = self._kernel(sel, centre[None], half[None])[0] if trusted else first
         model = cfg.anchor_weight * first + (1.0 - cfg.anchor_weight) * recent
         around = centre[None] + _NEIGHBOURS * 2.0 * half[None]
         halves = np.repeat(half[None], len(around), axis=0)
@@ -223,16 +251,17 @@ class AdaptiveTracker:
     ) -> FloatArray:
         """Kernel histograms (eq. 2) of the appearance model: joint or per-feature."""
         cfg = self.config
+        samples = sample_bins(planes, centres, halves, cfg.sample_grid)
         if cfg.appearance == "joint":
-            joint = joint_planes(planes, cfg.bins, cfg.joint_bins)
+            joint = joint_planes(samples, cfg.bins, cfg.joint_bins)
             nbins = cfg.joint_bins ** planes.shape[0]
-            return kernel_histograms(joint, centres, halves, cfg.sample_grid, nbins)
-        return kernel_histograms(planes, centres, halves, cfg.sample_grid, cfg.bins)
+            return histograms_from_samples(joint, cfg.sample_grid, nbins)
+        return histograms_from_samples(samples, cfg.sample_grid, cfg.bins)
 
     def _confidence(self, rho: FloatArray) -> FloatArray:
         """Calibrated confidence: 0 at the background's similarity, 1 at the first frame's."""
         m = self._model
-        return np.clip((rho - m.rho_bg) / (m.rho_ref - m.rho_bg), 0.0, 1.0)
+        return np.minimum(np.maximum((rho - m.rho_bg) / (m.rho_ref - m.rho_bg), 0.0), 1.0)
 
     def _model_hist(self) -> FloatArray:
         a = self.config.anchor_weight
@@ -242,8 +271,12 @@ class AdaptiveTracker:
         cfg = self.config
         side = 0.5 * (self._size0[0] + self._size0[1]) * self._state[2]
         return motion_noise(
-            self._history, cfg.motion_history_frames, cfg.motion_gain,
-            cfg.motion_min_frac * side, cfg.motion_max_frac * side,
+            self._history,
+            cfg.motion_history_frames,
+            cfg.motion_gain,
+            cfg.motion_min_frac * side,
+            cfg.motion_max_frac * side,
+            cfg.motion_initial_frac * side,
         )
 
     def _track(self, image: npt.NDArray[np.uint8]) -> TrackResult:
@@ -251,6 +284,11 @@ class AdaptiveTracker:
         noise = self._noise()
         scale_range = (cfg.min_scale, cfg.max_scale)
         particles = propagate(self._particles, noise, cfg.scale_noise, scale_range, self.rng)
+        if cfg.drift_gain > 0 and len(self._history) >= 2:  # CONDENSATION drift: mean velocity
+            steps = np.diff(np.asarray(self._history), axis=0)
+            particles[:, :2] += cfg.drift_gain * steps.mean(axis=0)
+        if cfg.gain_source == "frame":
+            self._frame_gain(image)
         raw = self._window(image, self._state, 2.0 * noise, 1.0)
         window = self._compensated(raw)
         planes, lik = self._likelihood(window)
@@ -279,7 +317,8 @@ class AdaptiveTracker:
         best = int(np.argmax(rhos))
         self._particles = particles[systematic_resample(kept, self.rng)]
         result = self._accept(window, candidates[best], cand_hists[best], float(rhos[best]))
-        if result.box is not None and result.confidence >= cfg.lost_below_confidence:
+        trusted = result.box is not None and result.confidence >= cfg.lost_below_confidence
+        if cfg.gain_source == "target" and trusted:
             self._update_gain(raw, candidates[best])
         return result
 
@@ -287,7 +326,8 @@ class AdaptiveTracker:
         self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
     ) -> FloatArray:
         """``exp(gain * (mean LLR in box - max over particles))``: the likelihood image's vote."""
-        sums, area = window_sums(integral_images(lik)[:1], centres, halves)
+        table: FloatArray = np.asarray(cv2.integral(lik, sdepth=cv2.CV_64F), np.float64)[None]
+        sums, area = window_sums(table, centres, halves)
         mean = sums[0] / np.maximum(area, 1.0)
         return np.exp(self.config.llr_gain * (mean - mean.max()))
 
@@ -310,14 +350,14 @@ class AdaptiveTracker:
         self._since_rank += 1
         low = confidence < cfg.rerank_below_confidence and self._since_rank >= 3
         if self._since_rank >= cfg.rerank_every_frames or low:
-            self._model = self._rank(window, state)
+            self._model = self._rank(window, state, not low)
             self._since_rank = 0
         return self._result(self._box(state), confidence)
 
     def _search_lost(self, image: npt.NDArray[np.uint8]) -> TrackResult:
         """Widening search: mode of the smoothed likelihood plus scattered, mean-shifted samples."""
         cfg = self.config
-        widen = cfg.reacquire_growth ** self._lost_frames
+        widen = cfg.reacquire_growth**self._lost_frames
         self._lost_frames += 1
         window = self._compensated(self._window(image, self._state, 0.0, widen))
         planes, lik = self._likelihood(window)
@@ -351,9 +391,22 @@ class AdaptiveTracker:
 
     def _result(self, box: Box | None, confidence: float) -> TrackResult:
         return TrackResult(
-            box=box, confidence=confidence, features=self._model.features, lost=box is None,
-            cue=self._cue, particles=self.config.particles,
+            box=box,
+            confidence=confidence,
+            features=self._model.features,
+            lost=box is None,
+            cue=self._cue,
+            particles=self.config.particles,
         )
+
+
+def _frame_mean(image: npt.NDArray[np.uint8]) -> FloatArray:
+    """Mean BGR of the frame sampled on every 8th row and column (cheap, robust to motion)."""
+    return np.maximum(image[::8, ::8].reshape(-1, 3).mean(axis=0), 1.0)
+
+
+def _clamp(value: float, low: int, high: int) -> int:
+    return int(min(max(value, low), high))
 
 
 def feature_weights(feature_id: int) -> tuple[int, int, int]:

@@ -27,6 +27,37 @@ def epanechnikov_grid(n: int) -> tuple[FloatArray, FloatArray]:
     return offsets, 1.0 - r2[inside]  # eq. 3: k(u) = 1 - ||u||^2 inside the unit circle
 
 
+def sample_bins(
+    bin_images: npt.NDArray[np.intp], centres: FloatArray, half_sizes: FloatArray, grid: int
+) -> npt.NDArray[np.intp]:
+    """Bin indices at each candidate's kernel sample points, shape (k, P, m).
+
+    ``bin_images`` (k, H, W); ``centres`` (P, 2) and ``half_sizes`` (P, 2) in patch pixels
+    (x, y); points outside the patch take the nearest edge pixel.
+    """
+    offsets, _ = epanechnikov_grid(grid)
+    k, h, w = bin_images.shape
+    xs = centres[:, None, 0] + offsets[None, :, 0] * half_sizes[:, None, 0]
+    ys = centres[:, None, 1] + offsets[None, :, 1] * half_sizes[:, None, 1]
+    xi = np.minimum(np.maximum(xs.astype(np.intp), 0), w - 1)
+    yi = np.minimum(np.maximum(ys.astype(np.intp), 0), h - 1)
+    return bin_images.reshape(k, -1)[:, yi * w + xi]
+
+
+def histograms_from_samples(samples: npt.NDArray[np.intp], grid: int, bins: int) -> FloatArray:
+    """Eq. 2: normalised kernel-weighted histograms from sampled bins (k, P, m) -> (P, k, bins).
+
+    ``q_b = g sum_i k(||(h - u_i)/l||^2) delta(b(u_i) - b)``, ``g = 1 / sum_i k(...)``.
+    """
+    _, weights = epanechnikov_grid(grid)
+    k, p, _ = samples.shape
+    slot = (np.arange(p, dtype=np.intp)[None, :] * k + np.arange(k)[:, None]) * bins  # (k, P)
+    index = samples + slot[:, :, None]
+    wts = np.broadcast_to(weights, index.shape)
+    hist = np.bincount(index.ravel(), wts.ravel(), minlength=p * k * bins)
+    return hist.reshape(p, k, bins) / weights.sum()
+
+
 def kernel_histograms(
     bin_images: npt.NDArray[np.intp],
     centres: FloatArray,
@@ -34,25 +65,8 @@ def kernel_histograms(
     grid: int,
     bins: int,
 ) -> FloatArray:
-    """Eq. 2: normalised kernel-weighted histograms of each candidate box.
-
-    ``bin_images`` (k, H, W) bin indices; ``centres`` (P, 2) and ``half_sizes`` (P, 2) in
-    pixels of that patch (x, y).  Returns (P, k, bins), each histogram summing to 1.
-    """
-    offsets, weights = epanechnikov_grid(grid)
-    k, h, w = bin_images.shape
-    p = centres.shape[0]
-    xs = centres[:, None, 0] + offsets[None, :, 0] * half_sizes[:, None, 0]
-    ys = centres[:, None, 1] + offsets[None, :, 1] * half_sizes[:, None, 1]
-    xi = np.clip(xs.astype(np.intp), 0, w - 1)
-    yi = np.clip(ys.astype(np.intp), 0, h - 1)
-    flat = bin_images.reshape(k, -1)[:, yi * w + xi]  # (k, P, m)
-    slot = (np.arange(p, dtype=np.intp)[:, None] * k + np.arange(k)[None, :]) * bins  # (P, k)
-    index = flat + slot.T[:, :, None]
-    wts = np.broadcast_to(weights, index.shape)
-    hist = np.bincount(index.ravel(), wts.ravel(), minlength=p * k * bins)
-    hist = hist.reshape(p, k, bins)
-    return hist / weights.sum()  # eq. 2: g = 1 / sum k(||(h - u_i)/l||^2)
+    """Eq. 2 for each candidate box: (P, k, bins) histograms, each summing to 1."""
+    return histograms_from_samples(sample_bins(bin_images, centres, half_sizes, grid), grid, bins)
 
 
 def bhattacharyya(hists: FloatArray, model: FloatArray) -> FloatArray:
@@ -62,21 +76,22 @@ def bhattacharyya(hists: FloatArray, model: FloatArray) -> FloatArray:
 
 def bhattacharyya_distance(rho: FloatArray) -> FloatArray:
     """Eq. 4: ``s = sqrt(1 - rho)``."""
-    return np.sqrt(np.clip(1.0 - rho, 0.0, None))
+    return np.sqrt(np.maximum(1.0 - rho, 0.0))
 
 
 def particle_likelihood(rho: FloatArray, omega: float) -> FloatArray:
     """``q(c|u) ~ exp(-omega * s^2)`` with ``s^2 = 1 - rho``."""
-    return np.exp(-omega * np.clip(1.0 - rho, 0.0, None))
+    return np.exp(-omega * np.maximum(1.0 - rho, 0.0))
 
 
 def joint_planes(
     bin_images: npt.NDArray[np.intp], bins: int, joint_bins: int
 ) -> npt.NDArray[np.intp]:
-    """Fold k feature planes (values < bins) into one joint index plane, shape (1, H, W).
+    """Fold k feature planes (values < bins) into one joint index plane: (k, ...) -> (1, ...).
 
     Each feature is requantised to ``joint_bins`` levels; the joint histogram has
     ``joint_bins**k`` bins and keeps the correlation between features that marginals lose.
+    Works on whole planes (k, H, W) or on samples (k, P, m).
     """
     out = np.zeros(bin_images.shape[1:], dtype=np.intp)
     for plane in bin_images:

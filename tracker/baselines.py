@@ -16,8 +16,6 @@ import numpy.typing as npt
 from tracker.appearance import bhattacharyya, kernel_histograms, particle_likelihood
 from tracker.features import is_grayscale
 from tracker.particles import (
-    integral_images,
-    mean_shift,
     propagate,
     systematic_resample,
     weighted_estimate,
@@ -119,36 +117,78 @@ class ParticleFilterTracker(_FixedHistogramTracker):
         self._state = weighted_estimate(particles, weights)
         self._particles = particles[systematic_resample(weights, self.rng)]
         est_rho = float(bhattacharyya(self._hists(window, self._state[None]), self._model)[0])
-        return TrackResult(
-            self._box(self._state), est_rho, (), False, self._cue, cfg.particles
-        )
+        return TrackResult(self._box(self._state), est_rho, (), False, self._cue, cfg.particles)
 
 
 class MeanShiftTracker(_FixedHistogramTracker):
-    """Plain mean shift (Comaniciu, Ramesh & Meer) with a fixed RGB histogram and fixed size."""
+    """Plain mean shift (Comaniciu, Ramesh & Meer) with a fixed RGB histogram and fixed size.
+
+    Histograms are dense here (every pixel of the candidate ellipse), as in the original.
+    """
 
     name = "meanshift"
+
+    def init(self, image_bgr: npt.NDArray[np.uint8], box: Box) -> None:
+        """Build the fixed target histogram q from the first frame."""
+        super().init(image_bgr, box)
+        window = self._window(image_bgr, self._state)
+        planes = rgb_bins(window.patch, self.config.rgb_bins_per_channel)[0]
+        centre = window.to_patch(self._state[:2])
+        self._q = _dense_kernel(
+            planes, centre, self._half(self._state[None, 2], window)[0], self._bins
+        )[0]
 
     def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:
         """Iterate ``y1 = sum x_i w_i / sum w_i`` with ``w_i = sqrt(q_b / p_b(y0))``."""
         self._check(image_bgr)
         cfg = self.config
         window = self._window(image_bgr, self._state)
-        planes = rgb_bins(window.patch, cfg.rgb_bins_per_channel)
-        centre = window.to_patch(self._state[None, :2])
-        half = self._half(self._state[None, 2], window)
+        planes = rgb_bins(window.patch, cfg.rgb_bins_per_channel)[0]
+        centre = window.to_patch(self._state[:2])
+        half = self._half(self._state[None, 2], window)[0]
         for _ in range(cfg.mean_shift_iterations):
-            p = kernel_histograms(planes, centre, half, cfg.sample_grid, self._bins)[0, 0]
-            ratio = np.sqrt(self._model[0] / np.maximum(p, 1e-12)).astype(np.float32)
-            moved = mean_shift(integral_images(ratio[planes[0]]), centre, half, 1)
+            p, region, xs, ys, inside = _dense_kernel(planes, centre, half, self._bins)
+            w = np.sqrt(self._q[region] / np.maximum(p[region], 1e-12)) * inside
+            if w.sum() <= 0:
+                break
+            moved = np.array([(w * xs).sum() / w.sum(), (w * ys).sum() / w.sum()])
             step = float(np.abs(moved - centre).max())
             centre = moved
             if step < 0.5:
                 break
-        self._state[:2] = window.to_frame(centre)[0]
-        p = kernel_histograms(planes, centre, half, cfg.sample_grid, self._bins)
-        rho = float(bhattacharyya(p, self._model)[0])
+        self._state[:2] = window.to_frame(centre)
+        p = _dense_kernel(planes, centre, half, self._bins)[0]
+        rho = float(np.sqrt(p * self._q).sum())
         return TrackResult(self._box(self._state), rho, (), False, self._cue, 0)
+
+
+def _dense_kernel(
+    plane: npt.NDArray[np.intp], centre: FloatArray, half: FloatArray, bins: int
+) -> tuple[FloatArray, npt.NDArray[np.intp], FloatArray, FloatArray, FloatArray]:
+    """Epanechnikov-weighted histogram of every pixel in the ellipse (eq. 2-3).
+
+    Returns the histogram and, for the box around it, the bin image, pixel-centre x and y
+    coordinates and a 0/1 mask of the pixels inside the ellipse.
+    """
+    h, w = plane.shape
+    x0 = min(max(int(centre[0] - half[0]), 0), w - 1)
+    y0 = min(max(int(centre[1] - half[1]), 0), h - 1)
+    x1 = min(max(int(np.ceil(centre[0] + half[0])), x0 + 1), w)
+    y1 = min(max(int(np.ceil(centre[1] + half[1])), y0 + 1), h)
+    region = plane[y0:y1, x0:x1]
+    xs = np.arange(x0, x1, dtype=np.float64)[None, :] + 0.5
+    ys = np.arange(y0, y1, dtype=np.float64)[:, None] + 0.5
+    r2 = ((xs - centre[0]) / half[0]) ** 2 + ((ys - centre[1]) / half[1]) ** 2
+    k = np.maximum(1.0 - r2, 0.0)  # eq. 3
+    counts = np.bincount(region.ravel(), k.ravel(), minlength=bins).astype(np.float64)
+    total = float(counts.sum())
+    hist: FloatArray = counts / total if total > 0 else np.full(bins, 1.0 / bins)
+    xs_full = np.broadcast_to(xs, region.shape)
+    ys_full = np.broadcast_to(ys, region.shape)
+    return hist, region, xs_full, ys_full, (k > 0).astype(np.float64)
+
+
+MIL_MIN_SIDE_PX = 6
 
 
 class MilTracker:
@@ -164,10 +204,22 @@ class MilTracker:
         """Start tracking the target inside ``box`` of the first frame."""
         image = check_image(image_bgr)
         x, y, w, h = check_box(box, image.shape)
+        if w < MIL_MIN_SIDE_PX or h < MIL_MIN_SIDE_PX:
+            # OpenCV 5.0's TrackerMIL never returns from init/update on boxes of 4 px or less
+            raise ValueError(
+                f"box: TrackerMIL needs width and height >= {MIL_MIN_SIDE_PX} px, "
+                f"got w={w:g}, h={h:g}"
+            )
         self._shape = image.shape
         cv2.setRNGSeed(self.seed)
         self._tracker = cv2.TrackerMIL.create()
-        self._tracker.init(image, (round(x), round(y), max(1, round(w)), max(1, round(h))))
+        try:
+            self._tracker.init(image, (round(x), round(y), round(w), round(h)))
+        except cv2.error as err:
+            raise ValueError(
+                f"box: TrackerMIL cannot sample around (x={x:g}, y={y:g}, w={w:g}, h={h:g}); "
+                "expected a box with room around it inside the image"
+            ) from err
         self._cue: Cue = "grayscale" if is_grayscale(image, 1.0) else "colour"
 
     def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:

@@ -24,7 +24,9 @@ class TrackerConfig:
     mean_shift_iterations: int = field(default=4, metadata={"ge": 0, "le": 50})
     bins: int = field(default=16, metadata={"ge": 4, "le": 256})
     stretch_features: bool = False
-    gain_compensation: bool = True
+    gain_compensation: Literal["colour", "always", "never"] = "colour"
+    gain_source: Literal["frame", "target"] = "target"
+    gain_core_frac: float = field(default=1.0, metadata={"gt": 0.0, "le": 1.0})
     gain_mode: Literal["grey", "colour"] = "grey"
     gain_deadband: float = field(default=0.0, metadata={"ge": 0.0, "lt": 1.0})
     gain_rate: float = field(default=0.3, metadata={"gt": 0.0, "le": 1.0})
@@ -38,19 +40,21 @@ class TrackerConfig:
     model_update_rate: float = field(default=0.05, metadata={"ge": 0.0, "le": 1.0})
     ring_area_ratio: float = field(default=1.0, metadata={"gt": 0.0, "le": 8.0})
     loglik_floor: float = field(default=0.001, metadata={"gt": 0.0, "lt": 1.0})
-    llr_gain: float = field(default=0.0, metadata={"ge": 0.0})
-    omega: float = field(default=20.0, metadata={"gt": 0.0})
+    llr_gain: float = field(default=1.5, metadata={"ge": 0.0})
+    omega: float = field(default=50.0, metadata={"gt": 0.0})
     weight_threshold: float = field(default=0.02, metadata={"ge": 0.0, "lt": 1.0})
     motion_history_frames: int = field(default=5, metadata={"ge": 1})
+    drift_gain: float = field(default=0.5, metadata={"ge": 0.0, "le": 2.0})
     motion_gain: float = field(default=1.0, metadata={"gt": 0.0})
     motion_min_frac: float = field(default=0.04, metadata={"ge": 0.0})
+    motion_initial_frac: float = field(default=0.5, metadata={"ge": 0.0})
     motion_max_frac: float = field(default=0.5, metadata={"gt": 0.0})
-    scale_noise: float = field(default=0.02, metadata={"ge": 0.0, "le": 0.5})
+    scale_noise: float = field(default=0.01, metadata={"ge": 0.0, "le": 0.5})
     min_scale: float = field(default=0.3, metadata={"gt": 0.0})
     max_scale: float = field(default=3.0, metadata={"gt": 1.0})
     search_margin_frac: float = field(default=0.75, metadata={"ge": 0.0})
     work_area_px: int = field(default=900, metadata={"ge": 64})
-    sample_grid: int = field(default=16, metadata={"ge": 4, "le": 64})
+    sample_grid: int = field(default=24, metadata={"ge": 4, "le": 64})
     lost_below_confidence: float = field(default=0.15, metadata={"ge": 0.0, "le": 1.0})
     lost_after_frames: int = field(default=3, metadata={"ge": 1})
     reacquire_confidence: float = field(default=0.45, metadata={"ge": 0.0, "le": 1.0})

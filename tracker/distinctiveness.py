@@ -18,9 +18,11 @@ from tracker.ranking import masked_histograms, ring_masks, variance_ratio
 from tracker.validation import check_box, check_image
 
 
-def best_variance_ratio(image_bgr: npt.NDArray[np.uint8],
-                        box: tuple[float, float, float, float],
-                        config: TrackerConfig | None = None) -> float:
+def best_variance_ratio(
+    image_bgr: npt.NDArray[np.uint8],
+    box: tuple[float, float, float, float],
+    config: TrackerConfig | None = None,
+) -> float:
     """The highest variance ratio over the 49 colour features, box against its ring.
 
     Uses the tracker's bin count, ring size and floor (``config``), so a landmark scores
@@ -33,8 +35,10 @@ def best_variance_ratio(image_bgr: npt.NDArray[np.uint8],
     bins = colour_feature_bins(image_bgr, ids, cfg.bins)
     inner, ring = ring_masks(image_bgr.shape[:2], (x, y, w, h), cfg.ring_area_ratio)
     if not ring.any():
-        raise ValueError("box: expected a box with some surroundings inside the image, "
-                         "got one that covers it all")
+        raise ValueError(
+            "box: expected a box with some surroundings inside the image, "
+            "got one that covers it all"
+        )
     p = masked_histograms(bins, inner, cfg.bins)
     q = masked_histograms(bins, ring, cfg.bins)
     return float(variance_ratio(p, q, cfg.loglik_floor).max())

@@ -84,7 +84,7 @@ def colour_feature_bins(
         span = values.max(axis=0) - low
         values = (values - low) * (bins / np.maximum(span * (1.0 + 1.0 / bins), 1e-3))
     out = values.astype(np.intp).T.reshape(len(ids), h, w)
-    np.clip(out, 0, bins - 1, out=out)
+    np.minimum(np.maximum(out, 0, out=out), bins - 1, out=out)
     return out
 
 
@@ -129,7 +129,9 @@ def feature_bins(
     colour = [i for i in ids if i < GRAY_INTENSITY]
     gray = [i for i in ids if i >= GRAY_INTENSITY]
     parts = {
-        **dict(zip(colour, colour_feature_bins(patch_bgr, tuple(colour), bins, stretch), strict=True)),
+        **dict(
+            zip(colour, colour_feature_bins(patch_bgr, tuple(colour), bins, stretch), strict=True)
+        ),
         **dict(zip(gray, gray_feature_bins(patch_bgr, tuple(gray), bins, stretch), strict=True)),
     }
     return np.stack([parts[i] for i in ids])

@@ -5,6 +5,7 @@ A particle is a row ``(x, y, s)``: centre in pixels and scale relative to the fi
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -12,17 +13,23 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def motion_noise(
-    centres: list[tuple[float, float]], frames: int, gain: float, low: float, high: float
+    centres: list[tuple[float, float]],
+    frames: int,
+    gain: float,
+    low: float,
+    high: float,
+    initial: float | None = None,
 ) -> float:
     """Eq. 1: ``lambda_t = gain * (1/n) sum_{i} |u_i - u_{i-1}|`` over the last n steps.
 
     ``centres`` are the estimated centres, oldest first; the result is clipped to [low, high].
+    With no step yet it is ``initial`` (default ``high``).
     """
     if len(centres) < 2:
-        return float(high)
+        return float(initial if initial is not None else high)
     recent = np.asarray(centres[-(frames + 1) :], dtype=np.float64)
     steps = np.linalg.norm(np.diff(recent, axis=0), axis=1)
-    return float(np.clip(gain * steps.mean(), low, high))
+    return float(min(max(gain * steps.mean(), low), high))
 
 
 def propagate(
@@ -37,7 +44,7 @@ def propagate(
     out = particles.copy()
     out[:, :2] += noise_px * rng.standard_normal((n, 2))
     out[:, 2] *= np.exp(scale_noise * rng.standard_normal(n))
-    np.clip(out[:, 2], scale_range[0], scale_range[1], out=out[:, 2])
+    out[:, 2] = np.minimum(np.maximum(out[:, 2], scale_range[0]), scale_range[1])
     return out
 
 
@@ -59,10 +66,9 @@ def integral_images(weight_image: npt.NDArray[np.float32]) -> FloatArray:
     wi = weight_image.astype(np.float64)
     xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
     ys = np.arange(h, dtype=np.float64)[:, None] + 0.5
-    stack = np.stack([wi, wi * xs, wi * ys])
-    out = np.zeros((3, h + 1, w + 1))
-    out[:, 1:, 1:] = stack.cumsum(axis=1).cumsum(axis=2)
-    return out
+    stack = np.dstack([wi, wi * xs, wi * ys])
+    table = cv2.integral(stack, sdepth=cv2.CV_64F)  # (H+1, W+1, 3), zero first row/column
+    return np.ascontiguousarray(np.moveaxis(table, 2, 0))
 
 
 def window_sums(
@@ -70,10 +76,11 @@ def window_sums(
 ) -> tuple[FloatArray, FloatArray]:
     """Sums of the tabled images over each centre's box, (3, P), and the box areas (P,) in px."""
     _, hp1, wp1 = tables.shape
-    x0 = np.clip(np.rint(centres[:, 0] - half_sizes[:, 0]), 0, wp1 - 1).astype(np.intp)
-    x1 = np.clip(np.rint(centres[:, 0] + half_sizes[:, 0]), 0, wp1 - 1).astype(np.intp)
-    y0 = np.clip(np.rint(centres[:, 1] - half_sizes[:, 1]), 0, hp1 - 1).astype(np.intp)
-    y1 = np.clip(np.rint(centres[:, 1] + half_sizes[:, 1]), 0, hp1 - 1).astype(np.intp)
+    corners = np.rint(np.hstack([centres - half_sizes, centres + half_sizes])).astype(np.intp)
+    np.minimum(
+        np.maximum(corners, 0, out=corners), [wp1 - 1, hp1 - 1, wp1 - 1, hp1 - 1], out=corners
+    )
+    x0, y0, x1, y1 = corners.T
     sums = tables[:, y1, x1] - tables[:, y0, x1] - tables[:, y1, x0] + tables[:, y0, x0]
     return sums, ((x1 - x0) * (y1 - y0)).astype(np.float64)
 

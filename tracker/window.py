@@ -50,14 +50,16 @@ def cut_window(
     h, w = image.shape[:2]
     cx, cy = centre
     ex, ey = half_extent
-    x0 = int(np.clip(math.floor(cx - ex), 0, w - 2))
-    y0 = int(np.clip(math.floor(cy - ey), 0, h - 2))
-    x1 = int(np.clip(math.ceil(cx + ex), x0 + 2, w))
-    y1 = int(np.clip(math.ceil(cy + ey), y0 + 2, h))
+    x0 = min(max(math.floor(cx - ex), 0), w - 2)
+    y0 = min(max(math.floor(cy - ey), 0), h - 2)
+    x1 = min(max(math.ceil(cx + ex), x0 + 2), w)
+    y1 = min(max(math.ceil(cy + ey), y0 + 2), h)
     crop = image[y0:y1, x0:x1]
     if factor >= 0.999:
         return Window(x0, y0, 1.0, 1.0, np.ascontiguousarray(crop))
     out_w = max(2, round((x1 - x0) * factor))
     out_h = max(2, round((y1 - y0) * factor))
-    patch = cv2.resize(crop, (out_w, out_h), interpolation=cv2.INTER_AREA)
+    patch: npt.NDArray[np.uint8] = np.asarray(
+        cv2.resize(crop, (out_w, out_h), interpolation=cv2.INTER_AREA), dtype=np.uint8
+    )
     return Window(x0, y0, out_w / (x1 - x0), out_h / (y1 - y0), patch)

@@ -34,6 +34,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "record_cmd",
     "fake_autopilot_cmd",
     "landmarks_cmd",
+    "eval_cmd",
 )
 
 log = logging.getLogger("companion")

@@ -11,7 +11,7 @@ from typing import Any
 
 from companion.errors import CompanionError, InputError
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.geodesy import LocalFrame, corners_ned
+from companion.landmarks.geodesy import LocalFrame, corners_ned, pick_one
 from companion.landmarks.geojson_io import import_map, landmark_to_feature, write_map
 from companion.landmarks.record import Area, Landmark, parse_area
 from companion.landmarks.repository import LandmarkRepository
@@ -131,15 +131,8 @@ def _list(args: argparse.Namespace, repo: LandmarkRepository, config: LandmarksC
 
 
 def _find(repo: LandmarkRepository, key: str) -> Landmark:
-    lm = repo.get(key)
-    if lm is not None:
-        return lm
-    named = repo.find_by_name(key)
-    if len(named) == 1:
-        return named[0]
-    if not named:
-        raise InputError(f"landmark {key!r}: no landmark has this id or name")
-    raise InputError(f"landmark {key!r}: {len(named)} landmarks share this name; use an id")
+    by_id = repo.get(key)
+    return pick_one(key, by_id, [] if by_id is not None else repo.find_by_name(key))
 
 
 def _show(args: argparse.Namespace, repo: LandmarkRepository, config: LandmarksConfig) -> int:
@@ -192,15 +185,16 @@ def _zones(args: argparse.Namespace, config: LandmarksConfig) -> list[Any]:
 
 def _print_selection(sel: Selection, as_json: bool) -> None:
     if as_json:
-        json.dump({"selected": [landmark_to_feature(lm, None) for lm in sel.selected],
-                   "left_out": [{"id": lo.id, "reason": lo.reason} for lo in sel.left_out],
+        json.dump({"selected": [landmark_to_feature(lm, None) for lm in sel.landmarks],
+                   "left_out": [{"id": lo.id, "kind": lo.kind, "reason": lo.reason}
+                                for lo in sel.left_out],
                    "total_impact": sel.total_impact}, sys.stdout)
         print()
         return
     print(_HEADER)
-    for lm in sel.selected:
+    for lm in sel.landmarks:
         print(_row(lm))
-    print(f"selected {len(sel.selected)} landmarks, total impact {sel.total_impact:.2f}; "
+    print(f"selected {len(sel.ids)} landmarks, total impact {sel.total_impact:.2f}; "
           f"left out {len(sel.left_out)}:")
     for lo in sel.left_out:
         print(f"  {lo.id}: {lo.reason}")
@@ -224,7 +218,7 @@ def _sync(args: argparse.Namespace, repo: LandmarkRepository, config: LandmarksC
                                  include_candidates=args.include_candidates)
     finally:
         source.close()
-    print(f"synced {len(sel.selected)} landmarks (total impact {sel.total_impact:.2f}, "
+    print(f"synced {len(sel.ids)} landmarks (total impact {sel.total_impact:.2f}, "
           f"{len(sel.left_out)} left out) into {repo.path}; {repo.count()} in the database")
     return 0
 

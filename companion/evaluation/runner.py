@@ -12,14 +12,20 @@ import numpy.typing as npt
 from companion.errors import InputError
 from companion.evaluation.metrics import Scores, score, visible
 from companion.evaluation.sequences import Sequence
-from tracker import AdaptiveTracker, MeanShiftTracker, MilTracker, ParticleFilterTracker
+from tracker import (
+    AdaptiveTracker,
+    MeanShiftTracker,
+    MilTracker,
+    ParticleFilterTracker,
+    TrackerConfig,
+)
 from tracker.types import Box, Tracker, TrackResult
 
-TRACKERS: dict[str, Callable[[int], Tracker]] = {
-    "adaptive": lambda seed: AdaptiveTracker(seed=seed),
-    "pf": lambda seed: ParticleFilterTracker(seed=seed),
-    "meanshift": lambda seed: MeanShiftTracker(seed=seed),
-    "mil": lambda seed: MilTracker(seed=seed),
+TRACKERS: dict[str, Callable[[int, TrackerConfig | None], Tracker]] = {
+    "adaptive": lambda seed, config: AdaptiveTracker(config=config, seed=seed),
+    "pf": lambda seed, _: ParticleFilterTracker(seed=seed),
+    "meanshift": lambda seed, _: MeanShiftTracker(seed=seed),
+    "mil": lambda seed, _: MilTracker(seed=seed),
 }
 
 
@@ -50,12 +56,11 @@ class RunResult:
         return out
 
 
-def make_tracker(name: str, seed: int = 0) -> Tracker:
-    """A tracker by its name in :data:`TRACKERS`."""
-    try:
-        return TRACKERS[name](seed)
-    except KeyError:
-        raise InputError(f"unknown tracker {name!r}; expected one of {', '.join(TRACKERS)}") from None
+def make_tracker(name: str, seed: int = 0, config: TrackerConfig | None = None) -> Tracker:
+    """A tracker by its name in :data:`TRACKERS` (``config`` is used by ``adaptive``)."""
+    if name not in TRACKERS:
+        raise InputError(f"unknown tracker {name!r}; expected one of {', '.join(TRACKERS)}")
+    return TRACKERS[name](seed, config)
 
 
 def run_frames(
@@ -72,7 +77,7 @@ def run_frames(
     start = int(np.argmax(vis))
     first = sequence.truth[start]
     tracker.init(images[start], (first[0], first[1], first[2], first[3]))
-    boxes: list[Box | None] = [tuple(first)]  # type: ignore[list-item]
+    boxes: list[Box | None] = [(first[0], first[1], first[2], first[3])]
     conf = [1.0]
     times: list[float] = []
     last: TrackResult | None = None

@@ -1,63 +1,56 @@
-"""Loading evaluation sequences: OTB layout and recorded frame streams with truth boxes."""
+"""Evaluation sequences: OTB folders and recorded streams with truth boxes.
+
+Reading the files is left to :mod:`companion.sources` (one parser per format); this module only
+pairs frames with one target's truth box per frame.
+"""
 
 from __future__ import annotations
 
-import csv
-import re
-import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 
 from companion.errors import InputError
-
-_IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp"}
+from companion.sources.files import IMAGE_SUFFIXES, read_frame_list, read_otb_groundtruth
+from companion.sources.images import ImageProblem, read_image
+from companion.sources.stream_format import read_meta
+from companion.sources.stream_io import read_truth_boxes
 
 
 @dataclass(frozen=True)
 class Sequence:
-    """A sequence of frame files with one truth box (x, y, w, h; 0-based px) per frame."""
+    """Frame files with one truth box (x, y, w, h; 0-based px) per frame; NaN rows = absent."""
 
     name: str
     frames: tuple[Path, ...]
-    truth: npt.NDArray[np.float64]  # (N, 4); NaN rows where the target is absent
+    truth: npt.NDArray[np.float64]
 
     def images(self) -> Iterator[npt.NDArray[np.uint8]]:
         """Decode the frames one by one as BGR uint8."""
         for path in self.frames:
-            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if image is None:
-                raise InputError(f"{path}: cannot decode image")
-            yield image
+            try:
+                yield read_image(path)
+            except ImageProblem as err:
+                raise InputError(f"{path}: {err}") from err
 
 
-def _numbers(line: str) -> list[float]:
-    return [float(v) for v in re.split(r"[,\s]+", line.strip()) if v]
+def _mark_absent(truth: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    out = truth.astype(np.float64).copy()
+    absent = ~np.isfinite(out).all(axis=1) | (out[:, 2] <= 0) | (out[:, 3] <= 0)
+    out[absent] = np.nan
+    return out
 
 
 def load_otb(folder: Path) -> Sequence:
     """OTB layout: ``img/*.jpg`` and ``groundtruth_rect.txt`` (1-based x, y, w, h per line)."""
-    gt = folder / "groundtruth_rect.txt"
-    frames = sorted(p for p in (folder / "img").iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
-    rows = []
-    for number, line in enumerate(gt.read_text().splitlines(), 1):
-        if not line.strip():
-            continue
-        try:
-            values = _numbers(line)
-        except ValueError as err:
-            raise InputError(f"{gt}:{number}: expected x,y,w,h numbers, got {line!r}") from err
-        if len(values) != 4:
-            raise InputError(f"{gt}:{number}: expected 4 numbers x,y,w,h, got {len(values)}")
-        rows.append(values)
-    truth = np.array(rows, dtype=np.float64)
-    truth[:, :2] -= 1.0  # OTB is 1-based
-    absent = ~np.isfinite(truth).all(axis=1) | (truth[:, 2] <= 0) | (truth[:, 3] <= 0)
-    truth[absent] = np.nan
+    img = folder / "img"
+    if not img.is_dir():
+        raise InputError(f"{folder}: not an OTB sequence folder (no img/)")
+    frames = sorted(p for p in img.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    truth = _mark_absent(read_otb_groundtruth(folder))
     n = min(len(frames), len(truth))
     if n < 2:
         raise InputError(f"{folder}: expected at least 2 frames with truth, got {n}")
@@ -65,34 +58,34 @@ def load_otb(folder: Path) -> Sequence:
 
 
 def load_stream(folder: Path, landmark_id: str | None = None) -> Sequence:
-    """Recorded stream: ``stream.toml``, ``frames.csv`` (index, t_us, file), ``truth_boxes.csv``.
+    """Recorded stream with ``truth_boxes.csv``; the first landmark id unless one is given."""
+    read_meta(folder)  # refuses unknown formats and newer versions with a clear message
+    _, entries = read_frame_list(folder)
+    boxes = read_truth_boxes(folder)
+    if not boxes:
+        raise InputError(f"{folder}: has no truth_boxes.csv to evaluate against")
+    if landmark_id is None:
+        landmark_id = next(b.landmark_id for i in sorted(boxes) for b in boxes[i])
+    if not any(b.landmark_id == landmark_id for bs in boxes.values() for b in bs):
+        raise InputError(f"{folder}: truth_boxes.csv has no landmark {landmark_id!r}")
+    truth = np.full((len(entries), 4), np.nan)
+    for row, entry in enumerate(entries):
+        for b in boxes.get(entry.index, []):
+            if b.landmark_id == landmark_id:
+                truth[row] = (b.x, b.y, b.w, b.h)
+    return Sequence(
+        f"{folder.name}:{landmark_id}", tuple(e.path for e in entries), _mark_absent(truth)
+    )
 
-    Only image-file streams are read; the first landmark id in ``truth_boxes.csv`` is used
-    unless ``landmark_id`` is given.
+
+def load_sequence(folder: Path, landmark_id: str | None = None) -> Sequence:
+    """Load a folder in either layout (recorded stream if it has ``stream.toml``).
+
+    ``landmark_id`` picks the target of a recorded stream (default: the first in the file).
     """
-    meta = tomllib.loads((folder / "stream.toml").read_text())
-    if meta.get("format") != "landmark-companion-stream":
-        raise InputError(f"{folder / 'stream.toml'}: not a landmark-companion-stream")
-    if int(meta.get("version", 1)) > 1:
-        raise InputError(f"{folder / 'stream.toml'}: version {meta['version']} is newer than 1")
-    with (folder / "frames.csv").open(newline="") as fh:
-        frames = {int(r["index"]): folder / r["file"] for r in csv.DictReader(fh)}
-    truth_rows: dict[int, list[float]] = {}
-    with (folder / "truth_boxes.csv").open(newline="") as fh:
-        for r in csv.DictReader(fh):
-            landmark_id = landmark_id or r["landmark_id"]
-            if r["landmark_id"] == landmark_id:
-                truth_rows[int(r["index"])] = [float(r[k]) for k in ("x", "y", "w", "h")]
-    indices = sorted(frames)
-    truth = np.array([truth_rows.get(i, [np.nan] * 4) for i in indices], dtype=np.float64)
-    return Sequence(folder.name, tuple(frames[i] for i in indices), truth)
-
-
-def load_sequence(folder: Path) -> Sequence:
-    """Load a folder in either layout (recorded stream if it has ``stream.toml``)."""
     if (folder / "stream.toml").is_file():
-        return load_stream(folder)
-    if (folder / "groundtruth_rect.txt").is_file() and (folder / "img").is_dir():
+        return load_stream(folder, landmark_id)
+    if (folder / "groundtruth_rect.txt").is_file():
         return load_otb(folder)
     raise InputError(
         f"{folder}: expected an OTB folder (img/, groundtruth_rect.txt) or a recorded stream "

@@ -37,7 +37,10 @@ class SynthSpec:
 
 def _background(spec: SynthSpec, rng: np.random.Generator) -> npt.NDArray[np.float32]:
     small = rng.uniform(30, 220, size=(12, 16, 3)).astype(np.float32)
-    bg = cv2.resize(small, (spec.width_px, spec.height_px), interpolation=cv2.INTER_CUBIC)
+    bg = np.asarray(
+        cv2.resize(small, (spec.width_px, spec.height_px), interpolation=cv2.INTER_CUBIC),
+        dtype=np.float32,
+    )
     texture = rng.normal(0, 12, size=(spec.height_px // 4, spec.width_px // 4, 3))
     bg += cv2.resize(texture.astype(np.float32), (spec.width_px, spec.height_px))
     return np.clip(bg, 0, 255)
@@ -87,8 +90,8 @@ def generate(spec: SynthSpec) -> tuple[list[npt.NDArray[np.uint8]], npt.NDArray[
         if not spec.hidden_frames[0] <= i < spec.hidden_frames[1]:
             img[y0 : y0 + h, x0 : x0 + w] = sign
             truth[i] = (x0, y0, w, h)
-        img = img * _gain(spec, i) + rng.normal(0, spec.noise_sigma, img.shape)
-        frames.append(np.clip(img, 0, 255).astype(np.uint8))
+        lit = img * _gain(spec, i) + rng.normal(0, spec.noise_sigma, img.shape)
+        frames.append(np.clip(lit, 0, 255).astype(np.uint8))
     return frames, truth
 
 

@@ -7,7 +7,6 @@ geodesy.  The local frame is NED about a configured origin, as everywhere in the
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -18,6 +17,7 @@ import pymap3d
 from companion.errors import InputError
 from companion.landmarks.record import Landmark
 from companion.landmarks.repository import LandmarkRepository
+from tracker.pose.landmarks import corners_about, face_rotation
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -51,33 +51,31 @@ class LocalFrame:
 
 
 def facing_normal_ned(facing_deg: float | None) -> FloatArray:
-    """Unit outward normal of the landmark face in NED.
-
-    A vertical face with azimuth ``a`` (from north, clockwise) has normal
-    ``(cos a, sin a, 0)``; a landmark lying flat (``None``) faces up: ``(0, 0, -1)``.
-    """
-    if facing_deg is None:
-        return np.array([0.0, 0.0, -1.0])
-    a = math.radians(facing_deg)
-    return np.array([math.cos(a), math.sin(a), 0.0])
+    """Unit outward normal of the landmark face in NED: ``(cos a, sin a, 0)`` for a vertical
+    face with azimuth ``a`` (from north, clockwise), ``(0, 0, -1)`` for one lying flat."""
+    return np.asarray(face_rotation(facing_deg)[:, 2], dtype=np.float64)
 
 
 def corners_ned(lm: Landmark, frame: LocalFrame) -> FloatArray:
     """The face's corners in NED, (4, 3): top-left, top-right, bottom-right, bottom-left as
-    seen by a viewer in front of the face (for a flat landmark: seen from above, north up).
-
-    The viewer's right is ``(sin a, -cos a, 0)`` and up is ``(0, 0, -1)`` for a vertical
-    face; east and north for a flat one.
-    """
+    seen by a viewer in front of the face (for a flat landmark: seen from above, north up);
+    :func:`tracker.pose.landmarks.corners_about` is the one definition."""
     centre = frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m)
-    if lm.facing_deg is None:
-        right, up = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
-    else:
-        a = math.radians(lm.facing_deg)
-        right, up = np.array([math.sin(a), -math.cos(a), 0.0]), np.array([0.0, 0.0, -1.0])
-    half_w, half_h = right * (lm.width_m / 2.0), up * (lm.height_m / 2.0)
-    return np.stack([centre - half_w + half_h, centre + half_w + half_h,
-                     centre + half_w - half_h, centre - half_w - half_h])
+    return corners_about(centre, lm.width_m, lm.height_m, lm.facing_deg)
+
+
+def pick_one(key: str, by_id: Landmark | None, named: list[Landmark]) -> Landmark:
+    """The landmark a user means by ``key``: the one with that id, else the only one
+    with that name; a missing or ambiguous name is an :class:`InputError`."""
+    if by_id is not None:
+        return by_id
+    if len(named) == 1:
+        return named[0]
+    if not named:
+        raise InputError(f"landmark {key!r}: no landmark has this id or name")
+    ids = ", ".join(lm.id for lm in named[:5])
+    raise InputError(f"landmark {key!r}: {len(named)} landmarks share this name "
+                     f"({ids}{', ...' if len(named) > 5 else ''}); use an id")
 
 
 class NameTable:
@@ -97,16 +95,7 @@ class NameTable:
 
     def lookup(self, key: str) -> Landmark:
         """The landmark with this id, else the one landmark with this name."""
-        if key in self._by_id:
-            return self._by_id[key]
-        found = self._by_name.get(key, [])
-        if len(found) == 1:
-            return found[0]
-        if not found:
-            raise InputError(f"landmark {key!r}: no landmark has this id or name")
-        ids = ", ".join(lm.id for lm in found[:5])
-        raise InputError(f"landmark {key!r}: {len(found)} landmarks share this name "
-                         f"({ids}...); use an id")
+        return pick_one(key, self._by_id.get(key), self._by_name.get(key, []))
 
     def wgs84(self, key: str) -> tuple[float, float, float]:
         lm = self.lookup(key)

@@ -32,6 +32,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, cast
 
+import orjson
+
 from companion.errors import InputError
 from companion.landmarks.record import (
     CATEGORIES,
@@ -43,7 +45,7 @@ from companion.landmarks.record import (
     Scores,
     Status,
 )
-from companion.landmarks.repository import LandmarkRepository, Progress
+from companion.landmarks.repository import LandmarkRepository, Progress, paused_gc
 
 _SCORE_KEYS = ("distinctiveness", "flatness", "static", "impact")
 
@@ -62,17 +64,18 @@ def _show(value: object) -> str:
 
 def _number(value: object, field: str, lo: float | None = None, hi: float | None = None,
             lo_open: bool = False, hi_open: bool = False) -> float:
+    t = type(value)
+    if t is float or t is int:  # fast path; bool is not int here, NaN fails the range test
+        x = float(value)  # type: ignore[arg-type]
+        if ((lo is None or (x > lo if lo_open else x >= lo))
+                and (hi is None or (x < hi if hi_open else x <= hi)) and math.isfinite(x)):
+            return x
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise _FieldError(field, f"expected a number, got {_show(value)}")
-    x = float(value)
-    if (lo is not None and (x < lo or (lo_open and x == lo))) or (
-        hi is not None and (x > hi or (hi_open and x == hi))
-    ):
-        lo_t = "" if lo is None else (f"> {lo:g}" if lo_open else f">= {lo:g}")
-        hi_t = "" if hi is None else (f"< {hi:g}" if hi_open else f"<= {hi:g}")
-        rng = " and ".join(t for t in (lo_t, hi_t) if t)
-        raise _FieldError(field, f"expected a number {rng}, got {_show(value)}")
-    return x
+    lo_t = "" if lo is None else (f"> {lo:g}" if lo_open else f">= {lo:g}")
+    hi_t = "" if hi is None else (f"< {hi:g}" if hi_open else f"<= {hi:g}")
+    rng = " and ".join(t for t in (lo_t, hi_t) if t)
+    raise _FieldError(field, f"expected a number {rng}, got {_show(value)}")
 
 
 def _triples(value: object, field: str, geographic: bool) -> tuple[Point3, ...]:
@@ -130,11 +133,11 @@ def _scores(value: object) -> Scores:
         return Scores()
     if not isinstance(value, dict):
         raise _FieldError("properties.scores", f"expected an object, got {_show(value)}")
-    vals: list[float | None] = []
-    for key in _SCORE_KEYS:
-        v = value.get(key)
-        vals.append(None if v is None else _number(v, f"properties.scores.{key}", 0.0, 1.0))
-    return Scores(*vals)
+    vals = [value.get(key) for key in _SCORE_KEYS]
+    if all(v is None or (type(v) is float and 0.0 <= v <= 1.0) for v in vals):
+        return Scores(*vals)  # fast path: the usual case
+    return Scores(*(None if v is None else _number(v, f"properties.scores.{key}", 0.0, 1.0)
+                    for key, v in zip(_SCORE_KEYS, vals, strict=True)))
 
 
 def _feature_id(feature: dict[str, Any]) -> str:
@@ -154,6 +157,10 @@ def _position(geometry: object) -> tuple[float, float, float]:
     c = geometry.get("coordinates")
     if not isinstance(c, list) or len(c) != 3:
         raise _FieldError("geometry.coordinates", f"expected [lon, lat, alt_m], got {_show(c)}")
+    lon, lat, alt = c
+    if (type(lon) is float and type(lat) is float and type(alt) is float
+            and -180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0 and math.isfinite(alt)):
+        return lon, lat, alt  # fast path: the usual case
     return (
         _number(c[0], "geometry.coordinates[0] (longitude)", -180, 180),
         _number(c[1], "geometry.coordinates[1] (latitude)", -90, 90),
@@ -237,11 +244,12 @@ def read_map(path: str | Path) -> list[Landmark]:
         text = p.read_bytes()
     except OSError as err:
         raise InputError(f"{p}: cannot read landmark map ({err.strerror})") from None
-    try:
-        doc = json.loads(text)
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise InputError(f"{p}: not valid JSON ({err})") from None
-    return parse_feature_collection(doc, str(p), p.parent)
+    with paused_gc():
+        try:
+            doc = orjson.loads(text)
+        except orjson.JSONDecodeError as err:
+            raise InputError(f"{p}: not valid JSON ({err})") from None
+        return parse_feature_collection(doc, str(p), p.parent)
 
 
 def landmark_to_feature(lm: Landmark, appearance_ref: str | None) -> dict[str, Any]:
@@ -295,7 +303,7 @@ def write_map(path: str | Path, landmarks: Iterable[Landmark], embed_appearance:
             if lm.appearance is not None:
                 ref = data_uri(lm.appearance) if embed_appearance else _write_image(
                     img_dir, lm, used)
-            out.write((",\n" if n else "") + json.dumps(landmark_to_feature(lm, ref)))
+            out.write((",\n" if n else "") + orjson.dumps(landmark_to_feature(lm, ref)).decode())
             n += 1
         out.write("\n]}\n")
     os.replace(tmp, p)
@@ -318,5 +326,7 @@ def _write_image(img_dir: Path, lm: Landmark, used: set[str]) -> str:
 def import_map(repo: LandmarkRepository, path: str | Path, *, replace: bool = False,
                progress: Progress | None = None) -> int:
     """Validate the whole map first, then store it in one transaction (all or nothing)."""
-    landmarks = read_map(path)
-    return repo.import_landmarks(landmarks, replace=replace, source=str(path), progress=progress)
+    with paused_gc():
+        landmarks = read_map(path)
+        return repo.import_landmarks(landmarks, replace=replace, source=str(path),
+                                     progress=progress)

@@ -16,7 +16,7 @@ from typing import Any
 import psycopg
 
 from companion.errors import InputError
-from companion.landmarks.record import Area, Landmark, filter_area
+from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
 from companion.landmarks.repository import (
     APPEARANCE_COLUMNS,
     COLUMNS,
@@ -25,8 +25,15 @@ from companion.landmarks.repository import (
     appearance_to_row,
     check_new_ids,
     landmark_to_row,
+    paused_gc,
     row_to_landmark,
 )
+
+_GEOM_INDEX = "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)"
+_NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"
+#: Imports at least this large (and larger than the table) drop the spatial and name
+#: indexes and build them again afterwards (PostGIS sorts points for a GiST build).
+BULK_ROWS = 50_000
 
 MIGRATIONS: tuple[tuple[str, ...], ...] = (
     (  # 0 -> 1
@@ -51,8 +58,8 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             geom geometry(Point, 4326) GENERATED ALWAYS AS
                 (ST_SetSRID(ST_MakePoint(lon_deg, lat_deg), 4326)) STORED
         )""",
-        "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)",
-        "CREATE INDEX landmarks_name ON landmarks (name)",
+        _GEOM_INDEX,
+        _NAME_INDEX,
         """CREATE TABLE appearances (
             id text PRIMARY KEY REFERENCES landmarks (id) ON DELETE CASCADE,
             media_type text NOT NULL,
@@ -138,13 +145,20 @@ class PostgisLandmarkRepository:
         """``COPY`` every record in one transaction (``replace`` overwrites equal ids)."""
         conn = self._conn
         try:
-            with conn.transaction():
+            with paused_gc(), conn.transaction():
                 if replace:
                     conn.execute("DELETE FROM landmarks WHERE id = ANY(%s)",
                                  ([lm.id for lm in landmarks],))
                 elif self.count():
                     check_new_ids(landmarks, self._existing, source, chunk=5000)
-                self._copy(landmarks, progress)
+                bulk = len(landmarks) >= BULK_ROWS and len(landmarks) >= self.count()
+                if bulk:  # DDL is transactional: a failure restores the indexes
+                    conn.execute("DROP INDEX landmarks_geom")
+                    conn.execute("DROP INDEX landmarks_name")
+                self._copy([landmarks[i] for i in spatial_order(list(landmarks))], progress)
+                if bulk:
+                    conn.execute(_GEOM_INDEX)
+                    conn.execute(_NAME_INDEX)
         except psycopg.errors.IntegrityError as err:
             check_new_ids(landmarks, lambda ids: set(), source)  # names a repeated id
             first = str(err).strip().splitlines()[0]
@@ -176,7 +190,7 @@ class PostgisLandmarkRepository:
                  f"LEFT JOIN appearances a ON a.id = l.id WHERE {where}")
         else:
             q = f"SELECT {_COLS} FROM landmarks l WHERE {where}"
-        with self._conn.cursor() as cur:
+        with self._conn.cursor(binary=True) as cur:
             cur.execute(q, params)
             for row in cur:
                 yield row_to_landmark(row[:n], row[n:] if with_appearance else None)
@@ -194,6 +208,20 @@ class PostgisLandmarkRepository:
         params = (b.min_lon_deg, b.min_lat_deg, b.max_lon_deg, b.max_lat_deg,
                   b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)
         return filter_area(list(self._select(where, params, with_appearance)), area)
+
+    def area_candidates(self, area: Area) -> Candidates:
+        b = area.bbox()
+        rows = self._conn.cursor(binary=True).execute(  # binary: half the client's parsing
+            "SELECT id, lat_deg, lon_deg, impact, status, status_reason FROM landmarks "
+            "WHERE geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326) "
+            "AND lon_deg BETWEEN %s AND %s AND lat_deg BETWEEN %s AND %s",
+            (b.min_lon_deg, b.min_lat_deg, b.max_lon_deg, b.max_lat_deg,
+             b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)).fetchall()
+        return Candidates.from_rows(rows, area)
+
+    def get_many(self, ids: Sequence[str]) -> list[Landmark]:
+        found = {lm.id: lm for lm in self._select("l.id = ANY(%s)", (list(ids),), True)}
+        return [found[i] for i in ids if i in found]
 
     def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]:
         return self._select("true ORDER BY l.id", (), with_appearance)

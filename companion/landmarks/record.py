@@ -11,8 +11,9 @@ flatness and static scores (:mod:`companion.landmarks.scores`).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import Any, Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -141,6 +142,43 @@ class Circle:
 Area = BBox | Circle
 
 
+@dataclass(frozen=True)
+class Candidates:
+    """What practical-map selection needs of the landmarks of one area, as columns.
+
+    ``impact`` is NaN where the landmark has no impact score yet.
+    """
+
+    ids: tuple[str, ...]
+    lat_deg: npt.NDArray[np.float64]
+    lon_deg: npt.NDArray[np.float64]
+    impact: npt.NDArray[np.float64]
+    status: tuple[str, ...]
+    status_reason: tuple[str, ...]
+
+    @classmethod
+    def from_rows(cls, rows: Sequence[tuple[Any, ...]], area: Area | None = None
+                  ) -> Candidates:
+        """From ``(id, lat, lon, impact, status, status_reason)`` rows, keeping those
+        inside ``area`` (exact test after an index's box pre-filter)."""
+        n = len(rows)
+        lat = np.fromiter((r[1] for r in rows), np.float64, n)
+        lon = np.fromiter((r[2] for r in rows), np.float64, n)
+        if area is not None and n:
+            keep = area.contains(lat, lon)
+            if not keep.all():
+                return cls.from_rows([r for r, ok in zip(rows, keep.tolist(), strict=True)
+                                      if ok])
+        impact = np.fromiter((np.nan if r[3] is None else r[3] for r in rows), np.float64, n)
+        return cls(tuple(r[0] for r in rows), lat, lon, impact,
+                   tuple(r[4] for r in rows), tuple(r[5] for r in rows))
+
+    @classmethod
+    def from_landmarks(cls, landmarks: Sequence[Landmark]) -> Candidates:
+        return cls.from_rows([(lm.id, lm.lat_deg, lm.lon_deg, lm.scores.impact, lm.status,
+                               lm.status_reason) for lm in landmarks])
+
+
 def parse_area(text: str) -> Area:
     """Parse ``bbox:MIN_LON,MIN_LAT,MAX_LON,MAX_LAT`` or ``circle:LAT,LON,RADIUS_M``.
 
@@ -176,3 +214,30 @@ def filter_area(landmarks: list[Landmark], area: Area) -> list[Landmark]:
     lon = np.fromiter((lm.lon_deg for lm in landmarks), np.float64, len(landmarks))
     inside = area.contains(lat, lon)
     return [lm for lm, ok in zip(landmarks, inside.tolist(), strict=True) if ok]
+
+
+def _spread_bits(v: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
+    """Insert a zero bit between the low 16 bits of each value (Morton code helper)."""
+    v = (v | (v << np.uint64(8))) & np.uint64(0x00FF00FF)
+    v = (v | (v << np.uint64(4))) & np.uint64(0x0F0F0F0F)
+    v = (v | (v << np.uint64(2))) & np.uint64(0x33333333)
+    return (v | (v << np.uint64(1))) & np.uint64(0x55555555)
+
+
+def spatial_order(landmarks: list[Landmark]) -> list[int]:
+    """Indices of ``landmarks`` in Morton (Z-curve) order of position.
+
+    Bulk loads in this order keep neighbours together in the table and in the spatial
+    index, which makes both the load and later area queries faster.
+    """
+    if len(landmarks) < 2:
+        return list(range(len(landmarks)))
+    lat = np.fromiter((lm.lat_deg for lm in landmarks), np.float64, len(landmarks))
+    lon = np.fromiter((lm.lon_deg for lm in landmarks), np.float64, len(landmarks))
+
+    def grid(x: npt.NDArray[np.float64]) -> npt.NDArray[np.uint64]:
+        span = float(x.max() - x.min()) or 1.0
+        return ((x - x.min()) * (65535.0 / span)).astype(np.uint64)
+
+    key = _spread_bits(grid(lon)) | (_spread_bits(grid(lat)) << np.uint64(1))
+    return list(np.argsort(key, kind="stable").tolist())

@@ -11,9 +11,11 @@ answer: best impact first, keep a landmark if it is far enough from all kept one
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -21,7 +23,7 @@ import pymap3d
 
 from companion.errors import InputError
 from companion.landmarks.config import BusyZone, LandmarksConfig
-from companion.landmarks.record import Landmark
+from companion.landmarks.record import Candidates, Landmark
 
 
 @dataclass(frozen=True)
@@ -47,24 +49,44 @@ class ZonePolygon:
         return inside
 
 
-@dataclass(frozen=True)
-class LeftOut:
-    """A candidate not in the practical map, and why."""
+#: How each kind of reason reads; ``LeftOut.detail`` holds the values.
+REASON_FORMATS = {
+    "status": "{0}",
+    "busy_zone": "inside busy zone {0!r}",
+    "spacing": "{0:.1f} m from selected {1!r} (min spacing {2:g} m; impact {3:.2f} <= {4:.2f})",
+    "max_count": "max count {0} reached (impact {1:.2f} ranks lower)",
+}
+
+
+class LeftOut(NamedTuple):
+    """A candidate not in the practical map, and why: ``kind`` is a key of
+    ``REASON_FORMATS``; the text is formatted only when asked (thousands per query)."""
 
     id: str
-    reason: str
+    kind: str
+    detail: tuple[object, ...]
+
+    @property
+    def reason(self) -> str:
+        return REASON_FORMATS[self.kind].format(*self.detail)
 
 
 @dataclass(frozen=True)
 class Selection:
-    """The practical map for one area."""
+    """The practical map for one area: the chosen ids (best first) and the rest with reasons.
 
-    selected: tuple[Landmark, ...]
+    ``landmarks`` holds the full records of ``ids`` once a repository filled them in
+    (:func:`companion.landmarks.sync.select_area`).
+    """
+
+    ids: tuple[str, ...]
+    impacts: tuple[float, ...]
     left_out: tuple[LeftOut, ...]
+    landmarks: tuple[Landmark, ...] = ()
 
     @property
     def total_impact(self) -> float:
-        return float(sum(lm.scores.impact or 0.0 for lm in self.selected))
+        return float(sum(self.impacts))
 
 
 def zones_from_config(zones: Sequence[BusyZone]) -> list[ZonePolygon]:
@@ -112,74 +134,107 @@ def busy_zones(config: LandmarksConfig) -> list[ZonePolygon]:
     return zones
 
 
-def _eligible(lm: Landmark, include_candidates: bool) -> str | None:
+def _eligible(status: str, reason: str, include_candidates: bool) -> str | None:
     """Why a landmark may not be used at all (None: it may)."""
-    if lm.status == "rejected":
-        return "status rejected" + (f" ({lm.status_reason})" if lm.status_reason else "")
-    if lm.status == "candidate" and not include_candidates:
+    if status == "rejected":
+        return "status rejected" + (f" ({reason})" if reason else "")
+    if status == "candidate" and not include_candidates:
         return "status candidate: not admitted yet (run 'companion landmarks score')"
     return None
 
 
-def select_practical_map(candidates: Sequence[Landmark], *, min_spacing_m: float,
+def select_practical_map(candidates: Candidates | Sequence[Landmark], *, min_spacing_m: float,
                          max_count: int, zones: Sequence[ZonePolygon] = (),
                          include_candidates: bool = False, unknown_score: float = 0.5
                          ) -> Selection:
-    """Greedy selection (module docstring); ``candidates`` are the landmarks of the area.
+    """Greedy selection (module docstring) among the landmarks of one area.
 
     Ranking: impact (``unknown_score`` if not scored) descending, then id.  Distances are
     horizontal, on the local tangent plane at the candidates' mean position.
     """
-    if not candidates:
-        return Selection((), ())
-    lat = np.array([lm.lat_deg for lm in candidates])
-    lon = np.array([lm.lon_deg for lm in candidates])
-    n_m, e_m, _ = pymap3d.geodetic2ned(lat, lon, 0.0, float(lat.mean()), float(lon.mean()), 0.0)
-    zone_of: list[str | None] = [None] * len(candidates)
+    c = candidates if isinstance(candidates, Candidates) else Candidates.from_landmarks(
+        candidates)
+    if not c.ids:
+        return Selection((), (), ())
+    n_arr, e_arr, _ = pymap3d.geodetic2ned(c.lat_deg, c.lon_deg, 0.0, float(c.lat_deg.mean()),
+                                           float(c.lon_deg.mean()), 0.0)
+    n_m, e_m = np.asarray(n_arr).tolist(), np.asarray(e_arr).tolist()
+    zone_of: list[str | None] = [None] * len(c.ids)
     for z in zones:
-        for idx in np.flatnonzero(z.contains(lon, lat)).tolist():
+        for idx in np.flatnonzero(z.contains(c.lon_deg, c.lat_deg)).tolist():
             zone_of[idx] = zone_of[idx] or z.name
-    impact = [unknown_score if lm.scores.impact is None else lm.scores.impact
-              for lm in candidates]
-    order = sorted(range(len(candidates)), key=lambda k: (-impact[k], candidates[k].id))
+    impact = np.where(np.isnan(c.impact), unknown_score, c.impact).tolist()
+    order = sorted(range(len(c.ids)), key=lambda k: (-impact[k], c.ids[k]))
     cell = max(min_spacing_m, 1e-9)
     grid: dict[tuple[int, int], list[int]] = {}
     kept: list[int] = []
     left: list[LeftOut] = []
-    for k in order:
-        lm = candidates[k]
-        why = _eligible(lm, include_candidates)
-        if why is None and zone_of[k] is not None:
-            why = f"inside busy zone {zone_of[k]!r}"
-        if why is None:
-            why = _too_close(k, n_m, e_m, grid, cell, min_spacing_m, candidates, impact)
-        if why is None and len(kept) >= max_count:
-            why = f"max count {max_count} reached (impact {impact[k]:.2f} ranks lower)"
+    for pos, k in enumerate(order):
+        if len(kept) >= max_count:  # the map is full: the rest only need their reasons
+            left += _rest_reasons(order[pos:], kept, c, n_m, e_m, zone_of, impact,
+                                  include_candidates, min_spacing_m, max_count)
+            break
+        why = _eligible(c.status[k], c.status_reason[k], include_candidates)
         if why is not None:
-            left.append(LeftOut(lm.id, why))
+            left.append(LeftOut(c.ids[k], "status", (why,)))
+            continue
+        if zone_of[k] is not None:
+            left.append(LeftOut(c.ids[k], "busy_zone", (zone_of[k],)))
+            continue
+        near = _too_close(k, n_m, e_m, grid, cell, min_spacing_m) if min_spacing_m > 0 else None
+        if near is not None:
+            left.append(_spacing(c.ids[k], near[0], k, near[1], min_spacing_m, c.ids, impact))
             continue
         kept.append(k)
-        key = (int(np.floor(n_m[k] / cell)), int(np.floor(e_m[k] / cell)))
-        grid.setdefault(key, []).append(k)
-    return Selection(tuple(candidates[k] for k in kept), tuple(left))
+        grid.setdefault((math.floor(n_m[k] / cell), math.floor(e_m[k] / cell)), []).append(k)
+    return Selection(tuple(c.ids[k] for k in kept), tuple(impact[k] for k in kept), tuple(left))
 
 
-def _too_close(k: int, n_m: npt.NDArray[np.float64], e_m: npt.NDArray[np.float64],
-               grid: dict[tuple[int, int], list[int]], cell: float, min_spacing_m: float,
-               candidates: Sequence[Landmark], impact: Sequence[float]) -> str | None:
-    """Reason naming the nearest kept landmark closer than ``min_spacing_m``, if any."""
-    if min_spacing_m <= 0.0:
-        return None
-    ci, cj = int(np.floor(n_m[k] / cell)), int(np.floor(e_m[k] / cell))
+def _spacing(lm_id: str, d: float, k: int, j: int, min_spacing_m: float, ids: Sequence[str],
+             impact: Sequence[float]) -> LeftOut:
+    return LeftOut(lm_id, "spacing", (d, ids[j], min_spacing_m, impact[k], impact[j]))
+
+
+def _rest_reasons(rest: list[int], kept: list[int], c: Candidates, n_m: list[float],
+                  e_m: list[float], zone_of: list[str | None], impact: list[float],
+                  include_candidates: bool, min_spacing_m: float, max_count: int
+                  ) -> list[LeftOut]:
+    """Reasons for the candidates ranked after a full map, the same as the greedy loop
+    would give, with the nearest kept landmark found for all of them at once."""
+    n, e = np.asarray(n_m), np.asarray(e_m)
+    kept_arr = np.asarray(kept)
+    out: list[LeftOut] = []
+    for start in range(0, len(rest), 1024):  # bounded (block x kept) distance matrices
+        block = rest[start:start + 1024]
+        idx = np.asarray(block)
+        d = np.hypot(n[idx, None] - n[None, kept_arr], e[idx, None] - e[None, kept_arr])
+        nearest_arr = d.argmin(axis=1)
+        dist = d[np.arange(len(block)), nearest_arr].tolist()
+        nearest = nearest_arr.tolist()
+        for r, k in enumerate(block):
+            why = _eligible(c.status[k], c.status_reason[k], include_candidates)
+            if why is not None:
+                out.append(LeftOut(c.ids[k], "status", (why,)))
+            elif zone_of[k] is not None:
+                out.append(LeftOut(c.ids[k], "busy_zone", (zone_of[k],)))
+            elif dist[r] < min_spacing_m:
+                out.append(_spacing(c.ids[k], dist[r], k, kept[nearest[r]],
+                                    min_spacing_m, c.ids, impact))
+            else:
+                out.append(LeftOut(c.ids[k], "max_count", (max_count, impact[k])))
+    return out
+
+
+def _too_close(k: int, n_m: list[float], e_m: list[float],
+               grid: dict[tuple[int, int], list[int]], cell: float, min_spacing_m: float
+               ) -> tuple[float, int] | None:
+    """(distance, index) of the nearest kept landmark closer than ``min_spacing_m``."""
+    ci, cj = math.floor(n_m[k] / cell), math.floor(e_m[k] / cell)
     best: tuple[float, int] | None = None
     for di in (-1, 0, 1):
         for dj in (-1, 0, 1):
             for j in grid.get((ci + di, cj + dj), ()):
-                d = float(np.hypot(n_m[k] - n_m[j], e_m[k] - e_m[j]))
+                d = math.hypot(n_m[k] - n_m[j], e_m[k] - e_m[j])
                 if d < min_spacing_m and (best is None or d < best[0]):
                     best = (d, j)
-    if best is None:
-        return None
-    d, j = best
-    return (f"{d:.1f} m from selected {candidates[j].id!r} (min spacing {min_spacing_m:g} m; "
-            f"impact {impact[k]:.2f} <= {impact[j]:.2f})")
+    return best

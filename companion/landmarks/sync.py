@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
 from companion.landmarks.config import LandmarksConfig
+from companion.landmarks.geojson_io import import_map
 from companion.landmarks.record import Area
 from companion.landmarks.repository import LandmarkRepository
 from companion.landmarks.selection import Selection, ZonePolygon, select_practical_map
@@ -25,13 +27,27 @@ def open_repository(location: str | Path) -> LandmarkRepository:
     return SqliteLandmarkRepository(text)
 
 
+def open_onboard(config: LandmarksConfig) -> SqliteLandmarkRepository:
+    """The on-board database ``db_path``; an empty one is first filled from ``map_path``
+    (when set), in one transaction."""
+    repo = SqliteLandmarkRepository(config.db_path)
+    try:
+        if config.map_path and repo.count() == 0:
+            import_map(repo, config.map_path)
+    except BaseException:
+        repo.close()
+        raise
+    return repo
+
+
 def select_area(repo: LandmarkRepository, area: Area, config: LandmarksConfig,
                 zones: Sequence[ZonePolygon], *, min_spacing_m: float | None = None,
                 max_count: int | None = None, include_candidates: bool | None = None
                 ) -> Selection:
-    """The practical map of ``area`` from ``repo`` (arguments override the config)."""
-    return select_practical_map(
-        repo.query_area(area),
+    """The practical map of ``area`` from ``repo`` (arguments override the config), with
+    the full records of the chosen landmarks."""
+    selection = select_practical_map(
+        repo.area_candidates(area),
         min_spacing_m=config.min_spacing_m if min_spacing_m is None else min_spacing_m,
         max_count=config.max_count if max_count is None else max_count,
         zones=zones,
@@ -39,6 +55,7 @@ def select_area(repo: LandmarkRepository, area: Area, config: LandmarksConfig,
                             else include_candidates),
         unknown_score=config.unknown_score,
     )
+    return dataclasses.replace(selection, landmarks=tuple(repo.get_many(selection.ids)))
 
 
 def sync_practical_map(source: LandmarkRepository, dest: LandmarkRepository, area: Area,
@@ -52,6 +69,6 @@ def sync_practical_map(source: LandmarkRepository, dest: LandmarkRepository, are
     """
     selection = select_area(source, area, config, zones, min_spacing_m=min_spacing_m,
                             max_count=max_count, include_candidates=include_candidates)
-    full = [source.get(lm.id) or lm for lm in selection.selected]
-    dest.import_landmarks(full, replace=True, source=f"sync from {type(source).__name__}")
+    dest.import_landmarks(list(selection.landmarks), replace=True,
+                          source=f"sync from {type(source).__name__}")
     return selection

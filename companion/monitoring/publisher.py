@@ -67,10 +67,15 @@ class MonitorPublisher:
         self._publishers[topic].put(json.dumps(data, default=str).encode())
         self.published[topic] += 1
 
+    def preview_due(self, now_s: float | None = None) -> bool:
+        """True when :meth:`publish_preview` would publish now."""
+        now_s = time.monotonic() if now_s is None else now_s
+        return now_s - self._last_preview_s >= 1.0 / self.cfg.preview_rate_hz
+
     def publish_preview(self, jpeg: bytes, now_s: float | None = None) -> bool:
         """Publish a JPEG preview unless one went out less than 1/rate ago."""
         now_s = time.monotonic() if now_s is None else now_s
-        if now_s - self._last_preview_s < 1.0 / self.cfg.preview_rate_hz:
+        if not self.preview_due(now_s):
             return False
         self._last_preview_s = now_s
         self._publishers["preview"].put(jpeg)

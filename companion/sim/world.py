@@ -3,7 +3,6 @@ behind the wall images, poles under the signposts, and a ground plane."""
 
 from __future__ import annotations
 
-import math
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +18,7 @@ from companion.sim import textures
 from companion.sources.base import ImageU8
 from companion.sources.stream_format import Origin
 from tracker.geometry import FloatArray
+from tracker.pose.landmarks import corners_about
 
 DOWN = np.array([0.0, 0.0, 1.0])
 
@@ -81,20 +81,9 @@ class SimLandmark:
 def face_corners(
     centre: FloatArray, width_m: float, height_m: float, facing_deg: float | None
 ) -> FloatArray:
-    """TL, TR, BR, BL of a face centred at ``centre`` (NED).
-
-    Upright faces have outward normal n = (cos f, sin f, 0); a viewer looks along -n with
-    right = down x (-n) and up = -down.  A flat face (``facing_deg`` None) faces up with
-    its top edge to the north and its right edge to the east.
-    """
-    if facing_deg is None:
-        right, up = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
-    else:
-        f = math.radians(facing_deg)
-        look = -np.array([math.cos(f), math.sin(f), 0.0])
-        right, up = np.cross(DOWN, look), -DOWN
-    hw, hh = right * width_m / 2.0, up * height_m / 2.0
-    return np.array([centre - hw + hh, centre + hw + hh, centre + hw - hh, centre - hw - hh])
+    """TL, TR, BR, BL of a face centred at ``centre`` (NED), as the pose solver defines
+    them (:func:`tracker.pose.landmarks.corners_about`)."""
+    return corners_about(centre, width_m, height_m, facing_deg)
 
 
 def seeded_rng(seed: int, key: str) -> np.random.Generator:

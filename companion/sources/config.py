@@ -5,7 +5,29 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-SourceKind = Literal["auto", "sim", "stream", "otb", "video", "camera"]
+SourceKind = Literal["auto", "sim", "stream", "otb", "video", "camera", "follow"]
+
+
+@dataclass(frozen=True)
+class FollowConfig:
+    """The simulated camera that follows an autopilot simulator's true pose (docs/sitl.md).
+
+    ``truth_timeout_s``: at start, how long to wait for the first truth message before a
+    one-line error names the missing message.  ``stale_ms``: truth older than this makes the
+    camera stop delivering (a stale world must not produce fixes).  ``delay_ms``: frames show
+    the world this long before their due time, so that two truth samples bracket it (the
+    frame is stamped with that earlier time).  ``max_extrapolation_ms``: how far past the
+    newest sample a frame may still be extrapolated.  ``request_rate_hz``: the truth
+    message's rate asked of the autopilot with SET_MESSAGE_INTERVAL (0: do not ask).
+    ``fps``: camera frame rate (0: the scenario's).
+    """
+
+    truth_timeout_s: float = field(default=10.0, metadata={"gt": 0})
+    stale_ms: float = field(default=300.0, metadata={"gt": 0})
+    delay_ms: float = field(default=20.0, metadata={"ge": 0, "le": 500})
+    max_extrapolation_ms: float = field(default=100.0, metadata={"ge": 0})
+    request_rate_hz: float = field(default=50.0, metadata={"ge": 0, "le": 400})
+    fps: float = field(default=0.0, metadata={"ge": 0})
 
 
 @dataclass(frozen=True)
@@ -14,7 +36,10 @@ class SourceConfig:
 
     ``spec``: a stream folder, an OTB folder, a video file, a camera (device index such as
     ``"0"``, a V4L2 path, a GStreamer pipeline or an RTSP URL) or, for ``kind = "sim"``, a
-    scenario name (``config/scenarios/NAME.toml``) or a scenario file.  ``kind = "auto"``
+    scenario name (``config/scenarios/NAME.toml``) or a scenario file; for ``kind = "follow"``
+    the scenario whose world (camera, effects, facades) is rendered from the autopilot
+    simulator's true pose, with the landmarks of ``landmarks.map_path`` about the
+    configured EKF origin (section ``[source.follow]``).  ``kind = "auto"``
     guesses from the spec (see :func:`companion.sources.factory.guess_kind`).
     ``realtime``: replay recorded times at their pace (false: as fast as possible).
     ``loop``: start again at the end of a finite source.  ``fps`` is used where the source
@@ -35,3 +60,4 @@ class SourceConfig:
     width: int = field(default=0, metadata={"ge": 0})  # 0 = camera default / scenario size
     height: int = field(default=0, metadata={"ge": 0})
     seed: int = field(default=0, metadata={"ge": 0})
+    follow: FollowConfig = field(default_factory=FollowConfig)

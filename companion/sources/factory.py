@@ -11,7 +11,7 @@ from companion.sources.config import SourceConfig, SourceKind
 from companion.sources.files import OtbSource, RecordedStreamSource
 from companion.sources.live import VIDEO_SUFFIXES, CameraSource, VideoFileSource
 
-KINDS = ("sim", "stream", "otb", "video", "camera")
+KINDS = ("sim", "stream", "otb", "video", "camera", "follow")
 
 
 def split_spec(spec: str) -> tuple[SourceKind, str]:
@@ -61,6 +61,10 @@ def resolve(config: SourceConfig) -> SourceConfig:
 async def open_source(config: SourceConfig) -> FrameSource:
     """Open the source a config names; one-line :class:`InputError`/``SourceError`` if not."""
     c = resolve(config)
+    if c.kind == "follow":
+        raise InputError("source.kind = \"follow\": the camera follows an autopilot "
+                         "simulator's truth, so it needs the MAVLink link: use `companion run` "
+                         "(docs/sitl.md)")
     if c.kind == "stream":
         return RecordedStreamSource(Path(c.spec), realtime=c.realtime, loop=c.loop,
                                     speed=c.speed)

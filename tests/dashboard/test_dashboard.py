@@ -96,10 +96,15 @@ def companion_and_dashboard() -> Iterator[tuple[FakeCompanion, str]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     fake = FakeCompanion(endpoint)
     fake.thread.start()
+    other = FakeCompanion(f"tcp/127.0.0.1:{free_port()}", vehicle="bravo")
+    other.pub.close()  # a second vehicle on the same network: it joins through the first
+    other.pub = MonitorPublisher(MonitorConfig(connect=(endpoint,)), "bravo")
+    other.thread.start()
     proc, url = start_dashboard(endpoint)
     yield fake, url
     proc.terminate()
     proc.wait(timeout=10)
+    other.stop()
     fake.stop()
 
 
@@ -115,6 +120,11 @@ def test_page_shows_live_preview_and_the_published_counters(
         browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
         page = browser.new_page()
         page.goto(url + "/")
+        page.wait_for_function("document.querySelector('#vehicle').options.length == 2",
+                               timeout=15000)
+        assert page.eval_on_selector_all("#vehicle option", "os => os.map(o => o.value)") \
+            == ["alpha", "bravo"]
+        page.select_option("#vehicle", "alpha")
         page.wait_for_function("document.querySelector('#preview').naturalWidth > 0",
                                timeout=15000)
         first = page.eval_on_selector("#preview", "e => e.src")
@@ -165,3 +175,48 @@ def test_binding_beyond_loopback_without_a_token_is_refused() -> None:
     assert out.returncode == 2
     assert out.stderr.strip() == ("dashboard: binding to 0.0.0.0 needs --token (or "
                                   "LMC_DASHBOARD_TOKEN): the page must not be open to the network")
+
+
+def test_page_against_a_running_demo(tmp_path: Path) -> None:
+    """The real thing: `companion demo` publishes, the page shows its preview and numbers."""
+    playwright = pytest.importorskip("playwright.sync_api")
+    if not Path(CHROMIUM).exists():
+        pytest.skip("chromium is not installed (apt-get install chromium)")
+    from companion.monitoring import MonitorWatcher
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    demo = subprocess.Popen(
+        [sys.executable, "-m", "companion", "--log-level", "warning",
+         "--set", f'monitor.listen=["{endpoint}"]',
+         "--set", f'flightlog.dir="{tmp_path}"', "demo", "--seconds", "25", "--json"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc, url = start_dashboard(endpoint)
+    watcher = MonitorWatcher(MonitorConfig(connect=(endpoint,)))
+    OUT.mkdir(exist_ok=True)
+    try:
+        assert watcher.wait_for("preview", timeout_s=30)
+        with playwright.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
+            page = browser.new_page()
+            page.goto(url + "/")
+            page.wait_for_function("document.querySelector('#preview').naturalWidth > 0",
+                                   timeout=20000)
+            shot1 = page.locator("#preview").screenshot()
+            time.sleep(1.5)
+            shot2 = page.locator("#preview").screenshot()
+            assert shot1 != shot2, "the demo's preview did not change over time"
+            page.wait_for_function(
+                "document.querySelector(\"td[data-key='fixes sent']\") !== null", timeout=20000)
+            shown = int(page.inner_text("td[data-key='fixes sent']"))
+            published = watcher.snapshot().vehicles["lmc1"].latest["status"]["counters"]
+            # the page polls every 0.5 s and the status comes at 1 Hz: within two periods
+            assert abs(published["fixes_sent"] - shown) <= 2 * 30
+            assert page.inner_text("td[data-key='state']") in ("tracking", "searching", "lost")
+            page.screenshot(path=str(OUT / "dashboard-demo.png"), full_page=True)
+            browser.close()
+    finally:
+        watcher.close()
+        proc.terminate()
+        proc.wait(timeout=10)
+        demo.terminate()
+        demo.wait(timeout=30)

@@ -10,6 +10,7 @@ import psycopg
 import pytest
 
 from companion.errors import InputError
+from companion.landmarks import postgis_repo
 from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.geojson_io import import_map, read_map
 from companion.landmarks.postgis_repo import SCHEMA_VERSION, PostgisLandmarkRepository, redact
@@ -46,7 +47,11 @@ def test_import_get_and_round_trip_match_sqlite(postgis_db: str, sample_map: Pat
         assert again.count() == 50
 
 
-def test_bad_import_leaves_repository_unchanged(postgis_db: str, sample_map: Path) -> None:
+@pytest.mark.parametrize("bulk_rows", [10**9, 100])  # indexes kept, or dropped and rebuilt
+def test_bad_import_leaves_repository_unchanged(postgis_db: str, sample_map: Path,
+                                                bulk_rows: int,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(postgis_repo, "BULK_ROWS", bulk_rows)
     with PostgisLandmarkRepository(postgis_db) as pg:
         import_map(pg, sample_map)
         before = _snapshot(postgis_db)
@@ -63,6 +68,12 @@ def test_bad_import_leaves_repository_unchanged(postgis_db: str, sample_map: Pat
         pg.import_landmarks([dataclasses.replace(good, id="lm0003")], replace=True)
         replaced = pg.get("lm0003")
         assert replaced is not None and replaced.appearance is None and pg.count() == 50
+        pg.import_landmarks(records[:-1])  # the good ones, through the same path
+        assert pg.count() == 50 + 2999
+        assert len(pg.query_area(Circle(1.0, 1.0, 1.0))) == 3000  # 2999 + replaced lm0003
+        indexes = {r[0] for r in pg._conn.execute(
+            "SELECT indexname FROM pg_indexes WHERE tablename = 'landmarks'")}
+        assert {"landmarks_geom", "landmarks_name"} <= indexes
 
 
 def test_update_scores(postgis_db: str, sample_map: Path) -> None:
@@ -89,13 +100,19 @@ def test_sync_pulls_the_practical_map_into_sqlite(postgis_db: str, tmp_path: Pat
         pg.import_landmarks(records)
         board.import_landmarks([dataclasses.replace(records[0], id="local-only")])
         sel = sync_practical_map(pg, board, area, config, ())
-        assert len(sel.selected) == 12
+        assert len(sel.ids) == 12
         stored = {lm.id: lm for lm in board.iter_all()}
-        assert set(stored) == {lm.id for lm in sel.selected} | {"local-only"}
-        for lm in sel.selected:
-            assert stored[lm.id] == pg.get(lm.id)
+        assert set(stored) == set(sel.ids) | {"local-only"}
+        for lm_id in sel.ids:
+            assert stored[lm_id] == pg.get(lm_id)
         in_area = pg.query_area(area)
-        assert len(sel.selected) + len(sel.left_out) == len(in_area)
+        assert len(sel.ids) + len(sel.left_out) == len(in_area)
+        candidates = pg.area_candidates(area)
+        assert sorted(candidates.ids) == [lm.id for lm in in_area]
+        by_id = {lm.id: lm for lm in in_area}
+        for k, lm_id in enumerate(candidates.ids):
+            assert candidates.impact[k] == by_id[lm_id].scores.impact
+            assert candidates.lat_deg[k] == by_id[lm_id].lat_deg
 
 
 def test_unreachable_repository_is_one_line_without_password() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import os
 import signal
@@ -17,9 +18,13 @@ import pymap3d
 import pytest
 
 from companion.errors import InputError
+from companion.landmarks import sqlite_repo
+from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.geojson_io import import_map, read_map, write_map
-from companion.landmarks.record import BBox, Circle, Landmark, parse_area
+from companion.landmarks.record import BBox, Circle, Landmark, Scores, parse_area
+from companion.landmarks.repository import ScoreUpdate
 from companion.landmarks.sqlite_repo import MIGRATIONS, SCHEMA_VERSION, SqliteLandmarkRepository
+from companion.landmarks.sync import open_onboard
 from tests.landmarks.helpers import (
     ORIGIN_LAT,
     ORIGIN_LON,
@@ -179,30 +184,44 @@ def test_duplicate_of_stored_id_fails_and_replace_overwrites(sample_map: Path,
         assert [lm.id for lm in repo.query_area(Circle(2.0, 2.0, 10.0))] == ["lm0003"]
 
 
-def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("bulk_rows", [10**9, 1000])  # row-by-row indexes, rebuilt indexes
+def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path: Path,
+                                                      bulk_rows: int,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sqlite_repo, "BULK_ROWS", bulk_rows)
     db = tmp_path / "a.db"
     with SqliteLandmarkRepository(db) as repo:
         import_map(repo, sample_map)
         before = _dump(db)
         good = Landmark("x0", "x", "logo", 1.0, 1.0, 0.0, 1.0, 1.0)
-        records = [dataclasses.replace(good, id=f"x{k}") for k in range(30_000)]
+        records = [dataclasses.replace(good, id=f"x{k}") for k in range(21_000)]
         records[-1] = dataclasses.replace(records[-1], width_m=-1.0)  # CHECK fails in chunk 2
         with pytest.raises(InputError, match="rejected by the database"):
             repo.import_landmarks(records)
+        assert _dump(db) == before
+        records[-1] = dataclasses.replace(records[-1], width_m=1.0, id="x7")  # repeated id
+        with pytest.raises(InputError, match="feature 20999: id: duplicate id 'x7'"):
+            repo.import_landmarks(records)
     assert _dump(db) == before
+    with SqliteLandmarkRepository(db) as repo:
+        assert repo.get("lm0003") is not None and len(repo.find_by_name("sign lm0003")) == 1
+        repo.import_landmarks(records[:-1])
+        assert repo.count() == 50 + 20_999 and repo.get("x20998") is not None
 
 
-def test_killed_import_leaves_database_exactly_as_it_was(sample_map: Path,
-                                                         tmp_path: Path) -> None:
+@pytest.mark.parametrize("bulk_rows", ["1000000000", "1000"])
+def test_killed_import_leaves_database_exactly_as_it_was(sample_map: Path, tmp_path: Path,
+                                                         bulk_rows: str) -> None:
     db = tmp_path / "a.db"
     with SqliteLandmarkRepository(db) as repo:
         import_map(repo, sample_map)
     before = _dump(db)
     big = write_json(tmp_path / "big.geojson", collection(
-        [feature(f"b{k}", 10.0 + k * 1e-5, 20.0) for k in range(45_000)]))
+        [feature(f"b{k}", 10.0 + k * 1e-5, 20.0) for k in range(25_000)]))
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     proc = subprocess.Popen(
-        [sys.executable, str(Path(__file__).with_name("import_worker.py")), str(db), str(big)],
+        [sys.executable, str(Path(__file__).with_name("import_worker.py")), str(db), str(big),
+         bulk_rows],
         stdout=subprocess.PIPE, text=True, env=env)
     try:
         assert proc.stdout is not None
@@ -229,12 +248,16 @@ def test_area_queries_match_brute_force(tmp_path: Path) -> None:
         repo.import_landmarks(records)
         box = BBox(ORIGIN_LON - 0.01, ORIGIN_LAT - 0.005, ORIGIN_LON + 0.004, ORIGIN_LAT + 0.01)
         got = {lm.id for lm in repo.query_area(box)}
+        assert set(repo.area_candidates(box).ids) == got
         want = {f"r{k}" for k in np.flatnonzero(
             (lat >= box.min_lat_deg) & (lat <= box.max_lat_deg)
             & (lon >= box.min_lon_deg) & (lon <= box.max_lon_deg))}
         assert got == want and len(want) > 50
         circle = parse_area(f"circle:{ORIGIN_LAT},{ORIGIN_LON},900")
         got = {lm.id for lm in repo.query_area(circle)}
+        assert set(repo.area_candidates(circle).ids) == got
+        picked = sorted(got)[:7]
+        assert [lm.id for lm in repo.get_many([*picked, "unknown"])] == picked
         n, e, _ = pymap3d.geodetic2ned(lat, lon, 0.0, ORIGIN_LAT, ORIGIN_LON, 0.0)
         want = {f"r{k}" for k in np.flatnonzero(np.hypot(n, e) <= 900.0)}
         assert got == want and len(want) > 50
@@ -245,3 +268,52 @@ def test_area_queries_match_brute_force(tmp_path: Path) -> None:
 def test_bad_area_text_is_refused(text: str) -> None:
     with pytest.raises(ValueError, match="expected bbox:"):
         parse_area(text)
+
+
+def test_replacing_the_newest_rows_never_duplicates_query_results(tmp_path: Path) -> None:
+    base = Landmark("x", "x", "logo", ORIGIN_LAT, ORIGIN_LON, 0.0, 1.0, 1.0)
+    first = [dataclasses.replace(base, id=f"p{k:02d}", lat_deg=ORIGIN_LAT + k * 1e-4)
+             for k in range(20)]
+    everything = Circle(ORIGIN_LAT, ORIGIN_LON, 5000.0)
+    with SqliteLandmarkRepository(tmp_path / "a.db") as repo:
+        repo.import_landmarks(first)
+        newest = max(first, key=lambda lm: repo._conn.execute(
+            "SELECT rid FROM landmarks WHERE id = ?", (lm.id,)).fetchone()[0])
+        moved = dataclasses.replace(newest, lon_deg=ORIGIN_LON + 0.01)  # replaced in place
+        repo.import_landmarks([moved], replace=True)
+        found = [lm.id for lm in repo.query_area(everything)]
+        assert sorted(found) == sorted(lm.id for lm in first)  # each exactly once
+        assert repo.area_candidates(everything).ids.count(moved.id) == 1
+        assert [lm.lon_deg for lm in repo.query_area(everything) if lm.id == moved.id] == [
+            moved.lon_deg]
+
+
+def test_bulk_load_pauses_and_restores_the_garbage_collector(sample_map: Path,
+                                                             tmp_path: Path) -> None:
+    bad = tmp_path / "bad.geojson"
+    bad.write_text("{")
+    assert gc.isenabled()
+    with pytest.raises(InputError):
+        read_map(bad)
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        read_map(sample_map)
+        assert not gc.isenabled()  # a caller's choice is kept
+    finally:
+        gc.enable()
+
+
+def test_onboard_database_is_seeded_from_the_configured_map_once(sample_map: Path,
+                                                                 tmp_path: Path) -> None:
+    config = LandmarksConfig(db_path=str(tmp_path / "board.db"), map_path=str(sample_map))
+    with open_onboard(config) as repo:
+        assert repo.count() == 50
+        repo.update_scores([ScoreUpdate("lm0001", Scores(impact=0.9), "approved", "")])
+    with open_onboard(config) as repo:  # not empty: the map is not imported again
+        assert repo.count() == 50
+        first = repo.get("lm0001")
+        assert first is not None and first.status == "approved"
+    bad = LandmarksConfig(db_path=str(tmp_path / "other.db"), map_path=str(tmp_path / "no"))
+    with pytest.raises(InputError, match="cannot read landmark map"):
+        open_onboard(bad)

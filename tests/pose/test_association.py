@@ -128,3 +128,14 @@ def test_config_gate_is_used(camera: CameraModel) -> None:
     far = _prior((0.0, 0.4, 0.0), 0.5, 1.0)
     assert associate(obs, lms, camera, far).matches
     assert not associate(obs, lms, camera, far, tight).matches
+
+
+def test_low_confidence_observations_are_not_used(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    obs[1] = replace(obs[1], confidence=0.1)
+    result = associate(obs, lms, camera, None)
+    assert result.unmatched == (1,) and len(result.matches) == 3
+    fix = solve_pose(obs, lms, camera, 0)
+    assert isinstance(fix, PoseFix) and "B" not in fix.landmark_ids
+    assert any("observation 1: confidence" in n for n in fix.notes)

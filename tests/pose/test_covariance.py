@@ -5,11 +5,13 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tracker.camera import CameraModel
 from tracker.pose import AttitudeSample, NoFix, Observation, PoseConfig, PoseFix, solve_pose
+from tracker.pose.refine import arc_correction
 from tracker.pose.scenarios import NEES_HIGH_3DOF, NEES_LOW_3DOF
 from tracker.pose.simulate import SensorNoise
 
@@ -59,7 +61,10 @@ def test_more_pixel_noise_gives_a_larger_covariance(camera: CameraModel) -> None
     small = solve_pose(obs, lms, camera, 0, config=PoseConfig(pixel_sigma_px=0.5))
     large = solve_pose(obs, lms, camera, 0, config=PoseConfig(pixel_sigma_px=2.0))
     assert isinstance(small, PoseFix) and isinstance(large, PoseFix)
-    np.testing.assert_allclose(large.covariance, 16.0 * small.covariance, rtol=1e-6)
+    # first order scales with sigma^2; the arc term (sigma^4) only adds to it
+    diff = large.covariance - 16.0 * small.covariance
+    assert np.all(np.linalg.eigvalsh(0.5 * (diff + diff.T)) > -1e-12)
+    np.testing.assert_allclose(large.covariance[3:, 3:], 16.0 * small.covariance[3:, 3:])
     assert large.quality <= small.quality
 
 
@@ -97,3 +102,28 @@ def test_any_input_gives_a_finite_fix_or_a_reason(
     )
     assert np.all(np.isfinite(values))
     assert np.all(np.linalg.eigvalsh(result.covariance) > 0)
+
+
+def test_arc_correction_adds_variance_along_the_line_of_sight_only() -> None:
+    cov = np.diag([0.01, 0.64, 0.64, 1e-4, 1e-4, 1e-4])  # looking north, loose across
+    pts = np.array([[20.0, -1.0, 0.0], [20.0, 1.0, 0.0]])
+    out = arc_correction(cov, np.zeros(3), pts)
+    extra = out - cov
+    # 3/4 (0.64^2 + 0.64^2) / 20^2 along north, nothing else
+    assert extra[0, 0] == pytest.approx(0.75 * 2 * 0.64**2 / 400.0)
+    extra[0, 0] = 0.0
+    np.testing.assert_allclose(extra, 0.0, atol=1e-15)
+    tight = np.diag([1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6])
+    np.testing.assert_allclose(arc_correction(tight, np.zeros(3), pts), tight, rtol=1e-6)
+
+
+def test_covariance_upper_triangle_is_row_major_for_mavlink(camera: CameraModel) -> None:
+    lms = wall()
+    fix = solve_pose(see(lms, camera), lms, camera, 0)
+    assert isinstance(fix, PoseFix)
+    urt = fix.covariance_urt
+    c = fix.covariance
+    assert len(urt) == 21
+    # ArduPilot reads c0, c6, c11 (x y z) and c15, c18, c20 (roll pitch yaw)
+    assert urt[0] == c[0, 0] and urt[5] == c[0, 5] and urt[6] == c[1, 1] and urt[11] == c[2, 2]
+    assert urt[15] == c[3, 3] and urt[18] == c[4, 4] and urt[20] == c[5, 5]

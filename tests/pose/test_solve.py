@@ -65,17 +65,17 @@ def test_single_rectangular_landmark_uses_plain_ippe(camera: CameraModel) -> Non
     _assert_pose(fix)
 
 
-def test_several_landmarks_without_attitude_use_pnp_ransac(camera: CameraModel) -> None:
+def test_several_consistent_landmarks_without_attitude_use_pnp(camera: CameraModel) -> None:
     lms = wall()
     fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US))
-    assert fix.solver == "pnp_ransac" and set(fix.landmark_ids) == {"A", "B", "C", "D"}
+    assert fix.solver == "pnp" and set(fix.landmark_ids) == {"A", "B", "C", "D"}
     _assert_pose(fix)
 
 
 def test_four_centres_without_attitude_use_pnp(camera: CameraModel) -> None:
     lms = wall()
     fix = _fix(solve_pose(_centres_only(see(lms, camera)), lms, camera, T_US))
-    assert fix.solver == "pnp_ransac"
+    assert fix.solver == "pnp"
     _assert_pose(fix)
 
 
@@ -131,7 +131,8 @@ def test_a_wrongly_labelled_landmark_is_dropped_as_an_outlier(camera: CameraMode
     obs[2] = replace(obs[2], landmark_id="E")  # the detector named C wrongly
     fix = _fix(solve_pose(obs, (*lms, elsewhere), camera, T_US))
     assert fix.landmark_ids == ("A", "B", "D")
-    assert any("dropped landmark 'E'" in n for n in fix.notes)
+    # the all-inlier hypothesis failed, RANSAC named the outlier, the rest was solved again
+    assert any("dropped landmark 'E': RANSAC outlier" in n for n in fix.notes)
     assert np.linalg.norm(np.asarray(fix.position_ned_m) - TRUE_P) < 0.1
 
 
@@ -240,3 +241,95 @@ def test_covariance_is_symmetric_positive_definite_and_ordered(camera: CameraMod
     # looking north at a wall: depth (north) is known worse than... the angles are radians
     assert np.all(np.sqrt(np.diag(c)[3:]) < 0.1)
     assert 1 <= fix.quality <= 100
+
+
+def test_distance_sensor_orientations_map_to_body_axes() -> None:
+    from tracker.pose import laser_axis_from_mav_orientation as axis
+
+    assert axis(0) == (1.0, 0.0, 0.0)
+    assert axis(2) == (0.0, 1.0, 0.0)  # YAW_90: right
+    assert axis(25) == (0.0, 0.0, 1.0)  # PITCH_270: down
+    assert axis(24) == (0.0, 0.0, -1.0)
+    with pytest.raises(ValueError, match="orientation"):
+        axis(100)
+
+
+def test_downward_laser_over_a_flat_landmark_fixes_height(camera: CameraModel) -> None:
+    cam = CameraModel(mount_rpy_deg=(0.0, -90.0, 0.0))
+    lm = MapLandmark("G", (0.0, 0.0, 0.0), 3.0, 3.0, None)
+    p, rpy = np.array([0.3, -0.2, -12.0]), (0.01, 0.02, 1.0)
+    d = cast_laser([lm], p, rpy, (0.0, 0.0, 1.0))
+    assert d is not None
+    obs = _centres_only(see((lm,), cam, p, rpy))
+    fix = _fix(
+        solve_pose(
+            obs,
+            [lm],
+            cam,
+            T_US,
+            attitude=AttitudeSample(T_US, *rpy),
+            laser=RangeSample(T_US, d, (0.0, 0.0, 1.0)),
+        )
+    )
+    assert fix.solver == "range_bearing"
+    assert_exact(fix, p, rpy)
+
+
+def test_with_attitude_a_gross_misassociation_is_found_by_landmark_consensus(
+    camera: CameraModel,
+) -> None:
+    lms = wall()
+    obs = _centres_only(see(lms, camera, noise=SensorNoise(), seed=5))
+    elsewhere = MapLandmark("E", (30.0, 12.0, -1.0), 1.2, 1.2, 180.0)
+    obs[2] = replace(obs[2], landmark_id="E")  # C seen, but named E (far to the right)
+    fix = _fix(solve_pose(obs, (*lms, elsewhere), camera, T_US, attitude=ATT))
+    assert fix.landmark_ids == ("A", "B", "D")
+    assert any("'E': disagrees with the other landmarks' consensus" in n for n in fix.notes)
+    assert np.linalg.norm(np.asarray(fix.position_ned_m) - TRUE_P) < 4 * max(fix.position_sigma_m)
+
+
+def test_a_landmark_whose_back_the_camera_would_see_is_dropped(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    # the map says A faces north (away from the camera): it cannot be what was seen
+    turned = (replace(lms[0], facing_deg=0.0), *lms[1:])
+    fix = _fix(solve_pose(_centres_only(obs), turned, camera, T_US, attitude=ATT))
+    assert "A" not in fix.landmark_ids
+    assert any("'A': the camera is behind its face" in n for n in fix.notes)
+
+
+def test_nan_side_samples_are_ignored_not_propagated(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    bad_att = replace(ATT, yaw_rad=float("nan"))
+    bad_alt = AltitudeSample(T_US, float("inf"))
+    bad_laser = RangeSample(T_US, float("nan"))
+    fix = _fix(
+        solve_pose(obs, lms, camera, T_US, attitude=bad_att, altitude=bad_alt, laser=bad_laser)
+    )
+    assert fix.solver == "pnp"  # solved as if no attitude had come
+    for name in ("attitude", "altitude", "laser"):
+        assert any(f"{name} sample ignored: not finite" in n for n in fix.notes)
+    assert np.all(np.isfinite(fix.covariance))
+
+
+def test_three_landmarks_with_one_misnamed_give_no_fix_rather_than_a_guess(
+    camera: CameraModel,
+) -> None:
+    lms = wall()[:3]
+    obs = see(lms, camera)
+    elsewhere = MapLandmark("E", (15.0, 9.0, -2.0), 1.2, 1.2, 180.0)
+    obs[2] = replace(obs[2], landmark_id="E")
+    for att in (None, ATT):
+        result = solve_pose(obs, (*lms, elsewhere), camera, T_US, attitude=att)
+        assert isinstance(result, NoFix)
+        assert "disagree" in result.reason or "no three landmarks agree" in result.reason
+
+
+def test_two_detections_claiming_one_landmark_are_both_left_out(camera: CameraModel) -> None:
+    lms = wall()
+    obs = see(lms, camera)
+    obs[3] = replace(obs[3], landmark_id="A")  # D's detection also named A
+    fix = _fix(solve_pose(obs, lms, camera, T_US))
+    assert fix.landmark_ids == ("B", "C")
+    assert any("'A' claimed by observations [0, 3]" in n for n in fix.notes)

@@ -18,6 +18,7 @@ from tracker.pose.types import (
     PoseFix,
     PosePrior,
     RangeSample,
+    laser_axis_from_mav_orientation,
 )
 
 __all__ = [
@@ -38,5 +39,6 @@ __all__ = [
     "face_rotation",
     "landmark_corners_ned",
     "landmark_normal_ned",
+    "laser_axis_from_mav_orientation",
     "solve_pose",
 ]

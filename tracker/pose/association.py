@@ -138,7 +138,10 @@ def associate(
     prior: PosePrior | None,
     config: PoseConfig | None = None,
 ) -> Association:
-    """Name every observation: labelled ones by id, unlabelled ones by gated projection."""
+    """Name every observation: labelled ones by id, unlabelled ones by gated projection.
+
+    Observations below ``config.min_confidence`` are left unmatched (with a note).
+    """
     full = config or PoseConfig()
     cfg = full.association
     by_id = {lm.landmark_id: lm for lm in landmarks}
@@ -147,7 +150,10 @@ def associate(
     unmatched: list[int] = []
     pending: list[int] = []
     for i, obs in enumerate(observations):
-        if obs.landmark_id is None:
+        if obs.confidence < full.min_confidence:
+            unmatched.append(i)
+            notes.append(f"observation {i}: confidence {obs.confidence:.2f} below min_confidence")
+        elif obs.landmark_id is None:
             pending.append(i)
         elif obs.landmark_id in by_id:
             matches.append(Match(i, obs.landmark_id))

@@ -180,6 +180,15 @@ def initial_cost(
     return float(r @ r)
 
 
+def point_errors_px(
+    k: FloatArray, r_body_cam: FloatArray, pts: PointSet, x: FloatArray
+) -> FloatArray:
+    """Reprojection error magnitude (px, ideal pixels) of every point at ``x``."""
+    r, _, _ = _residuals(np.asarray(x, dtype=np.float64), k, r_body_cam, pts, Priors())
+    n = pts.points_ned.shape[0]
+    return np.asarray(np.sqrt(np.sum(r.reshape(n, 2) ** 2, axis=1)) * pts.sigma_px)
+
+
 def refine_pose(
     k: FloatArray,
     r_body_cam: FloatArray,
@@ -200,8 +209,10 @@ def refine_pose(
             dx = -np.linalg.solve(h, g)
         except np.linalg.LinAlgError:
             return _failed(x, "degenerate geometry: singular normal matrix")
-        # converged when the step is far below the uncertainty: dx^T H dx = -g^T dx (sigma^2)
-        if float(-g @ dx) < 1e-6:
+        # nearly converged when the step is well below the uncertainty (dx^T H dx = -g^T dx,
+        # in sigma^2): take it without re-linearising; what is left is second order
+        if float(-g @ dx) < 1e-2:
+            x = x + dx
             break
         accepted = False
         for step in (1.0, 0.5, 0.25, 0.125):  # step halving keeps the cost decreasing
@@ -238,6 +249,30 @@ def _finish(
     errs = np.sum(r[: 2 * n].reshape(n, 2) ** 2, axis=1)
     x[3:] = wrap_angle(x[3:])
     return Refined(x[:3].copy(), x[3:].copy(), cov, errs, cost=float(r @ r))
+
+
+def arc_correction(cov: FloatArray, position: FloatArray, points_ned: FloatArray) -> FloatArray:
+    """Second-order term for the curved valley of bearing-dominated geometry (a new 6x6).
+
+    Seen from afar, the landmarks fix the direction to them well but let the vehicle slide
+    sideways while turning; the valley of the cost is curved, and the tangent (linear)
+    picture misses a departure along the line of sight ``u`` of order ``d phi^2 / 2`` for an
+    angular error ``phi ~ N(0, s^2)``, whose second moment is ``3 d^2 s^4 / 4`` (cf. the
+    converted-measurement bias of Lerro & Bar-Shalom, 1993).  Its sign depends on the
+    geometry (measured: away from a head-on wall), so it is added as a second moment, not
+    corrected as a bias.  With ``s_i^2 = lambda_i / d^2`` for the two position variances
+    ``lambda_i`` across ``u``: ``P_pos += 3/4 (lambda_1^2 + lambda_2^2) / d^2 u u^T``.
+    """
+    rel = points_ned.mean(axis=0) - position
+    d = float(np.linalg.norm(rel))
+    if d <= 0:
+        return cov
+    u = rel / d
+    proj = np.eye(3) - np.outer(u, u)
+    lam = np.linalg.eigvalsh(proj @ cov[:3, :3] @ proj)[1:]  # the two across the sight line
+    out = cov.copy()
+    out[:3, :3] += 0.75 * float(np.sum(lam**2)) / d**2 * np.outer(u, u)
+    return out
 
 
 def _failed(x: FloatArray, reason: str, index: int = -1) -> Refined:

@@ -6,21 +6,23 @@ Solver choice (automatic, see ``docs/pose.md``):
 what is in view                           autopilot attitude      solver
 ========================================  =====================  ==================
 one landmark with four corners            optional (picks flip)   ``ippe[_square]``
-four or more points, two+ landmarks       absent                  ``pnp_ransac``
+four or more points, two+ landmarks       absent                  ``pnp`` / ``pnp_ransac``
 two or more landmarks (centres/corners)   present                 ``bearing_ls``
 one landmark centre + laser range         present                 ``range_bearing``
 one landmark centre + altitude            present                 ``altitude_bearing``
 ========================================  =====================  ==================
 
 Every initial estimate is refined by the same MAP Gauss-Newton (:mod:`tracker.pose.refine`)
-that also yields the 6x6 covariance; landmarks that do not fit are dropped one at a time.
+that also yields the 6x6 covariance.  The all-landmarks-right hypothesis is tried first; when
+a landmark does not fit, RANSAC (PnP, or over landmark pairs when the attitude is known)
+names it, it is dropped and the rest is solved again.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import cv2
@@ -41,13 +43,17 @@ from tracker.pose.refine import (
     Priors,
     RangePrior,
     Refined,
+    arc_correction,
     initial_cost,
+    point_errors_px,
     refine_pose,
 )
 from tracker.pose.solvers import (
+    bearing_consensus,
     bearing_least_squares,
     bearings_ned,
     ippe_candidates,
+    pnp_all_points,
     pnp_ransac,
 )
 from tracker.pose.types import (
@@ -64,6 +70,8 @@ from tracker.pose.validate import check_observation, fresh_samples
 
 #: Chi-square difference below which both planar (IPPE) solutions explain the corners.
 _FLIP_CHI2 = 4.0
+#: A landmark is dropped as an outlier only when this many are in play (3 stay to outvote it).
+_MIN_TO_DROP = 4
 #: A second IPPE solution starting this much (chi-square) worse is not refined.
 _SKIP_CHI2 = 25.0
 
@@ -92,12 +100,15 @@ class _Context:
     attitude: AttitudeSample | None
     altitude: AltitudeSample | None
     laser: RangeSample | None
+    distorted: bool  # does the camera have any distortion to undo?
 
 
 @dataclass(frozen=True)
 class _Solved:
     solver: str
     refined: Refined
+    points: PointSet
+    all_fit: bool = False  # already checked by _worst_group
 
 
 @dataclass(frozen=True)
@@ -131,18 +142,17 @@ def solve_pose(
             return NoFix(time_us, f"observation {i}: {problem}")
     notes: list[str] = []
     attitude, altitude, laser = fresh_samples(time_us, attitude, altitude, laser, cfg, notes)
-    usable = [o for o in observations if o.confidence >= cfg.min_confidence]
-    if len(usable) < len(observations):
-        notes.append(f"{len(observations) - len(usable)} observation(s) below min_confidence")
-    if prior is None and attitude is not None and any(o.landmark_id is None for o in usable):
-        notes.append("no predicted pose: unlabelled observations cannot be named")
-    assoc = associate(usable, landmarks, camera, prior, cfg)
+    assoc = associate(observations, landmarks, camera, prior, cfg)
     notes += list(assoc.notes)
     notes += [f"observation {a.observation_index} ambiguous: {a.reason}" for a in assoc.ambiguities]
-    ctx = _Context(camera, *_camera_arrays(camera), cfg, attitude, altitude, laser)
+    k, dist, r_body_cam = _camera_arrays(camera)
+    ctx = _Context(camera, k, dist, r_body_cam, cfg, attitude, altitude, laser, bool(np.any(dist)))
     by_id = {lm.landmark_id: lm for lm in landmarks}
     groups = _make_groups(
-        ctx, usable, [(m.observation_index, by_id[m.landmark_id]) for m in assoc.matches], notes
+        ctx,
+        observations,
+        [(m.observation_index, by_id[m.landmark_id]) for m in assoc.matches],
+        notes,
     )
     if not groups:
         return NoFix(time_us, "no identified landmark in view", tuple(notes))
@@ -165,32 +175,34 @@ def _make_groups(
     notes: list[str],
 ) -> list[_Group]:
     """Image points per landmark (corners when known, else the centre); one per landmark."""
+    claims: dict[str, list[int]] = {}
+    for i, lm in named:
+        claims.setdefault(lm.landmark_id, []).append(i)
     best: dict[str, tuple[int, MapLandmark]] = {}
     for i, lm in named:
-        prev = best.get(lm.landmark_id)
-        if prev is None or observations[i].confidence > observations[prev[0]].confidence:
-            if prev is not None:
-                notes.append(f"landmark {lm.landmark_id!r} seen twice: kept the more confident")
+        who = claims[lm.landmark_id]
+        if len(who) == 1:
             best[lm.landmark_id] = (i, lm)
+        elif i == who[0]:  # one landmark, several detections: at least one is misnamed
+            notes.append(f"landmark {lm.landmark_id!r} claimed by observations {who}: not used")
     cfg = ctx.config
+    centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
     groups = []
     for i, lm in best.values():
         obs = observations[i]
         if obs.corners_px is not None:
-            pts, px, sig = landmark_corners_ned(lm), np.asarray(obs.corners_px), cfg.pixel_sigma_px
+            pts, sig = landmark_corners_ned(lm), cfg.pixel_sigma_px
+            px = np.array(obs.corners_px, dtype=np.float64)
         else:
-            pts = np.asarray([lm.position_ned_m], dtype=np.float64)
-            px = np.asarray([obs.centre_px], dtype=np.float64)
-            sig = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
-        px = px.astype(np.float64)
-        groups.append(_Group(lm, obs, pts, px, _undistort(ctx, px), sig))
+            pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma
+            px = np.array([obs.centre_px], dtype=np.float64)
+        ideal = _undistort(ctx, px) if ctx.distorted else px
+        groups.append(_Group(lm, obs, pts, px, ideal, sig))
     return groups
 
 
 def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
     """Distorted -> ideal pinhole pixels (same K)."""
-    if not np.any(ctx.dist):
-        return px
     out = cv2.undistortPoints(px.reshape(-1, 1, 2), ctx.k, ctx.dist, P=ctx.k)
     return np.asarray(out.reshape(-1, 2), dtype=np.float64)
 
@@ -198,7 +210,11 @@ def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
 def _solve_robust(
     ctx: _Context, groups: list[_Group], time_us: int, reset_counter: int, notes: list[str]
 ) -> PoseFix | NoFix:
-    """Solve; while a landmark does not fit, drop the worst one and solve again."""
+    """Solve; while a landmark does not fit, drop it and solve again.
+
+    A landmark is dropped only while at least three others remain to outvote it: two
+    landmarks always agree with each other, so a pair left after a drop proves nothing.
+    """
     active = list(groups)
     dropped = 0
     while True:
@@ -208,11 +224,13 @@ def _solve_robust(
                 return NoFix(time_us, out.reason, tuple(notes))
             bad, why = out.bad_group, out.reason
         else:
-            bad, why = _worst_group(ctx, active, out.refined)
+            bad, why = (-1, "") if out.all_fit else _worst_group(ctx, active, out.refined)
             if bad < 0:
                 return _make_fix(ctx, active, out, time_us, reset_counter, dropped, notes)
-            if len(active) == 1:
-                return NoFix(time_us, why, tuple(notes))
+        if len(active) < _MIN_TO_DROP:  # too few left to outvote a wrong one
+            ids = ", ".join(repr(g.landmark.landmark_id) for g in active)
+            why = why if len(active) == 1 else f"landmarks {ids} disagree ({why})"
+            return NoFix(time_us, why, tuple(notes))
         notes.append(f"dropped {why}")
         del active[bad]
         dropped += 1
@@ -220,10 +238,12 @@ def _solve_robust(
 
 def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int, str]:
     """Index of the landmark to drop with the reason, or (-1, "") when all fit."""
-    for gi, g in enumerate(groups):
-        c = np.asarray(g.landmark.position_ned_m)
-        if float(landmark_normal_ned(g.landmark) @ (ref.position_ned_m - c)) <= 0.0:
-            return gi, f"landmark {g.landmark.landmark_id!r}: the camera is behind its face"
+    normals = np.array([landmark_normal_ned(g.landmark) for g in groups])
+    centres = np.array([g.landmark.position_ned_m for g in groups])
+    front = np.einsum("ij,ij->i", normals, ref.position_ned_m - centres)
+    if np.any(front <= 0.0):
+        gi = int(np.argmin(front))
+        return gi, f"landmark {groups[gi].landmark.landmark_id!r}: the camera is behind its face"
     counts = np.array([g.points_ned.shape[0] for g in groups])
     idx = np.repeat(np.arange(len(groups)), counts)
     per_point = np.bincount(idx, weights=ref.point_errors, minlength=len(groups)) / counts
@@ -306,12 +326,17 @@ def _refine(ctx: _Context, pts: PointSet, priors: Priors, x0: FloatArray) -> Ref
     )
 
 
-def _as_outcome(solver: str, ref: Refined, pts: PointSet) -> _Solved | _Failure:
+def _as_outcome(
+    solver: str, ref: Refined, pts: PointSet, groups: list[_Group]
+) -> _Solved | _Failure:
     """Map a failed refinement (e.g. a point behind the camera) to the landmark to drop."""
     if not ref.reason:
-        return _Solved(solver, ref)
-    bad = int(pts.landmark_index[ref.bad_point]) if ref.bad_point >= 0 else -1
-    return _Failure(ref.reason if bad < 0 else f"landmark {bad}: {ref.reason}", bad)
+        return _Solved(solver, ref, pts)
+    if ref.bad_point < 0:
+        return _Failure(ref.reason)
+    bad = int(pts.landmark_index[ref.bad_point])
+    lid = groups[bad].landmark.landmark_id
+    return _Failure(f"landmark {lid!r}: {ref.reason}", bad)
 
 
 def _solve_once(ctx: _Context, groups: list[_Group]) -> _Solved | _Failure:
@@ -344,7 +369,14 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
             if single
             else "degenerate geometry: bearings do not fix the position"
         )
-    ahead = np.einsum("ij,ij->i", pts.points_ned - p0, b)
+    rel = pts.points_ned - p0
+    ahead = np.einsum("ij,ij->i", rel, b)
+    cos = ahead / np.maximum(np.linalg.norm(rel, axis=1), 1e-12)
+    worst_angle = float(np.max(np.arccos(np.clip(cos, -1.0, 1.0))))
+    if not single and worst_angle > _consensus_threshold(ctx):  # cheap all-inlier test
+        suspect = _consensus_outlier(ctx, pts, b)
+        if suspect >= 0:
+            return _outlier_failure(groups, suspect)
     if np.any(ahead <= 0):
         gi = int(pts.landmark_index[int(np.argmin(ahead))])
         lid = groups[gi].landmark.landmark_id
@@ -357,13 +389,42 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
     if not single:
         rng = _laser_for(ctx, groups, x0)
     solver = "bearing_ls" if not single else ("range_bearing" if rng else "altitude_bearing")
-    return _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts)
+    out = _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts, groups)
+    if single:
+        return out
+    if isinstance(out, _Solved) and _worst_group(ctx, groups, out.refined)[0] < 0:
+        return replace(out, all_fit=True)
+    suspect = _consensus_outlier(ctx, pts, b)  # the all-inlier hypothesis failed
+    return _outlier_failure(groups, suspect) if suspect >= 0 else out
+
+
+def _consensus_threshold(ctx: _Context) -> float:
+    """Angular inlier gate: the RANSAC pixel gate plus 3 sigma of the attitude prior."""
+    assert ctx.attitude is not None
+    a = ctx.attitude
+    sigma = max(a.roll_pitch_sigma_rad, a.yaw_sigma_rad)
+    return ctx.config.ransac_threshold_px / float(ctx.k[0, 0]) + 3.0 * sigma
+
+
+def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray) -> int:
+    """The landmark the best pair of landmarks disagrees with most, or -1 (attitude known)."""
+    thr = _consensus_threshold(ctx)
+    per_group = bearing_consensus(pts.points_ned, b, pts.landmark_index, thr)
+    if per_group is None:
+        return -1
+    worst = int(np.argmax(per_group))
+    return worst if per_group[worst] >= thr else -1
+
+
+def _outlier_failure(groups: list[_Group], gi: int) -> _Failure:
+    lid = groups[gi].landmark.landmark_id
+    return _Failure(f"landmark {lid!r}: disagrees with the other landmarks' consensus", gi)
 
 
 def _solve_without_attitude(
     ctx: _Context, groups: list[_Group], pts: PointSet
 ) -> _Solved | _Failure:
-    """PnP with RANSAC on every point, then MAP refinement."""
+    """SQPnP on every point, refined; if a landmark does not fit, RANSAC PnP instead."""
     n = pts.points_ned.shape[0]
     if len(groups) == 1:
         return _Failure("one landmark without corners and no attitude: pose unobservable")
@@ -374,6 +435,13 @@ def _solve_without_attitude(
         return _Failure("degenerate geometry: the landmark points are collinear")
     cfg = ctx.config
     dist_px = np.vstack([g.pixels_distorted for g in groups])
+    direct = pnp_all_points(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam)
+    if direct is not None and _fits_within(ctx, pts, direct.x0, cfg.ransac_threshold_px):
+        # the all-inlier hypothesis first; RANSAC only when it fails
+        priors = _priors(ctx, _laser_for(ctx, groups, direct.x0))
+        ref = _refine(ctx, pts, priors, direct.x0)
+        if not ref.reason and _worst_group(ctx, groups, ref)[0] < 0:
+            return _Solved("pnp", ref, pts, all_fit=True)
     res = pnp_ransac(
         pts.points_ned,
         dist_px,
@@ -388,11 +456,19 @@ def _solve_without_attitude(
         return _Failure("PnP RANSAC found no consistent pose")
     cand, inlier = res
     outliers = np.bincount(pts.landmark_index[~inlier], minlength=len(groups))
+    if int(np.sum(outliers == 0)) < 3:  # one landmark's own corners always agree
+        return _Failure("PnP RANSAC: no three landmarks agree on a pose")
     if outliers.max() > 0:
         gi = int(np.argmax(outliers))
         return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: RANSAC outlier", gi)
     priors = _priors(ctx, _laser_for(ctx, groups, cand.x0))
-    return _as_outcome("pnp_ransac", _refine(ctx, pts, priors, cand.x0), pts)
+    return _as_outcome("pnp_ransac", _refine(ctx, pts, priors, cand.x0), pts, groups)
+
+
+def _fits_within(ctx: _Context, pts: PointSet, x: FloatArray, threshold_px: float) -> bool:
+    """Do all points reproject within ``threshold_px`` at pose ``x``?"""
+    err = point_errors_px(ctx.k, ctx.r_body_cam, pts, x)
+    return bool(np.all(err <= threshold_px))
 
 
 def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
@@ -430,7 +506,7 @@ def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
                 f"planar ambiguity: both IPPE solutions fit landmark {lm.landmark_id!r} "
                 "(no attitude or range to tell them apart)"
             )
-    return _Solved(solver, ok[0])
+    return _Solved(solver, ok[0], pts)
 
 
 def _make_fix(
@@ -444,22 +520,23 @@ def _make_fix(
 ) -> PoseFix | NoFix:
     """The fix with quality ``100 * inlier ratio * 2^(-sigma_max / sigma_ref)``."""
     ref = out.refined
-    values = np.concatenate([ref.position_ned_m, ref.attitude_rpy_rad, ref.covariance.ravel()])
+    cov = arc_correction(ref.covariance, ref.position_ned_m, out.points.points_ned)
+    values = np.concatenate([ref.position_ned_m, ref.attitude_rpy_rad, cov.ravel()])
     if not np.all(np.isfinite(values)):
         return NoFix(time_us, "the solution is not finite", tuple(notes))
-    sigma_max = float(np.sqrt(np.max(np.diag(ref.covariance)[:3])))
+    sigma_max = float(np.sqrt(np.max(np.diag(cov)[:3])))
     if sigma_max > ctx.config.max_position_sigma_m:
         return NoFix(time_us, f"position 1-sigma {sigma_max:.1f} m is too large", tuple(notes))
     inlier_ratio = len(groups) / (len(groups) + dropped)
     quality = 100.0 * inlier_ratio * 2.0 ** (-sigma_max / ctx.config.quality_sigma_ref_m)
-    pts = _point_set(groups)
+    pts = out.points
     rms = math.sqrt(float(np.mean(ref.point_errors * pts.sigma_px**2)) / 2.0)
     p, a = ref.position_ned_m, ref.attitude_rpy_rad
     return PoseFix(
         time_us=time_us,
         position_ned_m=(float(p[0]), float(p[1]), float(p[2])),
         attitude_rpy_rad=(float(a[0]), float(a[1]), float(a[2])),
-        covariance=ref.covariance,
+        covariance=cov,
         quality=max(1, min(100, round(quality))),
         landmark_ids=tuple(g.landmark.landmark_id for g in groups),
         solver=out.solver,

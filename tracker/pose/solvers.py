@@ -62,9 +62,12 @@ def ippe_candidates(
     ``face_points`` are the 4 corners in the face frame in the IPPE_SQUARE order.
     """
     flags = cv2.SOLVEPNP_IPPE_SQUARE if square else cv2.SOLVEPNP_IPPE
-    n, rvecs, tvecs, errs = cv2.solvePnPGeneric(
-        face_points.reshape(-1, 1, 3), pixels_distorted.reshape(-1, 1, 2), k, dist, flags=flags
-    )
+    try:
+        n, rvecs, tvecs, errs = cv2.solvePnPGeneric(
+            face_points.reshape(-1, 1, 3), pixels_distorted.reshape(-1, 1, 2), k, dist, flags=flags
+        )
+    except cv2.error:
+        return []
     out = []
     for i in range(int(n)):
         r_nc, cam = _camera_from_opencv(rvecs[i], tvecs[i], r_ned_face, centre_ned)
@@ -86,22 +89,47 @@ def pnp_ransac(
     """RANSAC PnP on NED points (centred for conditioning); returns the pose and inlier mask."""
     origin = points_ned.mean(axis=0)
     obj = (points_ned - origin).reshape(-1, 1, 3)
-    ok, rvec, tvec, inliers = cv2.solvePnPRansac(
-        obj,
-        pixels_distorted.reshape(-1, 1, 2),
-        k,
-        dist,
-        iterationsCount=iterations,
-        reprojectionError=threshold_px,
-        confidence=confidence,
-        flags=cv2.SOLVEPNP_SQPNP,
-    )
+    try:
+        ok, rvec, tvec, inliers = cv2.solvePnPRansac(
+            obj,
+            pixels_distorted.reshape(-1, 1, 2),
+            k,
+            dist,
+            iterationsCount=iterations,
+            reprojectionError=threshold_px,
+            confidence=confidence,
+            flags=cv2.SOLVEPNP_SQPNP,
+        )
+    except cv2.error:
+        return None
     if not ok or inliers is None:
         return None
     mask = np.zeros(points_ned.shape[0], dtype=bool)
     mask[np.asarray(inliers).reshape(-1)] = True
     r_nc, cam = _camera_from_opencv(rvec, tvec, np.eye(3), origin)
     return Candidate(state_from_camera(r_nc, cam, r_body_cam), 0.0), mask
+
+
+def pnp_all_points(
+    points_ned: FloatArray,
+    pixels_distorted: FloatArray,
+    k: FloatArray,
+    dist: FloatArray,
+    r_body_cam: FloatArray,
+) -> Candidate | None:
+    """SQPnP (globally optimal for its algebraic cost) on every point, no outlier rejection."""
+    origin = points_ned.mean(axis=0)
+    obj = (points_ned - origin).reshape(-1, 1, 3)
+    try:
+        ok, rvec, tvec = cv2.solvePnP(
+            obj, pixels_distorted.reshape(-1, 1, 2), k, dist, flags=cv2.SOLVEPNP_SQPNP
+        )
+    except cv2.error:
+        return None
+    if not ok:
+        return None
+    r_nc, cam = _camera_from_opencv(rvec, tvec, np.eye(3), origin)
+    return Candidate(state_from_camera(r_nc, cam, r_body_cam), 0.0)
 
 
 def bearings_ned(pixels_ideal: FloatArray, k: FloatArray, r_ned_cam: FloatArray) -> FloatArray:
@@ -156,3 +184,49 @@ def bearing_least_squares(
     if rank < 3 or sv[-1] < min_singular * sv[0]:
         return None
     return np.asarray(sol, dtype=np.float64)
+
+
+def bearing_consensus(
+    points_ned: FloatArray,
+    bearings: FloatArray,
+    landmark_index: npt.NDArray[np.int64],
+    threshold_rad: float,
+) -> FloatArray | None:
+    """Per-landmark angular error (rad) under the best two-landmark hypothesis.
+
+    RANSAC over all landmark pairs with a known rotation, vectorised: each landmark is
+    reduced to its mean point ``C_g`` and mean bearing ``u_g``; a pair's position is the
+    midpoint of the shortest segment between the rays ``C_i - s u_i`` and ``C_j - t u_j``;
+    the pair leaving the most landmarks within ``threshold_rad`` (ties: the smallest summed
+    error) wins.  ``None`` when no pair is joined by a third landmark (no majority).
+    """
+    n_groups = int(landmark_index.max()) + 1
+    if n_groups < 3:
+        return None
+    counts = np.bincount(landmark_index, minlength=n_groups).astype(np.float64)[:, None]
+    sums = [np.bincount(landmark_index, v, n_groups) for v in (*points_ned.T, *bearings.T)]
+    c = np.stack(sums[:3], axis=1) / counts  # mean point per landmark
+    u = np.stack(sums[3:], axis=1)
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)  # mean bearing per landmark
+    i, j = np.triu_indices(n_groups, 1)
+    # closest points of X = C_i - s u_i and X = C_j - t u_j (unit directions, b = u_i.u_j)
+    w0 = c[i] - c[j]
+    b = np.einsum("pk,pk->p", u[i], u[j])
+    d = -np.einsum("pk,pk->p", u[i], w0)
+    e = -np.einsum("pk,pk->p", u[j], w0)
+    denom = 1.0 - b * b
+    ok = denom > 1e-9
+    denom = np.where(ok, denom, 1.0)
+    s = (b * e - d) / denom
+    t = (e - b * d) / denom
+    pos = 0.5 * ((c[i] - s[:, None] * u[i]) + (c[j] - t[:, None] * u[j]))  # pairs x 3
+    rel = c[None, :, :] - pos[:, None, :]  # pairs x groups x 3
+    cos = np.einsum("pgk,gk->pg", rel, u) / np.maximum(np.linalg.norm(rel, axis=2), 1e-12)
+    err = np.arccos(np.clip(cos, -1.0, 1.0))
+    err[~ok] = np.pi
+    inl = err < threshold_rad
+    count = inl.sum(axis=1)
+    score = count * 1e3 - np.where(inl, err, 0.0).sum(axis=1)  # count, then error
+    best = int(np.argmax(score))
+    # a pair always fits itself: only a third landmark agreeing makes a consensus
+    return np.asarray(err[best]) if count[best] >= 3 else None

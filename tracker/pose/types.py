@@ -13,7 +13,15 @@ import numpy as np
 from tracker.geometry import FloatArray
 
 #: Solvers the pose module may choose (``PoseFix.solver``).
-SOLVERS = ("ippe", "ippe_square", "pnp_ransac", "bearing_ls", "range_bearing", "altitude_bearing")
+SOLVERS = (
+    "ippe",
+    "ippe_square",
+    "pnp",
+    "pnp_ransac",
+    "bearing_ls",
+    "range_bearing",
+    "altitude_bearing",
+)
 
 
 @dataclass(frozen=True)
@@ -92,6 +100,25 @@ class RangeSample:
     sigma_m: float = 0.05
 
 
+def laser_axis_from_mav_orientation(orientation: int) -> tuple[float, float, float]:
+    """Beam direction in body FRD for a DISTANCE_SENSOR ``orientation`` (MAV_SENSOR_ORIENTATION).
+
+    Supported: 0..7 (``MAV_SENSOR_ROTATION_YAW_45*k``: forward, then clockwise seen from
+    above), 24 (``PITCH_90``: up) and 25 (``PITCH_270``: down).  The forward unit vector
+    rotated by the named rotation.
+    """
+    if 0 <= orientation <= 7:
+        yaw = np.deg2rad(45.0 * orientation)
+        return (round(float(np.cos(yaw)), 12), round(float(np.sin(yaw)), 12), 0.0)
+    if orientation == 24:
+        return (0.0, 0.0, -1.0)
+    if orientation == 25:
+        return (0.0, 0.0, 1.0)
+    raise ValueError(
+        f"orientation: expected a MAV_SENSOR_ORIENTATION of 0..7, 24 or 25, got {orientation}"
+    )
+
+
 @dataclass(frozen=True)
 class PosePrior:
     """A predicted vehicle pose (e.g. last fix propagated) used to associate detections."""
@@ -121,6 +148,13 @@ class PoseFix:
     reset_counter: int = 0
     reprojection_rms_px: float = 0.0
     notes: tuple[str, ...] = field(default=())
+
+    @property
+    def covariance_urt(self) -> tuple[float, ...]:
+        """The 21 upper-right-triangle entries, row-major, as MAVLink VISION_POSITION_ESTIMATE
+        and ODOMETRY expect them (first row 6 entries, then 5, ...; x y z roll pitch yaw)."""
+        rows, cols = np.triu_indices(6)
+        return tuple(float(v) for v in self.covariance[rows, cols])
 
     @property
     def position_sigma_m(self) -> tuple[float, float, float]:

@@ -1,0 +1,95 @@
+"""Perception on rendered frames of the simulated world: acquire, track, solve, against truth."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+
+from companion.demo import map_landmarks
+from companion.perception import Perception, SideSensors
+from companion.sim.scenario import load_scenario
+from companion.sim.simulator import Simulator
+from companion.sources.base import Frame
+from tracker.pose.types import AttitudeSample, PoseFix
+
+
+@dataclass(frozen=True)
+class Hit:
+    box: tuple[float, float, float, float]
+    category: str
+    score: float
+
+
+def flight(scenario: str, frames: range, **kw: Any) -> tuple[Simulator, Perception, list[Any]]:
+    """Run perception over rendered frames with the true attitude; results with truth."""
+    sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=60))
+    landmarks, references = map_landmarks(sim)
+    truth_at: dict[int, Any] = {}
+
+    def sensors(t_us: int) -> SideSensors:
+        s = sim.state_at(t_us / 1e6)
+        return SideSensors(attitude=AttitudeSample(t_us, *s.attitude_rpy_rad))
+
+    perception = Perception(sim.scenario.camera, landmarks, references, sensors=sensors, **kw)
+    out = []
+    for i in frames:
+        image, truth = sim.render(i)
+        truth_at[i] = truth
+        frame = Frame(i, round(i * 1e6 / sim.fps), image)
+        result = perception.process(frame)
+        perception.housekeeping(frame)
+        out.append((result, truth, sim.state_at(i / sim.fps)))
+    return sim, perception, out
+
+
+def test_survey_fixes_match_the_truth_and_say_how_good_they_are() -> None:
+    _, _, out = flight("survey", range(180, 240))
+    fixes = [(r.fix, st) for r, _, st in out if isinstance(r.fix, PoseFix)]
+    assert len(fixes) >= 40  # acquisition within a few frames, then a fix per frame
+    errors = [np.linalg.norm(np.subtract(f.position_ned_m, st.position_ned_m)) for f, st in fixes]
+    assert np.sqrt(np.mean(np.square(errors))) < 0.15  # metres, at about 12 m
+    for fix, st in fixes:
+        sigma = np.sqrt(np.trace(np.asarray(fix.covariance)[:3, :3]))
+        err = np.linalg.norm(np.subtract(fix.position_ned_m, st.position_ned_m))
+        assert np.isfinite(fix.covariance).all() and err < 6 * sigma + 0.05
+
+
+def test_no_track_for_a_landmark_out_of_view() -> None:
+    _, perception, out = flight("survey", range(180, 200))
+    visible = {b.landmark_id for _, truth, _ in out for b in truth.boxes if b.in_view_frac > 0}
+    assert perception.tracks, "nothing was acquired: the test would prove nothing"
+    assert set(perception.tracks) <= visible
+
+
+def test_a_detector_hit_restarts_a_track_when_the_reference_aligns_there() -> None:
+    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=60))
+    _image, truth = sim.render(200)
+    box = next(b for b in truth.boxes if b.in_view_frac == 1.0)
+    category = next(lm.category for lm in sim.world.landmarks
+                    if lm.landmark_id == box.landmark_id)
+    hits = [Hit((box.x, box.y, box.w, box.h), category, 0.9)]
+    _, _perception, out = flight("survey", range(200, 203), detect=lambda _img: hits)
+    events = [e for r, _, _ in out for e in r.events]
+    assert {"event": "acquired", "landmark": box.landmark_id, "by": "detector"}.items() <= \
+        next(e for e in events if e.get("by") == "detector").items()
+
+
+def test_a_frame_of_another_size_is_a_bad_frame_not_a_crash() -> None:
+    sim = Simulator(load_scenario("survey"))
+    landmarks, references = map_landmarks(sim)
+    perception = Perception(sim.scenario.camera, landmarks, references)
+    result = perception.process(Frame(0, 0, np.zeros((240, 320, 3), np.uint8)))
+    assert result.bad_frame and result.fix is None
+    assert "320x240" in (result.no_fix_reason or "")
+
+
+@pytest.mark.parametrize("scenario", ["survey"])
+def test_acquisition_never_invents_a_landmark(scenario: str) -> None:
+    _, _, out = flight(scenario, range(0, 30))  # the start: the first wall barely in view
+    for result, truth, _ in out:
+        in_view = {b.landmark_id for b in truth.boxes if b.in_view_frac > 0.5}
+        assert {t["landmark_id"] for t in result.tracks} <= in_view
