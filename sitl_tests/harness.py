@@ -196,6 +196,13 @@ class RecordingPerception:
         self.camera = camera
         self.out = out
 
+    def __getattr__(self, name: str) -> Any:
+        """Everything else (``housekeeping``, what the preview asks for) is the perception's."""
+        return getattr(self.perception, name)
+
+    def housekeeping(self, frame: Any) -> None:
+        self.perception.housekeeping(frame)
+
     def process(self, frame: Any) -> FrameResult:
         result = self.perception.process(frame)
         t_s = self.camera.scenario_time_s(frame)
