@@ -156,9 +156,6 @@ def test_no_fix_while_landmarks_out_of_view(leave_reenter: Flight) -> None:
     assert_unseen_then_reacquired(leave_reenter, 2.0, reacquire_s=math.inf)
 
 
-@pytest.mark.xfail(reason="finding: re-acquisition waits until the turn back ends, ~2.5 s "
-                   "after the landmarks are fully in view again; see docs/reliability.md",
-                   strict=False)
 def test_reacquired_within_2s_of_reentering_view(leave_reenter: Flight) -> None:
     """After turning back, a landmark is re-acquired within 2 s of being fully in view."""
     assert_unseen_then_reacquired(leave_reenter, 2.0, reacquire_s=REACQUIRE_S)
