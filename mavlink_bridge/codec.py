@@ -135,6 +135,26 @@ class Codec:
         s.timestamp = signing_timestamp_now()
         s.sign_outgoing = True
         s.allow_unsigned_callback = self._allow_unsigned
+        if not getattr(self, "_guarded", False):
+            self._pymavlink_check = self.mav.check_signature
+            self.mav.check_signature = self._check_signature
+            self._guarded = True
+
+    def _check_signature(self, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+        """pymavlink's check, but a message whose signature is wrong cannot move its stream's
+        replay timestamp: pymavlink records the timestamp *before* verifying the signature, so
+        one forged message with a far-future stamp (any key) would make every genuine message
+        of that stream "old" -- a lock-out found by sitl_tests/test_mavlink_faults.py."""
+        stamps = self.mav.signing.stream_timestamps
+        key = (msgbuf[-13], src_system, src_component)
+        had, before = key in stamps, stamps.get(key)
+        ok = bool(self._pymavlink_check(msgbuf, src_system, src_component))
+        if not ok:
+            if had:
+                stamps[key] = before
+            else:
+                stamps.pop(key, None)
+        return ok
 
     def _allow_unsigned(self, _mav: Any, msg_id: int) -> bool:
         return msg_id in self._allowed_unsigned
