@@ -111,6 +111,7 @@ class Counters:
     fixes_refused: int = 0
     no_fix: int = 0
     source_errors: int = 0
+    worker_errors: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return dict(vars(self))
@@ -224,6 +225,12 @@ class CompanionApp:
                     self.reporter.preview(jpeg)
         except (SlotClosedError, asyncio.CancelledError):
             pass
+        except Exception as err:  # a bug in perception must stop the flight, loudly
+            log.exception("frame processing failed: %s", err)
+            self.counters.worker_errors += 1
+            self._event("worker-failed", reason=f"{type(err).__name__}: {err}")
+            self._stop.set()
+            self._slot.close()
 
     async def _handle(self, result: FrameResult) -> None:
         now_s = self.clock_s()

@@ -201,3 +201,19 @@ def test_rolling_percentiles_and_rate() -> None:
     for i in range(11):
         m.tick(i * 0.1)
     assert m.rate(1.0) == pytest.approx(10.0)
+
+
+class Broken(Processor):
+    def process(self, frame: Any) -> FrameResult:
+        if frame.index == 3:
+            raise RuntimeError("boom")
+        return super().process(frame)
+
+
+async def test_a_failing_processor_stops_the_flight_with_a_reason() -> None:
+    rec = Recorder()
+    app = CompanionApp(ListSource(10_000, period_s=0.01), Broken(), Sink(), rec, "v1")
+    await asyncio.wait_for(app.run(), timeout=10)  # ends by itself, does not hang
+    assert app.counters.worker_errors == 1
+    failed = [e for e in rec.topic("events") if e["event"] == "worker-failed"]
+    assert failed and failed[0]["reason"] == "RuntimeError: boom"

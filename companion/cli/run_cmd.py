@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import sys
 import math
 
 from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
@@ -144,4 +145,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     c = app.counters
     log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
              app.dropped_frames)
+    if c.worker_errors:  # a bug, logged with its traceback: not a clean stop
+        print("companion: frame processing failed (see the log above)", file=sys.stderr)
+        return 1
     return 0
