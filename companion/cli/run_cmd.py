@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
-import sys
 import math
+import sys
 
 from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory
