@@ -201,6 +201,7 @@ class FollowCameraSource:
         self.failure: SourceError | None = None
         self.heard: dict[str, int] = {}
         self._request = request
+        self._asked = False
         self._clock_ns = clock_ns
         self._samples: deque[TruthSample] = deque(maxlen=SAMPLES_KEPT)
         rate = config.request_rate_hz
@@ -232,6 +233,7 @@ class FollowCameraSource:
                     await aclose()
 
     def _ask_for_truth(self) -> None:
+        self._asked = True
         want = FULL_TRUTH.get(self.profile)
         if self._request is None or want is None or self.config.request_rate_hz <= 0:
             return
@@ -257,6 +259,12 @@ class FollowCameraSource:
             if self.bridge.link_up and now >= next_ask:
                 self._ask_for_truth()
                 next_ask = now + 1_000_000_000
+            await asyncio.sleep(0.02)
+        while not self._asked and self._clock_ns() < deadline:
+            # it already streams: ask anyway (once the link is up), for the configured rate
+            if self.bridge.link_up:
+                self._ask_for_truth()
+                break
             await asyncio.sleep(0.02)
         log.info("follow camera: the simulator's truth (%s) arrives",
                  FULL_TRUTH.get(self.profile))
