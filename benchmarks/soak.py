@@ -47,6 +47,7 @@ sys.path.insert(0, str(ROOT))
 from companion.sim.scenario import SCENARIO_DIR, load_scenario  # noqa: E402
 from companion.sim.simulator import Simulator  # noqa: E402
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig  # noqa: E402
+from sitl_tests.harness import run_config as harness_run_config  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -72,25 +73,9 @@ def soak_scenario(tmp: Path, seconds: float, fps: float) -> Path:
 
 
 def run_config(tmp: Path, scenario: Path, port: int) -> Path:
-    o = load_scenario(str(scenario)).origin
-    path = tmp / "soak-run.toml"
-    path.write_text(f"""
-[source]
-kind = "sim"
-spec = "{scenario.as_posix()}"
-[mavlink]
-endpoint = "udpout:127.0.0.1:{port}"
-origin_lat_deg = {o.lat}
-origin_lon_deg = {o.lon}
-origin_alt_m = {o.alt_m}
-[landmarks]
-map_path = "{(ROOT / 'config' / 'landmarks.geojson').as_posix()}"
-[flightlog]
-dir = "{(tmp / 'logs').as_posix()}"
-[logging]
-level = "warning"
-""", encoding="utf-8")
-    return path
+    """``companion run``'s config for the soak (the same builder the scenario tests use)."""
+    return harness_run_config(tmp, port, scenario=scenario.as_posix(),
+                              extra="[logging]\nlevel = \"warning\"\n", name="soak-run.toml")
 
 
 async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,

@@ -19,6 +19,7 @@ from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
 from sitl_tests.harness import SitlAutopilot
+from sitl_tests.harness import run_config as harness_run_config
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "config" / "landmarks.geojson"
@@ -26,26 +27,8 @@ MAP = ROOT / "config" / "landmarks.geojson"
 
 def run_config(tmp: Path, port: int, map_path: Path = MAP, extra: str = "") -> Path:
     """A ``--config`` file for ``companion run``: the hover scenario, the fake on ``port``."""
-    o = load_scenario("hover").origin
-    path = tmp / "flight.toml"
-    path.write_text(f"""
-[source]
-kind = "sim"
-spec = "hover"
-[mavlink]
-endpoint = "udpout:127.0.0.1:{port}"
-origin_lat_deg = {o.lat}
-origin_lon_deg = {o.lon}
-origin_alt_m = {o.alt_m}
-[landmarks]
-map_path = "{map_path}"
-[flightlog]
-dir = "{tmp / 'logs'}"
-[monitor]
-enabled = false
-{extra}
-""", encoding="utf-8")
-    return path
+    return harness_run_config(tmp, port, map_path=map_path,
+                              extra="[monitor]\nenabled = false\n" + extra)
 
 
 async def companion(*args: str, cwd: Path) -> asyncio.subprocess.Process:
