@@ -24,7 +24,7 @@ from mavlink_bridge.codec import Codec, MAVLinkMessage, load_signing_key
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.endpoint import Connection, Endpoint, open_connection, parse_endpoint
 from mavlink_bridge.errors import MavlinkBridgeError
-from mavlink_bridge.telemetry import Telemetry, convert
+from mavlink_bridge.telemetry import Telemetry, TelemetryHub, convert
 
 log = logging.getLogger(__name__)
 
@@ -64,8 +64,7 @@ class MavlinkLink:
         self._health: HealthState = "starting"
         self._health_ns = clock_ns()
         self._health_stale = False
-        self._cache: dict[str, Telemetry] = {}
-        self._subs: dict[str, set[asyncio.Queue[Telemetry]]] = {}
+        self._hub = TelemetryHub(self.config.rx_queue_len, self.counters)
         self._tasks: list[asyncio.Task[None]] = []
         self._link_event = asyncio.Event()
         self._opened = asyncio.Event()
@@ -244,12 +243,7 @@ class MavlinkLink:
         if value is None:
             return
         item = Telemetry(name, sysid, compid, now_ns, value)
-        self._cache[name] = item
-        for q in self._subs.get(name, ()):
-            if q.full():
-                q.get_nowait()
-                self.counters["queue_drops"] += 1
-            q.put_nowait(item)
+        self._hub.publish(item)
 
     def _on_heartbeat(self, msg: MAVLinkMessage, sysid: int, compid: int, now_ns: int) -> None:
         if compid != 1 or msg.autopilot == MAV_AUTOPILOT_INVALID:
@@ -283,22 +277,11 @@ class MavlinkLink:
     # ----------------------------------------------------------------- telemetry API
     def latest(self, name: str) -> Telemetry | None:
         """The newest message of ``name`` from the autopilot, or None."""
-        return self._cache.get(name)
+        return self._hub.latest(name)
 
-    async def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
-        """Yield every new message of the given names; the queue is released in ``finally``.
-
-        The queue is bounded (``rx_queue_len``); a slow reader loses the oldest items.
-        """
-        q: asyncio.Queue[Telemetry] = asyncio.Queue(maxsize=self.config.rx_queue_len)
-        for n in names:
-            self._subs.setdefault(n, set()).add(q)
-        try:
-            while True:
-                yield await q.get()
-        finally:
-            for n in names:
-                self._subs[n].discard(q)
+    def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
+        """Every new message of the given names; bounded, a slow reader loses the oldest."""
+        return self._hub.subscribe(*names)
 
     def stats(self) -> dict[str, Any]:
         """Counters for monitoring: rx parser counts, link, drops."""

@@ -56,7 +56,7 @@ from mavlink_bridge.messages import (
     vpe_fields,
 )
 from mavlink_bridge.output import OutputGate, SendResult
-from mavlink_bridge.telemetry import Telemetry, convert
+from mavlink_bridge.telemetry import Telemetry, TelemetryHub, convert
 
 log = logging.getLogger(__name__)
 _URL = {"udpin": "udpin", "udpout": "udpout", "tcp": "tcpout", "tcpin": "tcpin"}
@@ -91,8 +91,7 @@ class MavsdkBridge:
         self._health: HealthState = "starting"
         self._last_boot_ms = -1
         self.reboots = 0
-        self._cache: dict[str, Telemetry] = {}
-        self._subs: dict[str, set[asyncio.Queue[Telemetry]]] = {}
+        self._hub = TelemetryHub(self.config.rx_queue_len, self.counters)
         self._tasks: list[asyncio.Task[Any]] = []
 
     # ------------------------------------------------------------ lifecycle
@@ -278,15 +277,10 @@ class MavsdkBridge:
         if value is None:
             return
         item = Telemetry(name, sysid, compid, now, value)
-        self._cache[name] = item
         if not self._origin_ok and origin_seen(item):
             self._origin_ok = True
             self.statustext("EKF origin confirmed")
-        for q in self._subs.get(name, ()):
-            if q.full():
-                q.get_nowait()
-                self.counters["queue_drops"] += 1
-            q.put_nowait(item)
+        self._hub.publish(item)
 
     def _check_reboot(self, boot_ms: int) -> None:
         """time_boot_ms stepping back: the autopilot rebooted and lost its origin."""
@@ -299,18 +293,11 @@ class MavsdkBridge:
         self._last_boot_ms = boot_ms
 
     def latest(self, name: str) -> Telemetry | None:
-        return self._cache.get(name)
+        return self._hub.latest(name)
 
-    async def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
-        q: asyncio.Queue[Telemetry] = asyncio.Queue(maxsize=self.config.rx_queue_len)
-        for n in names:
-            self._subs.setdefault(n, set()).add(q)
-        try:
-            while True:
-                yield await q.get()
-        finally:
-            for n in names:
-                self._subs[n].discard(q)
+    def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
+        """Every new message of the given names; bounded, a slow reader loses the oldest."""
+        return self._hub.subscribe(*names)
 
     @property
     def link_up(self) -> bool:

@@ -6,8 +6,9 @@ MavlinkDirect plugin gives the fields as JSON.  Field names carry units.
 
 from __future__ import annotations
 
+import asyncio
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import AsyncGenerator, Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -249,3 +250,47 @@ def convert(name: str, fields: Mapping[str, Any]) -> Any:
     """Typed value for a telemetry message, or ``None`` for a name we do not convert."""
     conv = _CONVERTERS.get(name)
     return None if conv is None else conv(fields)
+
+
+class TelemetryHub:
+    """Latest value per message name, and bounded async streams of new ones.
+
+    Both backends keep their telemetry here.  A slow reader's queue drops its oldest item
+    (counted in ``counters["queue_drops"]``), never blocking the receive path.
+    """
+
+    def __init__(self, queue_len: int, counters: dict[str, int]) -> None:
+        self.queue_len = queue_len
+        self.counters = counters
+        self.counters.setdefault("queue_drops", 0)
+        self._cache: dict[str, Telemetry] = {}
+        self._subs: dict[str, set[asyncio.Queue[Telemetry]]] = {}
+
+    def publish(self, item: Telemetry) -> None:
+        """Store ``item`` as the latest of its name and hand it to every subscriber."""
+        self._cache[item.name] = item
+        for q in self._subs.get(item.name, ()):
+            if q.full():
+                q.get_nowait()
+                self.counters["queue_drops"] += 1
+            q.put_nowait(item)
+
+    def latest(self, name: str) -> Telemetry | None:
+        """The newest item of ``name`` (None before the first)."""
+        return self._cache.get(name)
+
+    def subscriber_count(self, name: str) -> int:
+        """How many live subscriptions follow ``name`` (a closed stream leaves none)."""
+        return len(self._subs.get(name, ()))
+
+    async def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
+        """New items of ``names`` as they arrive; the queue is released in ``finally``."""
+        q: asyncio.Queue[Telemetry] = asyncio.Queue(maxsize=self.queue_len)
+        for n in names:
+            self._subs.setdefault(n, set()).add(q)
+        try:
+            while True:
+                yield await q.get()
+        finally:
+            for n in names:
+                self._subs[n].discard(q)
