@@ -26,6 +26,7 @@ from companion.app import Frame, FrameResult
 from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks, run_demo
 from companion.landmarks.geodesy import LocalFrame
+from companion.perception import PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import Settings, load_settings
 from companion.sim.follow import FollowCameraSource, command_sender
@@ -63,9 +64,9 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
     source = FollowCameraSource(sim, bridge, local, profile, request=command_sender(bridge))
     errors: list[float] = []
 
-    class Recorder:
+    class Recorder(PerceptionWrapper):
         def __init__(self, attitude: AttitudeHistory) -> None:
-            self.perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
+            super().__init__(perception_for(settings, sim.scenario.camera, pmap, attitude))
 
         def process(self, frame: Frame) -> FrameResult:
             result = self.perception.process(frame)
@@ -73,9 +74,6 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
                 truth = sim.state_at((frame.t_us * 1000 - fake.start_ns) / 1e9)
                 errors.append(math.dist(result.fix.position_ned_m, truth.position_ned_m))
             return result
-
-        def housekeeping(self, frame: Frame) -> None:
-            self.perception.housekeeping(frame)
 
     try:
         app = await fly(settings, source, bridge, Recorder, landmarks, seconds=seconds,

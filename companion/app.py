@@ -1,12 +1,17 @@
 """The one asyncio pipeline: source -> perception (trackers, pose) -> MAVLink, watched live.
 
     reader task ──LatestSlot (newest frame wins)──► worker task ──► sink (MAVLink bridge)
-                                                      │  heavy work in one executor thread
-    status task (1 Hz and on every health change) ────┴─► monitor (Zenoh) + flight log
+                                                      │  process() in the worker thread
+                                                      └─► background lane (its own thread):
+                                                          housekeeping() + preview
+    status task (1 Hz and on every health change) ──────► monitor (Zenoh) + flight log
 
-Everything heavy runs in a single worker thread (:meth:`FrameProcessor.process`) so the
-event loop stays free for heartbeats and telemetry.  Every task is kept in ``self._tasks``
-and always finishes: :meth:`CompanionApp.run` returns only after all of them ended.
+The critical path, capture -> fix on the wire, is :meth:`FrameProcessor.process` in the
+worker thread, so the event loop stays free for heartbeats and telemetry.  What must not
+delay the next frame (looking for new landmarks, drawing the preview) goes to a
+:class:`~companion.pipeline.background.BackgroundLane` once the fix is out, and runs while
+the worker already processes the next frame.  Every task is kept in ``self._tasks`` and
+always finishes: :meth:`CompanionApp.run` returns only after all of them ended.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from companion.pipeline.background import BackgroundLane
 from companion.pipeline.health import HealthInputs, HealthPolicy, State, health_state
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
@@ -68,10 +74,12 @@ class FrameResult:
 
 
 class FrameProcessor(Protocol):
-    """Synchronous per-frame work (tracking and pose); runs in the worker thread.
+    """Synchronous per-frame work (tracking and pose); ``process`` runs in the worker thread.
 
-    ``housekeeping`` runs after the frame's fix was sent: work that must not add latency
-    (looking for new landmarks).
+    ``housekeeping`` runs after the frame's fix was sent, in the background lane's thread
+    and so possibly *while* ``process`` works on a later frame: work that must not add
+    latency (looking for new landmarks).  It sees frames in order, but not every frame
+    when it is slower than the camera (the newest waiting frame wins).
     """
 
     def process(self, frame: Frame) -> FrameResult: ...
@@ -112,6 +120,7 @@ class Counters:
     no_fix: int = 0
     source_errors: int = 0
     worker_errors: int = 0
+    housekeeping_skipped: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return dict(vars(self))
@@ -149,6 +158,7 @@ class CompanionApp:
         self.state: State = "starting"
         self._slot: LatestSlot[Frame] = LatestSlot()
         self._executor = concurrent.futures.ThreadPoolExecutor(1, "companion-worker")
+        self._background = BackgroundLane("companion-background", self._worker_failed)
         self._tasks: list[asyncio.Task[None]] = []
         self._stop = asyncio.Event()
         self._last_frame_s: float | None = None
@@ -218,19 +228,34 @@ class CompanionApp:
                                                     frame)
                 self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
                 await self._handle(result)
-                await loop.run_in_executor(self._executor, self.processor.housekeeping, frame)
-                if self.preview is not None and self.reporter.preview_due():
-                    jpeg = await loop.run_in_executor(self._executor, self.preview, frame,
-                                                      result)
-                    self.reporter.preview(jpeg)
+                self._after(frame, result)
         except (SlotClosedError, asyncio.CancelledError):
             pass
         except Exception as err:  # a bug in perception must stop the flight, loudly
-            log.exception("frame processing failed: %s", err)
-            self.counters.worker_errors += 1
-            self._event("worker-failed", reason=f"{type(err).__name__}: {err}")
-            self._stop.set()
-            self._slot.close()
+            self._worker_failed(err)
+
+    def _after(self, frame: Frame, result: FrameResult) -> None:
+        """Hand the frame's after-work to the background lane (newest frame wins)."""
+        preview = self.preview if self.preview is not None and self.reporter.preview_due() \
+            else None
+
+        def work() -> bytes | None:
+            self.processor.housekeeping(frame)
+            return None if preview is None else preview(frame, result)
+
+        def done(jpeg: bytes | None) -> None:
+            if jpeg is not None:
+                self.reporter.preview(jpeg)
+
+        self._background.submit(work, done)
+        self.counters.housekeeping_skipped = self._background.dropped
+
+    def _worker_failed(self, err: BaseException) -> None:
+        log.error("frame processing failed: %s", err, exc_info=err)
+        self.counters.worker_errors += 1
+        self._event("worker-failed", reason=f"{type(err).__name__}: {err}")
+        self._stop.set()
+        self._slot.close()
 
     async def _handle(self, result: FrameResult) -> None:
         now_s = self.clock_s()
@@ -314,6 +339,7 @@ class CompanionApp:
             if task.get_name() == "reader":
                 task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
+        await self._background.close()
         self._executor.shutdown(wait=True)
         self._event("stopped", frames=self.counters.frames)
         try:

@@ -25,7 +25,7 @@ import numpy as np
 from companion.app import CompanionApp
 from companion.autopilot import AttitudeHistory
 from companion.landmarks.geodesy import LocalFrame
-from companion.perception import Perception
+from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import Settings
 from companion.sim.scenario import load_scenario
@@ -45,18 +45,15 @@ class DemoResult:
     fixes: list[tuple[PoseFix, tuple[float, float, float], float]]  # fix, truth, distance
 
 
-class TruthRecorder:
+class TruthRecorder(PerceptionWrapper):
     """Wraps the perception to remember, for every fix, where the vehicle truly was."""
 
     def __init__(self, perception: Perception, source: SimCameraSource,
                  landmarks: dict[str, MapLandmark]) -> None:
-        self.perception = perception
+        super().__init__(perception)
         self.source = source
         self.landmarks = landmarks
         self.result = DemoResult([])
-
-    def housekeeping(self, frame: Any) -> None:
-        self.perception.housekeeping(frame)
 
     def process(self, frame: Any) -> Any:
         result = self.perception.process(frame)

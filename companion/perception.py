@@ -7,17 +7,24 @@ Runs in the pipeline's worker thread (synchronous, no asyncio).  For each frame:
 2. its four corners are refined by aligning the landmark's appearance reference onto the
    frame (ECC), started from the last homography moved with the tracker's box -- the
    tracker says *where*, the alignment says *exactly where the corners are*;
-3. map landmarks that are not tracked are looked for by their appearance references
-   (ORB features + verified homography) every ``acquire_every_frames`` frames, and at
-   once whenever nothing is tracked; a hit starts a tracker;
-4. the observations go to the pose solver with the latest attitude / altitude / range from
+3. the observations go to the pose solver with the latest attitude / altitude / range from
    the autopilot.
+
+:meth:`Perception.housekeeping` (after the fix is out, on the pipeline's background
+thread, possibly while :meth:`Perception.process` works on a later frame) looks for map
+landmarks that are not tracked, by their appearance references (ORB features + verified
+homography) every ``acquire_every_frames`` frames and at once whenever nothing is tracked,
+and by prediction from the frame's fix.  A hit is a started tracker handed over under a
+lock; the next ``process`` adopts it.  Nothing else is shared between the two threads
+but read-only data (references, map, configuration) and that lock-guarded hand-over.
 
 Algorithms live in ``tracker/``; this module only keeps state and glues them together.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -74,6 +81,9 @@ class PerceptionConfig:
     search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
     #: Acquire with the landmark detector ([detector]) instead of the template search.
     use_detector: bool = False
+    #: Update the tracks of one frame on two threads (OpenCV and most of numpy release
+    #: the GIL): lower latency with several landmarks in view, the same CPU time.
+    parallel_tracks: bool = True
 
 
 class DetectionLike(Protocol):
@@ -112,6 +122,18 @@ class Track:
     features: tuple[int, ...] = ()
     corners: FloatArray | None = None
     misses: int = 0
+
+
+@dataclass(frozen=True)
+class Start:
+    """A tracker started by housekeeping, waiting for ``process`` to adopt it."""
+
+    track: Track
+    event: dict[str, Any]
+
+
+#: How many frames' fixes are kept for housekeeping to look up.
+RECENT_FIXES = 8
 
 
 def box_iou(a: Box, b: Box) -> float:
@@ -158,18 +180,27 @@ class Perception:
         self.tracker_config = tracker_config
         self.pose_config = pose_config or PoseConfig()
         self.sensors = sensors
-        self.matcher = ReferenceMatcher(acquire_config)
+        self.matcher = ReferenceMatcher(acquire_config)  # housekeeping's
         self.unmatchable: dict[str, str] = {}
         for lid, image in references.items():
             try:
                 self.matcher.add(lid, image)
             except ValueError as err:
                 self.unmatchable[lid] = str(err)
+        self._recover_matcher = self.matcher.sibling()  # process's
+        self._recover_lock = threading.Lock()  # tracks may recover corners on two threads
+        self._pool = concurrent.futures.ThreadPoolExecutor(1, "companion-tracks") \
+            if self.config.parallel_tracks else None
         self.tracks: dict[str, Track] = {}
         self.gate = FixGate(gate_config or FixGateConfig())
+        # handed from housekeeping to process, under the lock
+        self._lock = threading.Lock()
         self._events_next: list[dict[str, Any]] = []
-        self._last_fix: PoseFix | None = None
+        self._pending: list[Start] = []
+        self._fixes: dict[int, PoseFix] = {}  # frame index -> its fix (the last few)
+        # housekeeping's own
         self._last_fix_us = -(2**62)
+        self._acquired_frame = -(2**62)
         self._search_turn = 0
         self.detect = detect
         self._seed = seed
@@ -179,38 +210,77 @@ class Perception:
         """Track and solve: one frame in, tracks and maybe a fix out.
 
         Acquisition of new landmarks waits for :meth:`housekeeping`, after the fix is on
-        the wire, so it never adds to the capture -> fix latency.
+        the wire, so it never adds to the capture -> fix latency; what it started is
+        adopted here.
         """
         image = frame.image
-        events, self._events_next = self._events_next, []
+        events = self._adopt()
         if image.shape[:2] != (self.camera.height, self.camera.width):
             return FrameResult(frame.index, frame.t_us, bad_frame=True,
                                no_fix_reason=f"frame {image.shape[1]}x{image.shape[0]} is "
                                f"not the camera's {self.camera.width}x{self.camera.height}")
         gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
-        for lid in list(self.tracks):
-            if not self._update_track(self.tracks[lid], image, gray):
-                del self.tracks[lid]
-                events.append({"event": "lost", "landmark": lid})
+        tracks = list(self.tracks.values())
+        for track, alive in zip(tracks, self._update_tracks(tracks, image, gray), strict=True):
+            if not alive:
+                del self.tracks[track.landmark_id]
+                events.append({"event": "lost", "landmark": track.landmark_id})
         self._frames += 1
-        self._last_fix = None
         return self._solve(frame, events)
+
+    def close(self) -> None:
+        """Stop the track-update thread (the pipeline calls this once it has stopped)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+
+    def _update_tracks(self, tracks: list[Track], image: npt.NDArray[np.uint8],
+                       gray: npt.NDArray[np.uint8]) -> list[bool]:
+        """Update every track; with two or more, every other one on the second thread.
+        Each track touches only its own state."""
+        if self._pool is None or len(tracks) < 2:
+            return [self._update_track(t, image, gray) for t in tracks]
+        there = [self._pool.submit(self._update_track, t, image, gray) for t in tracks[::2]]
+        here = [self._update_track(t, image, gray) for t in tracks[1::2]]
+        there_ok = [f.result() for f in there]
+        return [there_ok[i // 2] if i % 2 == 0 else here[i // 2] for i in range(len(tracks))]
+
+    def _adopt(self) -> list[dict[str, Any]]:
+        """Take over the trackers housekeeping started (and its events)."""
+        with self._lock:
+            events, self._events_next = self._events_next, []
+            pending, self._pending = self._pending, []
+        for start in pending:
+            lid = start.track.landmark_id
+            if lid not in self.tracks and len(self.tracks) < self.config.max_tracks:
+                self.tracks[lid] = start.track
+                events.append(start.event)
+        return events
 
     def housekeeping(self, frame: Frame) -> None:
         """Look for untracked landmarks (feature matching now and then; prediction from
-        this frame's fix); what is found is tracked from the next frame on."""
+        this frame's fix); what is found is tracked from the next ``process`` on.
+
+        Safe to run while :meth:`process` works on a later frame (see the module's notes).
+        """
         if frame.image.shape[:2] != (self.camera.height, self.camera.width):
             return
-        if self._should_acquire():
-            self._events_next += self._acquire(frame.image)
-        if self._last_fix is not None:
-            self._last_fix_us = self._last_fix.time_us
-            self._events_next += self._predict_acquire(frame.image, self._last_fix)
+        with self._lock:
+            fix = self._fixes.get(frame.index)
+        starts: list[Start] = []
+        if self._should_acquire(frame.index):
+            self._acquired_frame = frame.index
+            starts += self._acquire(frame.image)
+        if fix is not None:
+            self._last_fix_us = fix.time_us
+            starts += self._predict_acquire(frame.image, fix, starts)
         elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
             if self.detect is not None:
-                self._events_next += self._detect_acquire(frame.image)
+                starts += self._detect_acquire(frame.image)
             else:
-                self._events_next += self._search(frame.image)
+                starts += self._search(frame.image)
+        if starts:
+            with self._lock:
+                self._pending += starts
 
     # -- tracking ---------------------------------------------------------------------
 
@@ -254,7 +324,8 @@ class Perception:
         """Re-match the reference around the tracked box to get the homography back."""
         x, y, w, h = track.box
         roi = (x - 0.5 * w, y - 0.5 * h, 2.0 * w, 2.0 * h)
-        found = self.matcher.find(image, [track.landmark_id], roi=roi)
+        with self._recover_lock:
+            found = self._recover_matcher.find(image, [track.landmark_id], roi=roi)
         if found:
             track.homography, track.corners, track.misses = (found[0].homography,
                                                              found[0].corners_px, 0)
@@ -263,43 +334,57 @@ class Perception:
 
     # -- acquisition ------------------------------------------------------------------
 
-    def _should_acquire(self) -> bool:
-        if len(self.tracks) >= self.config.max_tracks:
-            return False
-        return not self.tracks or self._frames % self.config.acquire_every_frames == 0
+    def _busy(self, starts: Sequence[Start] = ()) -> int:
+        """Tracks running, waiting to be adopted and just started."""
+        with self._lock:
+            waiting = len(self._pending)
+        return len(self.tracks) + waiting + len(starts)
 
-    def _acquire(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+    def _taken(self, lid: str, starts: Sequence[Start] = ()) -> bool:
+        """Tracked, waiting to be adopted, or just started."""
+        with self._lock:
+            waiting = [s.track.landmark_id for s in self._pending]
+        return lid in self.tracks or lid in waiting or any(
+            s.track.landmark_id == lid for s in starts)
+
+    def _should_acquire(self, frame_index: int) -> bool:
+        if self._busy() >= self.config.max_tracks:
+            return False
+        due = frame_index - self._acquired_frame >= self.config.acquire_every_frames
+        return not self.tracks or due
+
+    def _acquire(self, image: npt.NDArray[np.uint8]) -> list[Start]:
         wanted = [lid for lid, ref in self.matcher.references.items()
-                  if lid not in self.tracks and ref.matchable]
-        events: list[dict[str, Any]] = []
+                  if ref.matchable and not self._taken(lid)]
+        starts: list[Start] = []
         height, width = image.shape[:2]
         for match in self.matcher.find(image, wanted):
             box = clip_box(match.box, width, height)
-            if box is None or len(self.tracks) >= self.config.max_tracks:
+            if box is None or self._busy(starts) >= self.config.max_tracks:
                 continue
-            events.append(self._start(match.landmark_id, image, box, match.homography,
-                                      match.corners_px, "features"))
-        return events
+            starts.append(self._start(match.landmark_id, image, box, match.homography,
+                                      match.corners_px, "features", starts))
+        return starts
 
     def _start(self, lid: str, image: npt.NDArray[np.uint8], box: Box, hom: FloatArray,
-               corners: FloatArray, by: str) -> dict[str, Any]:
-        """Start tracking landmark ``lid`` in ``box`` with a verified homography."""
-        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + len(self.tracks))
+               corners: FloatArray, by: str, starts: Sequence[Start]) -> Start:
+        """A tracker for landmark ``lid`` in ``box`` with a verified homography."""
+        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + self._busy(starts))
         tracker.init(image, box)
-        self.tracks[lid] = Track(lid, tracker, box, hom, corners=corners)
-        return {"event": "acquired", "landmark": lid, "by": by,
-                "box": [round(v, 1) for v in box]}
+        return Start(Track(lid, tracker, box, hom, corners=corners),
+                     {"event": "acquired", "landmark": lid, "by": by,
+                      "box": [round(v, 1) for v in box]})
 
-    def _detect_acquire(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+    def _detect_acquire(self, image: npt.NDArray[np.uint8]) -> list[Start]:
         """Restart tracks from detector hits: each hit is tried against the untracked map
         landmarks of its category, and kept only when the reference aligns there."""
         assert self.detect is not None
-        events: list[dict[str, Any]] = []
+        starts: list[Start] = []
         category = {lm.landmark_id: lm.category for lm in self.landmarks}
         gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
         for det in self.detect(image):
             for lid, ref in self.matcher.references.items():
-                if lid in self.tracks or category.get(lid) not in (det.category, ""):
+                if self._taken(lid, starts) or category.get(lid) not in (det.category, ""):
                     continue
                 x, y, w, h = det.box
                 start = homography_to(ref, np.array([[x, y], [x + w, y], [x + w, y + h],
@@ -311,16 +396,17 @@ class Perception:
                 quad = project_corners(ref, aligned)
                 box = clip_box(det.box, image.shape[1], image.shape[0])
                 if box is not None and inside(quad, image.shape[1], image.shape[0], 2.0):
-                    events.append(self._start(lid, image, box, aligned, quad, "detector"))
+                    starts.append(self._start(lid, image, box, aligned, quad, "detector",
+                                              starts))
                     break
-        return events
+        return starts
 
-    def _search(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+    def _search(self, image: npt.NDArray[np.uint8]) -> list[Start]:
         """Look for one untracked landmark (round robin) by colour template search over the
         whole frame, verified by alignment: finds distant or plain landmarks that feature
         matching misses, while nothing gives a fix to predict from."""
-        untracked = [lid for lid in self.matcher.references if lid not in self.tracks]
-        if not untracked or len(self.tracks) >= self.config.max_tracks:
+        untracked = [lid for lid in self.matcher.references if not self._taken(lid)]
+        if not untracked or self._busy() >= self.config.max_tracks:
             return []
         lid = untracked[self._search_turn % len(untracked)]
         self._search_turn += 1
@@ -339,23 +425,24 @@ class Perception:
         box = clip_box((x0, y0, x1 - x0, y1 - y0), image.shape[1], image.shape[0])
         if box is None or not inside(quad, image.shape[1], image.shape[0], margin=2.0):
             return []
-        return [self._start(lid, image, box, aligned, quad, "search")]
+        return [self._start(lid, image, box, aligned, quad, "search", [])]
 
-    def _predict_acquire(self, image: npt.NDArray[np.uint8], fix: PoseFix) -> list[dict[str, Any]]:
+    def _predict_acquire(self, image: npt.NDArray[np.uint8], fix: PoseFix,
+                         earlier: Sequence[Start]) -> list[Start]:
         """Start tracks on map landmarks the fix says are in view, verified by alignment.
 
         The fix predicts where each untracked landmark's corners are; aligning its
         reference there (ECC) confirms it and gives exact corners.  This finds plain
         plates that have too few keypoints for feature matching.
         """
-        events: list[dict[str, Any]] = []
+        starts: list[Start] = list(earlier)
         height, width = image.shape[:2]
         gray: npt.NDArray[np.uint8] | None = None
         for lm in self.landmarks:
             lid = lm.landmark_id
-            if lid in self.tracks or lid not in self.matcher.references:
+            if self._taken(lid, starts) or lid not in self.matcher.references:
                 continue
-            if len(self.tracks) >= self.config.max_tracks:
+            if self._busy(starts) >= self.config.max_tracks:
                 break
             corners = self._project(lm, fix)
             if corners is None or not inside(corners, width, height, margin=4.0):
@@ -375,8 +462,8 @@ class Perception:
             box = clip_box((x0, y0, x1 - x0, y1 - y0), width, height)
             if box is None:
                 continue
-            events.append(self._start(lid, image, box, aligned, quad, "prediction"))
-        return events
+            starts.append(self._start(lid, image, box, aligned, quad, "prediction", starts))
+        return starts[len(earlier):]
 
     def _project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
         """The landmark's corners in the image for the vehicle pose of ``fix``."""
@@ -433,9 +520,29 @@ class Perception:
             return FrameResult(frame.index, frame.t_us, tracks, None,
                                "held back: inconsistent with recent fixes", tuple(events),
                                particles=particles)
-        self._last_fix = fix
+        with self._lock:  # for this frame's housekeeping
+            self._fixes[frame.index] = fix
+            for old in [i for i in self._fixes if i <= frame.index - RECENT_FIXES]:
+                del self._fixes[old]
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
                            pose_json=pose_json(fix), particles=particles)
+
+
+class PerceptionWrapper:
+    """Base of processors that add to what a :class:`Perception` returns (truth taggers
+    of the demo, follow mode and the tests): override :meth:`process`."""
+
+    def __init__(self, perception: Perception) -> None:
+        self.perception = perception
+
+    def process(self, frame: Frame) -> FrameResult:
+        return self.perception.process(frame)
+
+    def housekeeping(self, frame: Frame) -> None:
+        self.perception.housekeeping(frame)
+
+    def close(self) -> None:
+        self.perception.close()
 
 
 def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:

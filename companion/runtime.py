@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
+from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory, BridgeSink
 from companion.errors import ConfigError, InputError
 from companion.flightlog import FlightLogWriter
@@ -29,7 +29,7 @@ from companion.landmarks.geodesy import LocalFrame
 from companion.landmarks.geojson_io import read_map
 from companion.landmarks.record import Landmark
 from companion.monitoring.publisher import MonitorPublisher
-from companion.perception import DetectFn, Perception, SideSensors
+from companion.perception import DetectFn, Perception, PerceptionWrapper, SideSensors
 from companion.preview import render_preview
 from companion.reporting import Reporter
 from companion.settings import Settings
@@ -128,7 +128,7 @@ def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
 
 
 async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
-              make_processor: Callable[[AttitudeHistory], FrameProcessor],
+              make_processor: Callable[[AttitudeHistory], Perception | PerceptionWrapper],
               landmarks: tuple[MapLandmark, ...] | list[MapLandmark], *,
               seconds: float | None = None, prefix: str = "flight",
               on_start: Callable[[CompanionApp], None] | None = None) -> CompanionApp:
@@ -148,7 +148,11 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         return render_preview(frame.image, tracks, mon.preview_width_px,
                               mon.preview_jpeg_quality, caption)
 
-    reporter = reporter_for(settings, landmarks, prefix)
+    try:
+        reporter = reporter_for(settings, landmarks, prefix)
+    except BaseException:
+        processor.close()
+        raise
     loop = asyncio.get_running_loop()
     try:
         await bridge.start()
@@ -171,6 +175,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         await attitude.stop()
         await bridge.stop()
         reporter.close()
+        processor.close()
     return app
 
 

@@ -40,7 +40,7 @@ from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks
 from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
-from companion.perception import Perception
+from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import Settings, load_settings
 from companion.sim.effects import EffectSpec
@@ -187,21 +187,18 @@ class FrameRecord:
     brightness: float = 0.0  # mean grey level of the image
 
 
-class RecordingPerception:
+class RecordingPerception(PerceptionWrapper):
     """Wraps the real :class:`Perception`; records every frame against the truth."""
 
     def __init__(self, perception: Perception, camera: FaultyCamera,
                  out: list[FrameRecord]) -> None:
-        self.perception = perception
+        super().__init__(perception)
         self.camera = camera
         self.out = out
 
     def __getattr__(self, name: str) -> Any:
         """Everything else (``housekeeping``, what the preview asks for) is the perception's."""
         return getattr(self.perception, name)
-
-    def housekeeping(self, frame: Any) -> None:
-        self.perception.housekeeping(frame)
 
     def process(self, frame: Any) -> FrameResult:
         result = self.perception.process(frame)

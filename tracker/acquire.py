@@ -77,6 +77,13 @@ class ReferenceMatcher:
         self._matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
         self.references: dict[str, Reference] = {}
 
+    def sibling(self) -> ReferenceMatcher:
+        """A matcher with the same references but its own ORB and matcher objects, for use
+        on another thread (OpenCV's feature objects are not meant to be shared)."""
+        twin = ReferenceMatcher(self.config)
+        twin.references = self.references
+        return twin
+
     def add(self, landmark_id: str, image_bgr: npt.NDArray[np.uint8]) -> Reference:
         """Prepare a reference image.
 

@@ -8,9 +8,9 @@ import logging
 import math
 import sys
 
-from companion.app import CompanionApp, Frame, FrameProcessor, FrameResult, FrameSource
+from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory
-from companion.perception import Perception
+from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
@@ -56,12 +56,12 @@ def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
     return PracticalMap(pmap.landmarks, refs, pmap.origin)
 
 
-class TruthTagger:
+class TruthTagger(PerceptionWrapper):
     """Follow mode: each pose message also carries the true position the frame showed
     (``truth_position_ned_m``) and the fix's distance from it (``truth_error_m``)."""
 
     def __init__(self, perception: Perception, source: FollowCameraSource) -> None:
-        self.perception = perception
+        super().__init__(perception)
         self.source = source
 
     def process(self, frame: Frame) -> FrameResult:
@@ -73,9 +73,6 @@ class TruthTagger:
             result.pose_json["truth_error_m"] = round(
                 math.dist(result.fix.position_ned_m, truth), 4)
         return result
-
-    def housekeeping(self, frame: Frame) -> None:
-        self.perception.housekeeping(frame)
 
 
 def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
@@ -104,7 +101,7 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
              len(pmap.landmarks), len(pmap.references), settings.source.kind,
              settings.source.spec)
 
-    def processor(attitude: AttitudeHistory) -> FrameProcessor:
+    def processor(attitude: AttitudeHistory) -> Perception | PerceptionWrapper:
         perception = perception_for(settings, camera, pmap, attitude)
         if isinstance(source, FollowCameraSource):
             return TruthTagger(perception, source)
