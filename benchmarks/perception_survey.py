@@ -33,7 +33,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="survey")
     parser.add_argument("--frames", type=int, default=900)
-    parser.add_argument("--pixel-sigma", type=float, default=0.7)
+    parser.add_argument("--pixel-sigma", type=float, default=0.15)
     args = parser.parse_args()
     cv2.setNumThreads(1)
     sim = Simulator(dataclasses.replace(load_scenario(args.scenario),

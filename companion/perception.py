@@ -38,6 +38,7 @@ from companion.fixgate import FixGate, FixGateConfig
 from tracker import AdaptiveTracker, TrackerConfig
 from tracker.acquire import (
     AcquireConfig,
+    Reference,
     ReferenceMatcher,
     homography_to,
     project_corners,
@@ -71,7 +72,12 @@ class PerceptionConfig:
     min_track_confidence: float = field(default=0.2, metadata={"ge": 0, "le": 1})
     refine_corners: bool = True
     min_corner_agreement: float = field(default=0.5, metadata={"gt": 0, "le": 1})
-    ecc_iterations: int = field(default=15, metadata={"ge": 1})
+    ecc_iterations: int = field(default=10, metadata={"ge": 1})
+    #: Unsmoothed ECC iterations after the smoothed ones (tracker.acquire.refine_ecc).
+    ecc_fine_iterations: int = field(default=6, metadata={"ge": 0})
+    #: A track's corners feed the pose only while this share of its quadrilateral is in
+    #: the image: corners extrapolated from a sliver are off by pixels.
+    min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
@@ -303,14 +309,14 @@ class Perception:
                 track.corners = project_corners(self.matcher.references[track.landmark_id],
                                                 aligned)
         if track.homography is None or track.misses >= self.config.max_corner_misses:
-            self._recover_corners(track, image)
+            self._recover_corners(track, image, gray)
         return True
 
     def _align(self, lid: str, gray: npt.NDArray[np.uint8], hom: FloatArray,
-               box: Box) -> FloatArray | None:
+               box: Box, verify: bool = False) -> FloatArray | None:
         """ECC alignment of the reference, kept only if it agrees with the tracker's box."""
         ref = self.matcher.references[lid]
-        aligned = refine_ecc(ref, gray, hom, self.config.ecc_iterations)
+        aligned = self._ecc(ref, gray, hom, verify)
         if aligned is None:
             return None
         corners = project_corners(ref, aligned)
@@ -320,12 +326,34 @@ class Perception:
             return None  # the alignment wandered off: keep the box, drop the corners
         return aligned
 
-    def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
-        """Re-match the reference around the tracked box to get the homography back."""
+    def _ecc(self, ref: Reference, gray: npt.NDArray[np.uint8], hom: FloatArray,
+             verify: bool = True) -> FloatArray | None:
+        """ECC alignment with this perception's settings; ``verify``: a new sighting,
+        held to ``verify_correlation`` (a running track to refine_ecc's default)."""
+        cfg = self.config
+        if verify:
+            return refine_ecc(ref, gray, hom, cfg.ecc_iterations, cfg.verify_correlation,
+                              cfg.ecc_fine_iterations)
+        return refine_ecc(ref, gray, hom, cfg.ecc_iterations,
+                          fine_iterations=cfg.ecc_fine_iterations)
+
+    def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8],
+                         gray: npt.NDArray[np.uint8]) -> None:
+        """Get the homography back: align the reference onto the tracked box (held to
+        ``verify_correlation``), else re-match its features around the box.  Alignment
+        first: it is cheaper, and finds plates too small or plain for feature matching."""
+        lid = track.landmark_id
+        ref = self.matcher.references[lid]
+        aligned = self._align(lid, gray, homography_to(ref, box_corners(track.box)),
+                              track.box, verify=True)
+        if aligned is not None:
+            track.homography, track.corners = aligned, project_corners(ref, aligned)
+            track.misses = 0
+            return
         x, y, w, h = track.box
         roi = (x - 0.5 * w, y - 0.5 * h, 2.0 * w, 2.0 * h)
         with self._recover_lock:
-            found = self._recover_matcher.find(image, [track.landmark_id], roi=roi)
+            found = self._recover_matcher.find(image, [lid], roi=roi)
         if found:
             track.homography, track.corners, track.misses = (found[0].homography,
                                                              found[0].corners_px, 0)
@@ -386,11 +414,8 @@ class Perception:
             for lid, ref in self.matcher.references.items():
                 if self._taken(lid, starts) or category.get(lid) not in (det.category, ""):
                     continue
-                x, y, w, h = det.box
-                start = homography_to(ref, np.array([[x, y], [x + w, y], [x + w, y + h],
-                                                     [x, y + h]], np.float64))
-                aligned = refine_ecc(ref, gray, start, self.config.ecc_iterations,
-                                     self.config.verify_correlation)
+                start = homography_to(ref, box_corners(det.box))
+                aligned = self._ecc(ref, gray, start)
                 if aligned is None:
                     continue
                 quad = project_corners(ref, aligned)
@@ -415,8 +440,7 @@ class Perception:
         if found is None or found[0] < self.config.search_min_score:
             return []
         gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
-        aligned = refine_ecc(ref, gray, found[1], self.config.ecc_iterations,
-                             self.config.verify_correlation)
+        aligned = self._ecc(ref, gray, found[1])
         if aligned is None:
             return []
         quad = project_corners(ref, aligned)
@@ -450,8 +474,7 @@ class Perception:
             gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8) \
                 if gray is None else gray
             ref = self.matcher.references[lid]
-            aligned = refine_ecc(ref, gray, homography_to(ref, corners),
-                                 self.config.ecc_iterations, self.config.verify_correlation)
+            aligned = self._ecc(ref, gray, homography_to(ref, corners))
             if aligned is None:
                 continue
             quad = project_corners(ref, aligned)
@@ -483,15 +506,19 @@ class Perception:
         the landmark's centre under perspective, and mixing it in costs more than it adds.
         """
         out = []
+        size = (self.camera.width, self.camera.height)
+        usable = {t.landmark_id: t.corners is not None
+                  and in_view_share(t.corners, *size) >= self.config.min_corner_in_view
+                  for t in self.tracks.values()}
         tracks = list(self.tracks.values())
-        if any(t.corners is not None for t in tracks):
-            tracks = [t for t in tracks if t.corners is not None]
+        if any(usable.values()):
+            tracks = [t for t in tracks if usable[t.landmark_id]]
         for t in tracks:
             x, y, w, h = t.box
-            corners = None if t.corners is None else tuple(
+            corners = None if t.corners is None or not usable[t.landmark_id] else tuple(
                 (float(u), float(v)) for u, v in t.corners)
-            centre = ((x + w / 2, y + h / 2) if t.corners is None
-                      else tuple(float(c) for c in t.corners.mean(axis=0)))
+            centre = ((x + w / 2, y + h / 2) if corners is None
+                      else tuple(float(c) for c in np.mean(corners, axis=0)))
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
@@ -545,10 +572,31 @@ class PerceptionWrapper:
         self.perception.close()
 
 
+def box_corners(box: Box) -> FloatArray:
+    """The corners TL, TR, BR, BL of an (x, y, w, h) box."""
+    x, y, w, h = box
+    return np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], np.float64)
+
+
 def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:
     """All corners at least ``margin`` px inside the image."""
     return bool(np.all(corners >= margin) and np.all(corners[:, 0] <= width - margin)
                 and np.all(corners[:, 1] <= height - margin))
+
+
+def in_view_share(corners: FloatArray, width: int, height: int) -> float:
+    """Share of the quadrilateral's area inside the image (0 for a degenerate quad)."""
+    quad = np.asarray(corners, np.float32).reshape(-1, 1, 2)
+    area = abs(float(cv2.contourArea(quad)))
+    if area <= 0.0:
+        return 0.0
+    frame = np.array([[0, 0], [width, 0], [width, height], [0, height]],
+                     np.float32).reshape(-1, 1, 2)
+    try:
+        common, _ = cv2.intersectConvexConvex(quad, frame)
+    except cv2.error:  # not convex: no trustworthy corners either
+        return 0.0
+    return min(1.0, max(0.0, float(common)) / area)
 
 
 def pose_json(fix: PoseFix) -> dict[str, Any]:

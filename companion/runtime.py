@@ -136,7 +136,10 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
 
     Everything that can fail on bad input (the processor: a detector model, references)
     is built before anything is started, so such a failure leaves nothing running.
+    OpenCV runs single-threaded: the pipeline's own threads use the cores
+    (``companion.LIBRARY_THREAD_VARS`` says why).
     """
+    cv2.setNumThreads(1)
     attitude = AttitudeHistory(bridge)
     processor = make_processor(attitude)
     mon = settings.monitor

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -88,3 +89,18 @@ def test_json_log_format_writes_json_lines(tmp_path: Path) -> None:
     assert record["level"] == "info"
     assert record["logger"] == "companion.x"
     assert record["fps"] == 30
+
+
+def test_native_thread_pools_are_one_thread_unless_the_user_says_otherwise() -> None:
+    """The pipeline runs its own threads; OpenBLAS/OpenMP pools on top oversubscribe the
+    cores (docs/decisions.md).  Importing the package sets the limit before numpy loads, and
+    a value the user exported is kept."""
+    probe = ("import companion, numpy, os; "
+             "print(*(os.environ[v] for v in companion.LIBRARY_THREAD_VARS))")
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         env=env, cwd=ROOT, timeout=60, check=True)
+    assert out.stdout.split() == ["1", "1", "1"]
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         env={**env, "OMP_NUM_THREADS": "2"}, cwd=ROOT, timeout=60, check=True)
+    assert out.stdout.split() == ["1", "2", "1"]

@@ -35,7 +35,9 @@ def test_demo_json_reports_a_flight_the_autopilot_fused(tmp_path: Path) -> None:
     assert summary["frames"] > 0
     assert summary["fixes_sent"] > 0
     assert summary["fixes_accepted"] >= 0.9 * summary["fixes_sent"]
-    assert summary["position_rmse_m"] < 0.5  # against the simulated truth
+    # against the simulated truth: ~0.3 % of the distance with sub-pixel corners (0.75 %
+    # before the alignment's half-pixel and edge-smoothing biases were removed)
+    assert summary["position_rmse_m"] < 0.006 * summary["mean_landmark_distance_m"]
     assert 0.0 < summary["cpu_cores_busy"] < 2.0
     logs = list(tmp_path.glob("demo-*.jsonl"))
     assert len(logs) == 1
