@@ -1,4 +1,5 @@
-"""Landmark map GeoJSON: validation into :class:`Landmark` records, and export.
+"""Landmark map GeoJSON: validation into table rows (``LandmarkRows``, what an import
+writes) or :class:`Landmark` records, and export.
 
 Format (DESIGN.md, "Landmark map"): a FeatureCollection of Point features with
 coordinates ``[lon, lat, alt_m]``; the Feature ``id`` (string, or integer kept as its
@@ -30,22 +31,20 @@ import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import orjson
 
 from companion.errors import InputError
-from companion.landmarks.record import (
-    CATEGORIES,
-    STATUSES,
-    Appearance,
-    Category,
-    Landmark,
-    Point3,
-    Scores,
-    Status,
+from companion.landmarks.record import CATEGORIES, STATUSES, Appearance, Landmark, Point3
+from companion.landmarks.repository import (
+    LandmarkRepository,
+    LandmarkRows,
+    Progress,
+    appearance_to_row,
+    paused_gc,
+    triples_json,
 )
-from companion.landmarks.repository import LandmarkRepository, Progress, paused_gc
 
 _SCORE_KEYS = ("distinctiveness", "flatness", "static", "impact")
 
@@ -128,16 +127,23 @@ def _appearance(ref: object, box: object, base_dir: Path) -> Appearance | None:
     return Appearance(media_type, data, box_px)
 
 
-def _scores(value: object) -> Scores:
+_NO_SCORES = (None, None, None, None)
+
+
+def _scores(value: object) -> tuple[float | None, ...]:
+    """The four scores in ``_SCORE_KEYS`` order."""
     if value is None:
-        return Scores()
+        return _NO_SCORES
     if not isinstance(value, dict):
         raise _FieldError("properties.scores", f"expected an object, got {_show(value)}")
-    vals = [value.get(key) for key in _SCORE_KEYS]
-    if all(v is None or (type(v) is float and 0.0 <= v <= 1.0) for v in vals):
-        return Scores(*vals)  # fast path: the usual case
-    return Scores(*(None if v is None else _number(v, f"properties.scores.{key}", 0.0, 1.0)
-                    for key, v in zip(_SCORE_KEYS, vals, strict=True)))
+    vals = tuple(map(value.get, _SCORE_KEYS))
+    for v in vals:
+        if v is not None and not (type(v) is float and 0.0 <= v <= 1.0):
+            break  # not the usual case: check each one, naming the bad one
+    else:
+        return vals
+    return tuple(None if v is None else _number(v, f"properties.scores.{key}", 0.0, 1.0)
+                 for key, v in zip(_SCORE_KEYS, vals, strict=True))
 
 
 def _feature_id(feature: dict[str, Any]) -> str:
@@ -174,8 +180,10 @@ def _required(props: dict[str, Any], key: str) -> object:
     return props[key]
 
 
-def feature_to_landmark(feature: object, base_dir: Path) -> Landmark:
-    """One GeoJSON feature as a record; raises ``_FieldError`` naming the field."""
+def feature_to_row(feature: object, base_dir: Path
+                   ) -> tuple[tuple[Any, ...], Appearance | None]:
+    """One GeoJSON feature as a ``repository.COLUMNS`` row and its appearance image;
+    raises ``_FieldError`` naming the field."""
     if not isinstance(feature, dict) or feature.get("type") != "Feature":
         raise _FieldError("type", "expected a GeoJSON Feature object")
     fid = _feature_id(feature)
@@ -202,43 +210,46 @@ def feature_to_landmark(feature: object, base_dir: Path) -> Landmark:
     reason = props.get("status_reason", "")
     if not isinstance(reason, str):
         raise _FieldError("properties.status_reason", f"expected a string, got {_show(reason)}")
-    points = props.get("points_m")
-    sightings = props.get("sightings")
-    return Landmark(
-        id=fid, name=name, category=cast(Category, category),
-        lat_deg=lat, lon_deg=lon, alt_m=alt, width_m=width, height_m=height,
-        facing_deg=facing, status=cast(Status, status), status_reason=reason,
-        scores=_scores(props.get("scores")),
-        appearance=_appearance(props.get("appearance"), props.get("appearance_box"), base_dir),
-        points_m=() if points is None else _triples(points, "properties.points_m", False),
-        sightings=() if sightings is None else _triples(sightings, "properties.sightings", True),
-    )
+    d, f, s, i = _scores(props.get("scores"))
+    appearance = _appearance(props.get("appearance"), props.get("appearance_box"), base_dir)
+    points, sightings = props.get("points_m"), props.get("sightings")
+    if points is not None:
+        points = triples_json(_triples(points, "properties.points_m", False))
+    if sightings is not None:
+        sightings = triples_json(_triples(sightings, "properties.sightings", True))
+    return (fid, name, category, lat, lon, alt, width, height, facing, status, reason,
+            d, f, s, i, points, sightings), appearance
 
 
-def parse_feature_collection(doc: object, source: str, base_dir: Path) -> list[Landmark]:
-    """Validate a decoded GeoJSON document; raise :class:`InputError` on the first problem."""
+def parse_feature_collection(doc: object, source: str, base_dir: Path) -> LandmarkRows:
+    """Validate a decoded GeoJSON document into rows; raise :class:`InputError` on the
+    first problem."""
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
         raise InputError(f"{source}: not a GeoJSON FeatureCollection (top-level \"type\")")
     features = doc.get("features")
     if not isinstance(features, list):
         raise InputError(f"{source}: features: expected a list of Feature objects")
-    out: list[Landmark] = []
+    rows: list[tuple[Any, ...]] = []
+    apps: dict[int, tuple[Any, ...]] = {}
     seen: dict[str, int] = {}
     for i, feature in enumerate(features):
         try:
-            lm = feature_to_landmark(feature, base_dir)
+            row, app = feature_to_row(feature, base_dir)
         except _FieldError as err:
             raise InputError(f"{source}: feature {i}: {err}") from None
-        first = seen.setdefault(lm.id, i)
+        first = seen.setdefault(row[0], i)
         if first != i:
-            raise InputError(f"{source}: feature {i}: id: duplicate id {lm.id!r} "
+            raise InputError(f"{source}: feature {i}: id: duplicate id {row[0]!r} "
                              f"(already used by feature {first})")
-        out.append(lm)
-    return out
+        rows.append(row)
+        if app is not None:
+            apps[i] = appearance_to_row(app)
+    return LandmarkRows(rows, apps)
 
 
-def read_map(path: str | Path) -> list[Landmark]:
-    """Read and validate a landmark map file (appearance paths relative to it)."""
+def read_rows(path: str | Path) -> LandmarkRows:
+    """Read and validate a landmark map file (appearance paths relative to it) into the
+    rows an import writes."""
     p = Path(path)
     try:
         text = p.read_bytes()
@@ -250,6 +261,12 @@ def read_map(path: str | Path) -> list[Landmark]:
         except orjson.JSONDecodeError as err:
             raise InputError(f"{p}: not valid JSON ({err})") from None
         return parse_feature_collection(doc, str(p), p.parent)
+
+
+def read_map(path: str | Path) -> list[Landmark]:
+    """Read and validate a landmark map file (appearance paths relative to it)."""
+    with paused_gc():
+        return read_rows(path).landmarks()
 
 
 def landmark_to_feature(lm: Landmark, appearance_ref: str | None) -> dict[str, Any]:
@@ -327,6 +344,5 @@ def import_map(repo: LandmarkRepository, path: str | Path, *, replace: bool = Fa
                progress: Progress | None = None) -> int:
     """Validate the whole map first, then store it in one transaction (all or nothing)."""
     with paused_gc():
-        landmarks = read_map(path)
-        return repo.import_landmarks(landmarks, replace=replace, source=str(path),
-                                     progress=progress)
+        rows = read_rows(path)
+        return repo.import_landmarks(rows, replace=replace, source=str(path), progress=progress)

@@ -2,8 +2,8 @@
 
 ``geom`` is a generated ``geometry(Point, 4326)`` column with a GiST index; area queries
 use the index (``&&`` with an envelope) and then re-check exact coordinates, like the
-SQLite store.  Imports use ``COPY`` inside one transaction (all or nothing).  The schema
-version lives in ``landmark_schema``; migrations run under an advisory lock.
+SQLite store.  Imports use binary ``COPY`` inside one transaction (all or nothing).  The
+schema version lives in ``landmark_schema``; migrations run under an advisory lock.
 """
 
 from __future__ import annotations
@@ -20,11 +20,10 @@ from companion.landmarks.record import Area, Candidates, Landmark, filter_area, 
 from companion.landmarks.repository import (
     APPEARANCE_COLUMNS,
     COLUMNS,
+    LandmarkRows,
     Progress,
     ScoreUpdate,
-    appearance_to_row,
     check_new_ids,
-    landmark_to_row,
     paused_gc,
     row_to_landmark,
 )
@@ -32,8 +31,23 @@ from companion.landmarks.repository import (
 _GEOM_INDEX = "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)"
 _NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"
 #: Imports at least this large (and larger than the table) drop the spatial and name
-#: indexes and build them again afterwards (PostGIS sorts points for a GiST build).
+#: indexes and the primary key (with the foreign key that needs it) and build them again
+#: afterwards: sorted builds instead of random inserts (the key alone was ~40 % of the
+#: server's COPY time); a repeated id fails ``ADD PRIMARY KEY``.
 BULK_ROWS = 50_000
+_BULK_DROP = (
+    "DROP INDEX landmarks_geom",
+    "DROP INDEX landmarks_name",
+    "ALTER TABLE appearances DROP CONSTRAINT appearances_id_fkey",
+    "ALTER TABLE landmarks DROP CONSTRAINT landmarks_pkey",
+)
+_BULK_REBUILD = (
+    "ALTER TABLE landmarks ADD CONSTRAINT landmarks_pkey PRIMARY KEY (id)",
+    "ALTER TABLE appearances ADD CONSTRAINT appearances_id_fkey FOREIGN KEY (id) "
+    "REFERENCES landmarks (id) ON DELETE CASCADE",
+    _GEOM_INDEX,
+    _NAME_INDEX,
+)
 
 MIGRATIONS: tuple[tuple[str, ...], ...] = (
     (  # 0 -> 1
@@ -73,6 +87,12 @@ _LOCK_KEY = 0x4C4D4B53  # advisory lock id for migrations ("LMKS")
 
 _COLS = ", ".join(f"l.{c}" for c in COLUMNS)
 _APP_COLS = ", ".join(f"a.{c}" for c in APPEARANCE_COLUMNS)
+_TEXT_COLUMNS = ("id", "name", "category", "status", "status_reason", "points_json",
+                 "sightings_json")
+#: Binary COPY: the client sends doubles as 8 bytes instead of formatting them as text
+#: (measured: a third of the client's CPU time).
+_COPY_TYPES = tuple("text" if c in _TEXT_COLUMNS else "float8" for c in COLUMNS)
+_COPY_APPEARANCE_TYPES = ("text", "text", "bytea", "int4", "int4", "int4", "int4")
 
 
 def redact(url: str) -> str:
@@ -140,47 +160,49 @@ class PostgisLandmarkRepository:
         return {r[0] for r in self._conn.execute(
             "SELECT id FROM landmarks WHERE id = ANY(%s)", (ids,))}
 
-    def import_landmarks(self, landmarks: Sequence[Landmark], *, replace: bool = False,
-                         source: str = "input", progress: Progress | None = None) -> int:
+    def import_landmarks(self, landmarks: Sequence[Landmark] | LandmarkRows, *,
+                         replace: bool = False, source: str = "input",
+                         progress: Progress | None = None) -> int:
         """``COPY`` every record in one transaction (``replace`` overwrites equal ids)."""
         conn = self._conn
-        try:
-            with paused_gc(), conn.transaction():
-                if replace:
-                    conn.execute("DELETE FROM landmarks WHERE id = ANY(%s)",
-                                 ([lm.id for lm in landmarks],))
-                elif self.count():
-                    check_new_ids(landmarks, self._existing, source, chunk=5000)
-                bulk = len(landmarks) >= BULK_ROWS and len(landmarks) >= self.count()
-                if bulk:  # DDL is transactional: a failure restores the indexes
-                    conn.execute("DROP INDEX landmarks_geom")
-                    conn.execute("DROP INDEX landmarks_name")
-                self._copy([landmarks[i] for i in spatial_order(list(landmarks))], progress)
-                if bulk:
-                    conn.execute(_GEOM_INDEX)
-                    conn.execute(_NAME_INDEX)
-        except psycopg.errors.IntegrityError as err:
-            check_new_ids(landmarks, lambda ids: set(), source)  # names a repeated id
-            first = str(err).strip().splitlines()[0]
-            raise InputError(f"{source}: rejected by the database ({first})") from None
-        return len(landmarks)
+        with paused_gc():
+            batch = LandmarkRows.of(landmarks)
+            try:
+                with conn.transaction():
+                    if replace:
+                        conn.execute("DELETE FROM landmarks WHERE id = ANY(%s)", (batch.ids(),))
+                    elif self.count():
+                        check_new_ids(batch.ids(), self._existing, source, chunk=5000)
+                    bulk = len(batch) >= BULK_ROWS and len(batch) >= self.count()
+                    for sql in _BULK_DROP if bulk else ():  # DDL is undone on failure
+                        conn.execute(sql)
+                    self._copy(batch, progress)
+                    for sql in _BULK_REBUILD if bulk else ():
+                        conn.execute(sql)
+            except psycopg.errors.IntegrityError as err:
+                check_new_ids(batch.ids(), lambda ids: set(), source)  # names a repeated id
+                first = str(err).strip().splitlines()[0]
+                raise InputError(f"{source}: rejected by the database ({first})") from None
+        return len(batch)
 
-    def _copy(self, landmarks: Sequence[Landmark], progress: Progress | None) -> None:
+    def _copy(self, batch: LandmarkRows, progress: Progress | None) -> None:
         with self._conn.cursor() as cur:
-            with cur.copy(f"COPY landmarks ({', '.join(COLUMNS)}) FROM STDIN") as copy:
-                for k, lm in enumerate(landmarks, 1):
-                    copy.write_row(landmark_to_row(lm))
+            with cur.copy(f"COPY landmarks ({', '.join(COLUMNS)}) FROM STDIN "
+                          "(FORMAT BINARY)") as copy:
+                copy.set_types(_COPY_TYPES)
+                rows = batch.rows
+                for k, i in enumerate(spatial_order(*batch.positions()).tolist(), 1):
+                    copy.write_row(rows[i])
                     if progress is not None and k % 20_000 == 0:
                         progress(k)
-            apps = [(lm.id, *appearance_to_row(lm.appearance))
-                    for lm in landmarks if lm.appearance is not None]
-            if apps:
+            if batch.appearances:
                 with cur.copy(f"COPY appearances (id, {', '.join(APPEARANCE_COLUMNS)}) "
-                              "FROM STDIN") as copy:
-                    for row in apps:
-                        copy.write_row(row)
+                              "FROM STDIN (FORMAT BINARY)") as copy:
+                    copy.set_types(_COPY_APPEARANCE_TYPES)
+                    for i, app in batch.appearances.items():
+                        copy.write_row((batch.rows[i][0], *app))
         if progress is not None:
-            progress(len(landmarks))
+            progress(len(batch))
 
     def _select(self, where: str, params: Sequence[object], with_appearance: bool
                 ) -> Iterator[Landmark]:

@@ -224,20 +224,19 @@ def _spread_bits(v: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
     return (v | (v << np.uint64(1))) & np.uint64(0x55555555)
 
 
-def spatial_order(landmarks: list[Landmark]) -> list[int]:
-    """Indices of ``landmarks`` in Morton (Z-curve) order of position.
+def spatial_order(lat_deg: npt.NDArray[np.float64], lon_deg: npt.NDArray[np.float64]
+                  ) -> npt.NDArray[np.intp]:
+    """Indices of the positions ``(lat_deg[i], lon_deg[i])`` in Morton (Z-curve) order.
 
     Bulk loads in this order keep neighbours together in the table and in the spatial
     index, which makes both the load and later area queries faster.
     """
-    if len(landmarks) < 2:
-        return list(range(len(landmarks)))
-    lat = np.fromiter((lm.lat_deg for lm in landmarks), np.float64, len(landmarks))
-    lon = np.fromiter((lm.lon_deg for lm in landmarks), np.float64, len(landmarks))
+    if len(lat_deg) < 2:
+        return np.arange(len(lat_deg))
 
     def grid(x: npt.NDArray[np.float64]) -> npt.NDArray[np.uint64]:
         span = float(x.max() - x.min()) or 1.0
         return ((x - x.min()) * (65535.0 / span)).astype(np.uint64)
 
-    key = _spread_bits(grid(lon)) | (_spread_bits(grid(lat)) << np.uint64(1))
-    return list(np.argsort(key, kind="stable").tolist())
+    key = _spread_bits(grid(lon_deg)) | (_spread_bits(grid(lat_deg)) << np.uint64(1))
+    return np.argsort(key, kind="stable")

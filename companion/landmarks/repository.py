@@ -1,5 +1,6 @@
 """The repository interface shared by the SQLite (on-board) and PostGIS (cloud) stores,
-and the row <-> record conversion both of them use."""
+and the row <-> record conversion both of them use (:class:`LandmarkRows`: what an
+import writes)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,12 @@ import gc
 import json
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from operator import itemgetter
 from typing import Any, Protocol, cast
+
+import numpy as np
+import numpy.typing as npt
 
 from companion.landmarks.record import (
     Appearance,
@@ -28,6 +33,7 @@ COLUMNS: tuple[str, ...] = (
 )
 #: Columns of the ``appearances`` table after the landmark key.
 APPEARANCE_COLUMNS: tuple[str, ...] = ("media_type", "data", "box_x", "box_y", "box_w", "box_h")
+_LAT, _LON = itemgetter(COLUMNS.index("lat_deg")), itemgetter(COLUMNS.index("lon_deg"))
 
 Progress = Callable[[int], None]
 
@@ -45,19 +51,21 @@ class ScoreUpdate:
 class LandmarkRepository(Protocol):
     """What the application needs from a landmark store.
 
-    ``import_landmarks`` is all or nothing: on any error (or if the process dies) the
-    store is left exactly as it was.  ``query_area`` returns the landmarks inside the
-    area, without appearance images unless asked; ``area_candidates`` returns only what
-    practical-map selection needs, as columns (fast); ``get_many`` returns full records
-    (with appearance) in the order of the ids, skipping unknown ids.
+    ``import_landmarks`` (records, or the same as :class:`LandmarkRows`) is all or
+    nothing: on any error (or if the process dies) the store is left exactly as it was.
+    ``query_area`` returns the landmarks inside the area, without appearance images
+    unless asked; ``area_candidates`` returns only what practical-map selection needs, as
+    columns (fast); ``get_many`` returns full records (with appearance) in the order of
+    the ids, skipping unknown ids.
     """
 
     def schema_version(self) -> int: ...
 
     def count(self) -> int: ...
 
-    def import_landmarks(self, landmarks: Sequence[Landmark], *, replace: bool = False,
-                         source: str = "input", progress: Progress | None = None) -> int: ...
+    def import_landmarks(self, landmarks: Sequence[Landmark] | LandmarkRows, *,
+                         replace: bool = False, source: str = "input",
+                         progress: Progress | None = None) -> int: ...
 
     def get(self, landmark_id: str) -> Landmark | None: ...
 
@@ -93,7 +101,8 @@ def paused_gc() -> Iterator[None]:
             gc.enable()
 
 
-def _points_json(points: tuple[tuple[float, float, float], ...]) -> str | None:
+def triples_json(points: Sequence[tuple[float, float, float]]) -> str | None:
+    """The ``points_json`` / ``sightings_json`` column value (``None`` when empty)."""
     return json.dumps(points) if points else None
 
 
@@ -103,7 +112,7 @@ def landmark_to_row(lm: Landmark) -> tuple[Any, ...]:
     return (
         lm.id, lm.name, lm.category, lm.lat_deg, lm.lon_deg, lm.alt_m, lm.width_m,
         lm.height_m, lm.facing_deg, lm.status, lm.status_reason, s.distinctiveness,
-        s.flatness, s.static, s.impact, _points_json(lm.points_m), _points_json(lm.sightings),
+        s.flatness, s.static, s.impact, triples_json(lm.points_m), triples_json(lm.sightings),
     )
 
 
@@ -133,21 +142,58 @@ def row_to_landmark(row: Sequence[Any], app: Sequence[Any] | None = None) -> Lan
     )
 
 
-def check_new_ids(landmarks: Sequence[Landmark], existing: Callable[[list[str]], set[str]],
+@dataclass(frozen=True)
+class LandmarkRows:
+    """Records as the rows an import writes: their ``COLUMNS`` values, and the
+    ``APPEARANCE_COLUMNS`` values of those with an appearance image, by row index.
+
+    A validated map becomes rows directly (``geojson_io.read_rows``): making a frozen
+    :class:`Landmark` per feature only to take it apart again costs ~2 us a record.
+    """
+
+    rows: list[tuple[Any, ...]]
+    appearances: dict[int, tuple[Any, ...]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, records: Sequence[Landmark] | LandmarkRows) -> LandmarkRows:
+        if isinstance(records, LandmarkRows):
+            return records
+        return cls([landmark_to_row(lm) for lm in records],
+                   {i: appearance_to_row(lm.appearance) for i, lm in enumerate(records)
+                    if lm.appearance is not None})
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def ids(self) -> list[str]:
+        return [row[0] for row in self.rows]
+
+    def landmarks(self) -> list[Landmark]:
+        apps = self.appearances
+        return [row_to_landmark(row, apps.get(i)) for i, row in enumerate(self.rows)]
+
+    def positions(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """``(lat_deg, lon_deg)`` arrays of the rows."""
+        n = len(self.rows)
+        return (np.fromiter(map(_LAT, self.rows), np.float64, n),
+                np.fromiter(map(_LON, self.rows), np.float64, n))
+
+
+def check_new_ids(ids: Sequence[str], existing: Callable[[list[str]], set[str]],
                   source: str, chunk: int = 500) -> None:
-    """Raise InputError for the first record whose id is already stored (or repeated)."""
+    """Raise InputError for the first id that is already stored (or repeated)."""
     from companion.errors import InputError
 
     seen: dict[str, int] = {}
-    for i, lm in enumerate(landmarks):
-        first = seen.setdefault(lm.id, i)
+    for i, lm_id in enumerate(ids):
+        first = seen.setdefault(lm_id, i)
         if first != i:
-            raise InputError(f"{source}: feature {i}: id: duplicate id {lm.id!r} "
+            raise InputError(f"{source}: feature {i}: id: duplicate id {lm_id!r} "
                              f"(already used by feature {first})")
-    for start in range(0, len(landmarks), chunk):
-        ids = [lm.id for lm in landmarks[start:start + chunk]]
-        found = existing(ids)
+    for start in range(0, len(ids), chunk):
+        part = list(ids[start:start + chunk])
+        found = existing(part)
         if found:
-            i = next(k for k, x in enumerate(ids) if x in found) + start
-            raise InputError(f"{source}: feature {i}: id: {ids[i - start]!r} already exists in "
+            i = next(k for k, x in enumerate(part) if x in found) + start
+            raise InputError(f"{source}: feature {i}: id: {ids[i]!r} already exists in "
                              "the database (import with replace to overwrite)")

@@ -8,6 +8,9 @@ neighbours, and every run of up to ``BUCKET`` consecutive rows gets one R*Tree e
 an area query finds the buckets whose boxes overlap it, then range-scans their rows.
 It needs ``BUCKET`` times fewer R*Tree inserts than one entry per point (an R*Tree
 insert costs ~12 us), which is what makes imports of >= 50,000 records/s possible.
+The table's CHECKs list allowed values as ``x = 'a' OR x = 'b' ...``: SQLite (3.40)
+builds a temporary index for an ``IN (...)`` list of three or more values on every row
+it writes, which cost ~3 us a row, more than the row itself (schema version 4).
 Invariant: every row lies inside the box of a bucket whose rid range contains it
 (rows are only ever deleted or added in new buckets with fresh rids; positions never
 change in place).  Buckets emptied by deletions stay, harmless, until a ``VACUUM``-like
@@ -21,17 +24,20 @@ import sqlite3
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from types import TracebackType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
 
 from companion.errors import InputError
 from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
 from companion.landmarks.repository import (
     APPEARANCE_COLUMNS,
     COLUMNS,
+    LandmarkRows,
     Progress,
     ScoreUpdate,
-    appearance_to_row,
     check_new_ids,
-    landmark_to_row,
     paused_gc,
     row_to_landmark,
 )
@@ -45,21 +51,24 @@ BULK_ROWS = 50_000
 #: Consecutive rows per R*Tree entry (see the module docstring).
 BUCKET = 16
 
+#: Columns of ``landmarks`` whose definition has not changed since version 1.
+_PLACE_AND_SIZE = """lat_deg REAL NOT NULL CHECK (lat_deg BETWEEN -90 AND 90),
+            lon_deg REAL NOT NULL CHECK (lon_deg BETWEEN -180 AND 180),
+            alt_m REAL NOT NULL,
+            width_m REAL NOT NULL CHECK (width_m > 0),
+            height_m REAL NOT NULL CHECK (height_m > 0),
+            facing_deg REAL CHECK (facing_deg >= 0 AND facing_deg < 360),"""
+
 #: MIGRATIONS[k] brings a database from schema version k to k + 1.
 MIGRATIONS: tuple[tuple[str, ...], ...] = (
     (  # 0 -> 1: landmarks and their spatial index
-        """CREATE TABLE landmarks (
+        f"""CREATE TABLE landmarks (
             rid INTEGER PRIMARY KEY,
             id TEXT NOT NULL,
             name TEXT NOT NULL,
             category TEXT NOT NULL
                 CHECK (category IN ('signpost', 'wall_image', 'logo', 'other')),
-            lat_deg REAL NOT NULL CHECK (lat_deg BETWEEN -90 AND 90),
-            lon_deg REAL NOT NULL CHECK (lon_deg BETWEEN -180 AND 180),
-            alt_m REAL NOT NULL,
-            width_m REAL NOT NULL CHECK (width_m > 0),
-            height_m REAL NOT NULL CHECK (height_m > 0),
-            facing_deg REAL CHECK (facing_deg >= 0 AND facing_deg < 360),
+            {_PLACE_AND_SIZE}
             status TEXT NOT NULL DEFAULT 'candidate'
                 CHECK (status IN ('candidate', 'approved', 'rejected')),
             status_reason TEXT NOT NULL DEFAULT '',
@@ -87,48 +96,93 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             SELECT lon_deg, lon_deg, lat_deg, lat_deg, rid, rid FROM landmarks""",
         "DROP TABLE landmarks_rtree_v2",
     ),
+    (  # 3 -> 4: the same table and rows, CHECKs without IN lists (see the module docstring)
+        f"""CREATE TABLE landmarks_v4 (
+            rid INTEGER PRIMARY KEY,
+            id TEXT NOT NULL,
+            name TEXT NOT NULL,
+            category TEXT NOT NULL CHECK (category = 'signpost' OR category = 'wall_image'
+                                          OR category = 'logo' OR category = 'other'),
+            {_PLACE_AND_SIZE}
+            status TEXT NOT NULL DEFAULT 'candidate'
+                CHECK (status = 'candidate' OR status = 'approved' OR status = 'rejected'),
+            status_reason TEXT NOT NULL DEFAULT '',
+            distinctiveness REAL, flatness REAL, static REAL, impact REAL,
+            points_json TEXT, sightings_json TEXT
+        )""",
+        f"INSERT INTO landmarks_v4 (rid, {', '.join(COLUMNS)}) "
+        f"SELECT rid, {', '.join(COLUMNS)} FROM landmarks",
+        "DROP TABLE landmarks",  # foreign keys are off during migrations: no cascade
+        "ALTER TABLE landmarks_v4 RENAME TO landmarks",
+        _ID_INDEX,
+        _NAME_INDEX,
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
 _COLS = ", ".join(f"l.{c}" for c in COLUMNS)
 _APP_COLS = ", ".join(f"a.{c}" for c in APPEARANCE_COLUMNS)
 _CHUNK = 20_000  # a multiple of BUCKET
+_INSERT_ROW = (f"INSERT INTO landmarks (rid, {', '.join(COLUMNS)}) "
+               f"VALUES ({', '.join('?' * (len(COLUMNS) + 1))})")
+_INSERT_BUCKET = ("INSERT INTO landmarks_rtree (min_lon, max_lon, min_lat, max_lat, rid_lo, "
+                  "rid_hi) VALUES (?, ?, ?, ?, ?, ?)")
+_INSERT_APPEARANCE = (f"INSERT INTO appearances (rid, {', '.join(APPEARANCE_COLUMNS)}) "
+                      f"VALUES ({', '.join('?' * (len(APPEARANCE_COLUMNS) + 1))})")
 _RTREE_JOIN = "landmarks_rtree r JOIN landmarks l ON l.rid BETWEEN r.rid_lo AND r.rid_hi"
 #: Page cache per connection (KiB): holds the indexes of ~1M landmarks during imports.
 CACHE_KIB = 65_536
 
 
-def _buckets(chunk: Sequence[Landmark], rid0: int) -> list[tuple[float | int, ...]]:
-    """R*Tree rows (box, rid_lo, rid_hi) for rows ``rid0 ..`` holding ``chunk`` in order."""
-    out: list[tuple[float | int, ...]] = []
-    for start in range(0, len(chunk), BUCKET):
-        part = chunk[start:start + BUCKET]
-        lons = [lm.lon_deg for lm in part]
-        lats = [lm.lat_deg for lm in part]
-        out.append((min(lons), max(lons), min(lats), max(lats),
-                    rid0 + start, rid0 + start + len(part) - 1))
-    return out
+def _buckets(lat: npt.NDArray[np.float64], lon: npt.NDArray[np.float64], rid0: int
+             ) -> list[tuple[Any, ...]]:
+    """R*Tree rows (box, rid_lo, rid_hi) for rows ``rid0 ..`` at these positions, in order."""
+    n = len(lat)
+    pad = (0, -n % BUCKET)  # repeat the last point: boxes unchanged
+    lat_b = np.pad(lat, pad, mode="edge").reshape(-1, BUCKET)
+    lon_b = np.pad(lon, pad, mode="edge").reshape(-1, BUCKET)
+    lo = np.arange(rid0, rid0 + n, BUCKET)
+    hi = np.minimum(lo + BUCKET - 1, rid0 + n - 1)
+    return list(zip(lon_b.min(axis=1).tolist(), lon_b.max(axis=1).tolist(),
+                    lat_b.min(axis=1).tolist(), lat_b.max(axis=1).tolist(),
+                    lo.tolist(), hi.tolist(), strict=True))
 
 
-def migrate(conn: sqlite3.Connection, target: int = SCHEMA_VERSION) -> int:
-    """Bring the schema to ``target`` in one transaction; return the version before."""
+def _version(conn: sqlite3.Connection) -> int:
     (version,) = conn.execute("PRAGMA user_version").fetchone()
     if version > SCHEMA_VERSION:
         raise InputError(f"landmark database schema version {version} is newer than this "
                          f"program supports ({SCHEMA_VERSION}); upgrade landmark-companion")
-    if version >= target:
-        return int(version)
+    return int(version)
+
+
+def migrate(conn: sqlite3.Connection, target: int = SCHEMA_VERSION) -> int:
+    """Bring the schema to ``target`` in one transaction; return the version before.
+
+    Foreign keys are off meanwhile (SQLite's procedure for rebuilding a table: dropping
+    the old one must not cascade) and checked before the commit.
+    """
+    before = _version(conn)
+    if before >= target:
+        return before
+    (foreign_keys,) = conn.execute("PRAGMA foreign_keys").fetchone()
+    conn.execute("PRAGMA foreign_keys = OFF")
     conn.execute("BEGIN IMMEDIATE")
     try:
+        version = _version(conn)  # again: another process may have migrated meanwhile
         for step in range(version, target):
             for sql in MIGRATIONS[step]:
                 conn.execute(sql)
-        conn.execute(f"PRAGMA user_version = {int(target)}")
+        if conn.execute("PRAGMA foreign_key_check").fetchone() is not None:
+            raise InputError("landmark database: foreign key check failed after migration")
+        conn.execute(f"PRAGMA user_version = {int(max(version, target))}")
         conn.execute("COMMIT")
     except BaseException:
         conn.execute("ROLLBACK")
         raise
-    return int(version)
+    finally:
+        conn.execute(f"PRAGMA foreign_keys = {int(foreign_keys)}")
+    return version
 
 
 class SqliteLandmarkRepository:
@@ -167,62 +221,63 @@ class SqliteLandmarkRepository:
         q = f"SELECT id FROM landmarks WHERE id IN ({','.join('?' * len(ids))})"
         return {r[0] for r in self._conn.execute(q, ids)}
 
-    def import_landmarks(self, landmarks: Sequence[Landmark], *, replace: bool = False,
-                         source: str = "input", progress: Progress | None = None) -> int:
+    def import_landmarks(self, landmarks: Sequence[Landmark] | LandmarkRows, *,
+                         replace: bool = False, source: str = "input",
+                         progress: Progress | None = None) -> int:
         """Insert all records in one transaction (``replace`` overwrites equal ids)."""
         with paused_gc():
-            return self._import(landmarks, replace, source, progress)
+            return self._import(LandmarkRows.of(landmarks), replace, source, progress)
 
-    def _import(self, landmarks: Sequence[Landmark], replace: bool, source: str,
+    def _import(self, batch: LandmarkRows, replace: bool, source: str,
                 progress: Progress | None) -> int:
         conn = self._conn
         conn.execute("BEGIN IMMEDIATE")
         try:
             if replace:
-                self._delete_ids([lm.id for lm in landmarks])
+                self._delete_ids(batch.ids())
             elif self.count():
-                check_new_ids(landmarks, self._existing, source)
+                check_new_ids(batch.ids(), self._existing, source)
             # never reuse a rid inside an existing bucket's range (that row would be found twice)
             (rid0,) = conn.execute(
                 "SELECT max(coalesce((SELECT max(rid) FROM landmarks), 0), "
                 "coalesce((SELECT max(rid_hi) FROM landmarks_rtree), 0))").fetchone()
-            ordered = [landmarks[i] for i in spatial_order(list(landmarks))]
-            bulk = len(ordered) >= BULK_ROWS and len(ordered) >= self.count()
+            bulk = len(batch) >= BULK_ROWS and len(batch) >= self.count()
             if bulk:  # inside the transaction: a failure restores the indexes too
                 conn.execute("DROP INDEX landmarks_id")
                 conn.execute("DROP INDEX landmarks_name")
-            for start in range(0, len(ordered), _CHUNK):
-                self._insert_chunk(ordered[start:start + _CHUNK], rid0 + start + 1)
-                if progress is not None:
-                    progress(min(start + _CHUNK, len(landmarks)))
+            self._insert(batch, rid0 + 1, progress)
             if bulk:
                 conn.execute(_ID_INDEX)  # fails on a repeated id: rolled back below
                 conn.execute(_NAME_INDEX)
             conn.execute("COMMIT")
         except sqlite3.IntegrityError as err:
             conn.execute("ROLLBACK")
-            check_new_ids(landmarks, lambda ids: set(), source)  # names a repeated id
+            check_new_ids(batch.ids(), lambda ids: set(), source)  # names a repeated id
             raise InputError(f"{source}: rejected by the database ({err})") from None
         except BaseException:
             conn.execute("ROLLBACK")
             raise
-        return len(landmarks)
+        return len(batch)
 
-    def _insert_chunk(self, chunk: Sequence[Landmark], rid0: int) -> None:
-        marks = ",".join("?" * (len(COLUMNS) + 1))
-        self._conn.executemany(
-            f"INSERT INTO landmarks (rid, {', '.join(COLUMNS)}) VALUES ({marks})",
-            [(rid0 + k, *landmark_to_row(lm)) for k, lm in enumerate(chunk)],
-        )
-        self._conn.executemany(
-            "INSERT INTO landmarks_rtree (min_lon, max_lon, min_lat, max_lat, rid_lo, rid_hi) "
-            "VALUES (?, ?, ?, ?, ?, ?)", _buckets(chunk, rid0))
-        apps = [(rid0 + k, *appearance_to_row(lm.appearance))
-                for k, lm in enumerate(chunk) if lm.appearance is not None]
-        if apps:
-            self._conn.executemany(
-                f"INSERT INTO appearances (rid, {', '.join(APPEARANCE_COLUMNS)}) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?)", apps)
+    def _insert(self, batch: LandmarkRows, rid0: int, progress: Progress | None) -> None:
+        """Rows ``rid0 ..`` in Morton order with their R*Tree buckets, chunk by chunk, then
+        the appearance images."""
+        lat, lon = batch.positions()
+        order = spatial_order(lat, lon)
+        rows = batch.rows
+        for start in range(0, len(order), _CHUNK):
+            part, first = order[start:start + _CHUNK], rid0 + start
+            self._conn.executemany(_INSERT_ROW, [(first + k,) + rows[i]
+                                                 for k, i in enumerate(part.tolist())])
+            self._conn.executemany(_INSERT_BUCKET, _buckets(lat[part], lon[part], first))
+            if progress is not None:
+                progress(start + len(part))
+        if batch.appearances:
+            rid = np.empty(len(order), np.int64)
+            rid[order] = np.arange(rid0, rid0 + len(order))
+            apps = [(int(rid[i]), *app) for i, app in batch.appearances.items()]
+            for start in range(0, len(apps), _CHUNK):
+                self._conn.executemany(_INSERT_APPEARANCE, apps[start:start + _CHUNK])
 
     def _delete_ids(self, ids: list[str]) -> None:
         for start in range(0, len(ids), 500):

@@ -61,6 +61,10 @@ def test_bad_import_leaves_repository_unchanged(postgis_db: str, sample_map: Pat
         with pytest.raises(InputError, match="rejected by the database"):
             pg.import_landmarks(records)
         assert _snapshot(postgis_db) == before
+        repeated = [*records[:-1], dataclasses.replace(good, id="x7")]
+        with pytest.raises(InputError, match="feature 2999: id: duplicate id 'x7'"):
+            pg.import_landmarks(repeated, replace=True)  # bulk: fails ADD PRIMARY KEY
+        assert _snapshot(postgis_db) == before
         with pytest.raises(InputError, match=r"feature 1: id: 'lm0002' already exists"):
             pg.import_landmarks([dataclasses.replace(good, id="new"),
                                  dataclasses.replace(good, id="lm0002")])
@@ -73,7 +77,12 @@ def test_bad_import_leaves_repository_unchanged(postgis_db: str, sample_map: Pat
         assert len(pg.query_area(Circle(1.0, 1.0, 1.0))) == 3000  # 2999 + replaced lm0003
         indexes = {r[0] for r in pg._conn.execute(
             "SELECT indexname FROM pg_indexes WHERE tablename = 'landmarks'")}
-        assert {"landmarks_geom", "landmarks_name"} <= indexes
+        assert {"landmarks_geom", "landmarks_name", "landmarks_pkey"} <= indexes
+        constraints = {r[0] for r in pg._conn.execute(
+            "SELECT conname FROM pg_constraint WHERE contype IN ('p', 'f')")}
+        assert {"landmarks_pkey", "appearances_id_fkey"} <= constraints
+        pg._conn.execute("DELETE FROM landmarks WHERE id = 'lm0004'")  # had an appearance
+        assert pg._conn.execute("SELECT count(*) FROM appearances").fetchone()[0] == 0
 
 
 def test_update_scores(postgis_db: str, sample_map: Path) -> None:

@@ -157,6 +157,36 @@ def test_old_schema_is_migrated_keeping_rows(tmp_path: Path) -> None:
         assert [lm.id for lm in repo.find_by_name("Old sign")] == ["old"]
 
 
+def test_schema_3_is_rebuilt_keeping_rows_appearances_and_constraints(tmp_path: Path) -> None:
+    db = tmp_path / "v3.db"
+    conn = sqlite3.connect(db, isolation_level=None)
+    sqlite_repo.migrate(conn, 3)
+    conn.execute("INSERT INTO landmarks (rid, id, name, category, lat_deg, lon_deg, alt_m, "
+                 "width_m, height_m) VALUES (7, 'old', 'Old sign', 'logo', 10, 20, 5, 1, 1)")
+    conn.execute("INSERT INTO appearances (rid, media_type, data) VALUES (7, 'image/png', x'89')")
+    conn.execute("INSERT INTO landmarks_rtree (min_lon, max_lon, min_lat, max_lat, rid_lo, "
+                 "rid_hi) VALUES (20, 20, 10, 10, 7, 7)")
+    conn.close()
+    with SqliteLandmarkRepository(db) as repo:  # the table is rebuilt: no cascade meanwhile
+        assert repo.schema_version() == SCHEMA_VERSION == 4
+        old = repo.get("old")
+        assert old is not None and old.appearance is not None and old.appearance.data == b"\x89"
+        assert [lm.id for lm in repo.query_area(BBox(19.9, 9.9, 20.1, 10.1))] == ["old"]
+        conn = repo._conn
+        assert conn.execute("PRAGMA foreign_keys").fetchone()[0] == 1
+        (table_sql,) = conn.execute(
+            "SELECT sql FROM sqlite_schema WHERE name = 'landmarks'").fetchone()
+        assert " IN (" not in table_sql.upper()
+        for column, value in (("category", "tree"), ("status", "maybe"), ("width_m", 0)):
+            with pytest.raises(sqlite3.IntegrityError, match="CHECK"):
+                conn.execute(f"UPDATE landmarks SET {column} = ? WHERE id = 'old'", (value,))
+        with pytest.raises(sqlite3.IntegrityError, match="UNIQUE"):
+            conn.execute("INSERT INTO landmarks (id, name, category, lat_deg, lon_deg, alt_m, "
+                         "width_m, height_m) VALUES ('old', 'x', 'logo', 1, 1, 1, 1, 1)")
+        conn.execute("DELETE FROM landmarks WHERE id = 'old'")
+        assert conn.execute("SELECT count(*) FROM appearances").fetchone()[0] == 0  # cascade
+
+
 def test_newer_schema_is_refused(tmp_path: Path) -> None:
     db = tmp_path / "new.db"
     conn = sqlite3.connect(db)
@@ -207,6 +237,12 @@ def test_failure_late_in_import_rolls_back_everything(sample_map: Path, tmp_path
         assert repo.get("lm0003") is not None and len(repo.find_by_name("sign lm0003")) == 1
         repo.import_landmarks(records[:-1])
         assert repo.count() == 50 + 20_999 and repo.get("x20998") is not None
+        conn = repo._conn
+        assert conn.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+        assert conn.execute("PRAGMA foreign_key_check").fetchall() == []
+        assert conn.execute("SELECT rtreecheck('landmarks_rtree')").fetchone()[0] == "ok"
+        assert {r[1] for r in conn.execute("PRAGMA index_list(landmarks)")} == {
+            "landmarks_id", "landmarks_name"}
 
 
 @pytest.mark.parametrize("bulk_rows", ["1000000000", "1000"])
