@@ -160,15 +160,20 @@ class AdaptiveTracker:
 
     def _compensated(self, window: Window) -> Window:
         """The window with the illumination gain removed (per channel, clipped to 0..255)."""
-        band = self.config.gain_deadband
-        excess = np.sign(self._gain - 1.0) * np.maximum(np.abs(self._gain - 1.0) - band, 0.0)
-        mode = self.config.gain_compensation
-        off = mode == "never" or (mode == "colour" and self._cue != "colour")
-        if off or np.abs(excess).max() < 0.01:
+        gain = self._effective_gain(self._gain).astype(np.float32)
+        if not self._gain_applies() or np.abs(gain - 1.0).max() < 0.01:
             return window
-        gain = (1.0 + excess).astype(np.float32)  # a dead band keeps small drifts uncorrected
         patch = np.clip(window.patch * gain, 0, 255).astype(np.uint8)
         return Window(window.x0, window.y0, window.fx, window.fy, patch)
+
+    def _gain_applies(self) -> bool:
+        mode = self.config.gain_compensation
+        return mode == "always" or (mode == "colour" and self._cue == "colour")
+
+    def _effective_gain(self, gain: FloatArray) -> FloatArray:
+        """The gain applied: a dead band (``gain_deadband``) keeps small drifts uncorrected."""
+        band = self.config.gain_deadband
+        return 1.0 + np.sign(gain - 1.0) * np.maximum(np.abs(gain - 1.0) - band, 0.0)
 
     def _frame_gain(self, image: npt.NDArray[np.uint8]) -> None:
         """gain <- (1-r) gain + r * (first frame's mean / this frame's mean), on a 1/8 grid."""
@@ -179,13 +184,33 @@ class AdaptiveTracker:
         self._gain = (1.0 - rate) * self._gain + rate * np.clip(ratio, 0.25, 4.0)
 
     def _update_gain(self, raw: Window, state: FloatArray) -> None:
-        """gain <- (1-r) gain + r * (first-frame target mean / current target mean)."""
+        """gain <- (1-r) gain + r * (first-frame target mean / current target mean).
+
+        With ``gain_check`` the new gain is kept only if the target box, compensated with it,
+        looks at least as much like the model as with the old gain.
+        """
         current = self._box_mean(raw, state)
         ratio = np.clip(self._ref_mean / current, 0.25, 4.0)
         if self.config.gain_mode == "grey":
             ratio = np.full(3, min(max(float(self._ref_mean.sum() / current.sum()), 0.25), 4.0))
         rate = self.config.gain_rate
-        self._gain = (1.0 - rate) * self._gain + rate * ratio
+        proposed = (1.0 - rate) * self._gain + rate * ratio
+        if self.config.gain_check and self._gain_applies():
+            rhos = self._rho_under_gains(raw, state, np.stack([self._gain, proposed]))
+            if rhos[1] < rhos[0]:
+                return
+        self._gain = proposed
+
+    def _rho_under_gains(self, raw: Window, state: FloatArray, gains: FloatArray) -> FloatArray:
+        """Bhattacharyya ``rho`` of the box ``state`` against the model, per gain (G, 3)."""
+        cfg = self.config
+        centre = raw.to_patch(state[None, :2])
+        channels = np.moveaxis(raw.patch, 2, 0).astype(np.intp)
+        pixels = sample_bins(channels, centre, self._half(state[2], raw), cfg.sample_grid)[:, 0].T
+        effective = np.stack([self._effective_gain(g) for g in gains])
+        lit = np.clip(pixels[None] * effective[:, None, :], 0, 255).astype(np.uint8)
+        planes = feature_bins(lit, self._model.features, cfg.bins, cfg.stretch_features)
+        return bhattacharyya(self._sample_histograms(planes), self._model_hist())
 
     def _likelihood(self, window: Window) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float32]]:
         """Bin images of the selected features and their mean back-projected LLR image."""
@@ -250,11 +275,15 @@ class AdaptiveTracker:
         self, planes: npt.NDArray[np.intp], centres: FloatArray, halves: FloatArray
     ) -> FloatArray:
         """Kernel histograms (eq. 2) of the appearance model: joint or per-feature."""
+        samples = sample_bins(planes, centres, halves, self.config.sample_grid)
+        return self._sample_histograms(samples)
+
+    def _sample_histograms(self, samples: npt.NDArray[np.intp]) -> FloatArray:
+        """Kernel histograms from bins sampled on the kernel grid, (k, P, m) -> (P, ...)."""
         cfg = self.config
-        samples = sample_bins(planes, centres, halves, cfg.sample_grid)
         if cfg.appearance == "joint":
             joint = joint_planes(samples, cfg.bins, cfg.joint_bins)
-            nbins = cfg.joint_bins ** planes.shape[0]
+            nbins = cfg.joint_bins ** samples.shape[0]
             return histograms_from_samples(joint, cfg.sample_grid, nbins)
         return histograms_from_samples(samples, cfg.sample_grid, cfg.bins)
 
@@ -325,11 +354,21 @@ class AdaptiveTracker:
     def _llr_factor(
         self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
     ) -> FloatArray:
-        """``exp(gain * (mean LLR in box - max over particles))``: the likelihood image's vote."""
+        """``exp(gain * (vote - max over particles))``: the likelihood image's vote.
+
+        The vote is the mean LLR in the box minus, with ``llr_vote = "contrast"``, the mean
+        LLR in the ring around it (the ranking's ring, ``ring_area_ratio``).  The box mean
+        alone favours boxes smaller than the target (its most distinctive pixels); the
+        contrast drops both when background enters the box and when target enters the ring.
+        """
         table: FloatArray = np.asarray(cv2.integral(lik, sdepth=cv2.CV_64F), np.float64)[None]
         sums, area = window_sums(table, centres, halves)
-        mean = sums[0] / np.maximum(area, 1.0)
-        return np.exp(self.config.llr_gain * (mean - mean.max()))
+        vote = sums[0] / np.maximum(area, 1.0)
+        if self.config.llr_vote == "contrast":
+            grow = float(np.sqrt(1.0 + self.config.ring_area_ratio))
+            outer, outer_area = window_sums(table, centres, halves * grow)
+            vote = vote - (outer[0] - sums[0]) / np.maximum(outer_area - area, 1.0)
+        return np.exp(self.config.llr_gain * (vote - vote.max()))
 
     def _accept(
         self, window: Window, state: FloatArray, hist: FloatArray, rho: float
@@ -349,7 +388,10 @@ class AdaptiveTracker:
             self._model.recent = (1.0 - rate) * self._model.recent + rate * hist
         self._since_rank += 1
         low = confidence < cfg.rerank_below_confidence and self._since_rank >= 3
-        if self._since_rank >= cfg.rerank_every_frames or low:
+        due = self._since_rank >= cfg.rerank_every_frames or low
+        # never below lost_below_confidence: features chosen against a ring around a box the
+        # target has left make that background look like the target
+        if due and confidence >= cfg.lost_below_confidence:
             self._model = self._rank(window, state, not low)
             self._since_rank = 0
         return self._result(self._box(state), confidence)

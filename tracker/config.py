@@ -29,6 +29,7 @@ class TrackerConfig:
     gain_core_frac: float = field(default=1.0, metadata={"gt": 0.0, "le": 1.0})
     gain_mode: Literal["grey", "colour"] = "grey"
     gain_deadband: float = field(default=0.0, metadata={"ge": 0.0, "lt": 1.0})
+    gain_check: bool = True
     gain_rate: float = field(default=0.3, metadata={"gt": 0.0, "le": 1.0})
     appearance: Literal["joint", "marginal"] = "joint"
     joint_bins: int = field(default=8, metadata={"ge": 2, "le": 32})
@@ -41,6 +42,7 @@ class TrackerConfig:
     ring_area_ratio: float = field(default=1.0, metadata={"gt": 0.0, "le": 8.0})
     loglik_floor: float = field(default=0.001, metadata={"gt": 0.0, "lt": 1.0})
     llr_gain: float = field(default=1.5, metadata={"ge": 0.0})
+    llr_vote: Literal["box", "contrast"] = "contrast"
     omega: float = field(default=50.0, metadata={"gt": 0.0})
     weight_threshold: float = field(default=0.02, metadata={"ge": 0.0, "lt": 1.0})
     motion_history_frames: int = field(default=5, metadata={"ge": 1})
