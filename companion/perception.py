@@ -40,12 +40,15 @@ from tracker.acquire import (
     AcquireConfig,
     Reference,
     ReferenceMatcher,
+    Weights,
     homography_to,
     project_corners,
     refine_ecc,
     search_template,
 )
-from tracker.camera import CameraModel
+from tracker.boxes import box_corners, box_iou, clip_box, in_view_share, inside
+from tracker.camera import CameraModel, Rectifier
+from tracker.features import colour_weights
 from tracker.pose.config import PoseConfig
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.solve import solve_pose
@@ -61,6 +64,7 @@ from tracker.pose.types import (
 from tracker.types import Box, TrackResult
 
 FloatArray = npt.NDArray[np.float64]
+COLOUR_WEIGHTS = colour_weights()  # (49, 3) (w_r, w_g, w_b): the tracker's colour features
 
 
 @dataclass(frozen=True)
@@ -128,6 +132,9 @@ class Track:
     features: tuple[int, ...] = ()
     corners: FloatArray | None = None
     misses: int = 0
+    #: the colour feature the corners are aligned on: the tracker's best at acquisition,
+    #: when the box was verified (None: grey levels)
+    align_weights: Weights | None = None
 
 
 @dataclass(frozen=True)
@@ -138,34 +145,20 @@ class Start:
     event: dict[str, Any]
 
 
+#: ECC correlation a running track's alignment must reach (a new sighting: verify_correlation).
+TRACK_MIN_CORRELATION = 0.6
+
+
+def feature_weights_bgr(features: Sequence[int]) -> Weights | None:
+    """(w_b, w_g, w_r) of the tracker's best colour feature; None for grey cues or none."""
+    if not features or features[0] >= len(COLOUR_WEIGHTS):
+        return None
+    r, g, b = (float(v) for v in COLOUR_WEIGHTS[features[0]])
+    return (b, g, r)
+
+
 #: How many frames' fixes are kept for housekeeping to look up.
 RECENT_FIXES = 8
-
-
-def box_iou(a: Box, b: Box) -> float:
-    """Intersection over union of two (x, y, w, h) boxes."""
-    x0, y0 = max(a[0], b[0]), max(a[1], b[1])
-    x1, y1 = min(a[0] + a[2], b[0] + b[2]), min(a[1] + a[3], b[1] + b[3])
-    inter = max(0.0, x1 - x0) * max(0.0, y1 - y0)
-    union = a[2] * a[3] + b[2] * b[3] - inter
-    return inter / union if union > 0 else 0.0
-
-
-def box_motion(old: Box, new: Box) -> FloatArray:
-    """The similarity (scale about the centre + shift) taking box ``old`` to box ``new``."""
-    s = float(np.sqrt((new[2] * new[3]) / max(old[2] * old[3], 1e-9)))
-    ocx, ocy = old[0] + old[2] / 2, old[1] + old[3] / 2
-    ncx, ncy = new[0] + new[2] / 2, new[1] + new[3] / 2
-    return np.array([[s, 0.0, ncx - s * ocx], [0.0, s, ncy - s * ocy], [0.0, 0.0, 1.0]])
-
-
-def clip_box(box: Box, width: int, height: int) -> Box | None:
-    """``box`` cut to the image; None when too little is left to track."""
-    x0, y0 = max(0.0, box[0]), max(0.0, box[1])
-    x1, y1 = min(float(width), box[0] + box[2]), min(float(height), box[1] + box[3])
-    if x1 - x0 < 4 or y1 - y0 < 4:
-        return None
-    return (x0, y0, x1 - x0, y1 - y0)
 
 
 class Perception:
@@ -180,7 +173,10 @@ class Perception:
                  acquire_config: AcquireConfig | None = None,
                  gate_config: FixGateConfig | None = None, seed: int = 0,
                  detect: DetectFn | None = None) -> None:
-        self.camera = camera
+        # a distorted camera's frames are rectified first: tracking, alignment and the pose
+        # then work in the pinhole image of ``self.camera`` (same intrinsics)
+        self._rectify = Rectifier(camera) if any(camera.distortion) else None
+        self.camera = camera if self._rectify is None else self._rectify.camera
         self.landmarks = list(landmarks)
         self.config = config or PerceptionConfig()
         self.tracker_config = tracker_config
@@ -204,6 +200,7 @@ class Perception:
         self._events_next: list[dict[str, Any]] = []
         self._pending: list[Start] = []
         self._fixes: dict[int, PoseFix] = {}  # frame index -> its fix (the last few)
+        self._rectified: dict[int, npt.NDArray[np.uint8]] = {}  # the same, rectified frames
         # housekeeping's own
         self._last_fix_us = -(2**62)
         self._acquired_frame = -(2**62)
@@ -225,6 +222,12 @@ class Perception:
             return FrameResult(frame.index, frame.t_us, bad_frame=True,
                                no_fix_reason=f"frame {image.shape[1]}x{image.shape[0]} is "
                                f"not the camera's {self.camera.width}x{self.camera.height}")
+        if self._rectify is not None:
+            image = self._rectify(image)
+            with self._lock:  # for this frame's housekeeping (which may skip frames)
+                self._rectified[frame.index] = image
+                for old in [i for i in self._rectified if i <= frame.index - RECENT_FIXES]:
+                    del self._rectified[old]
         gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
         tracks = list(self.tracks.values())
         for track, alive in zip(tracks, self._update_tracks(tracks, image, gray), strict=True):
@@ -272,18 +275,21 @@ class Perception:
             return
         with self._lock:
             fix = self._fixes.get(frame.index)
+            image = self._rectified.pop(frame.index, frame.image)
+            for old in [i for i in self._rectified if i < frame.index]:
+                del self._rectified[old]
         starts: list[Start] = []
         if self._should_acquire(frame.index):
             self._acquired_frame = frame.index
-            starts += self._acquire(frame.image)
+            starts += self._acquire(image)
         if fix is not None:
             self._last_fix_us = fix.time_us
-            starts += self._predict_acquire(frame.image, fix, starts)
+            starts += self._predict_acquire(image, fix, starts)
         elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
             if self.detect is not None:
-                starts += self._detect_acquire(frame.image)
+                starts += self._detect_acquire(image)
             else:
-                starts += self._search(frame.image)
+                starts += self._search(image)
         if starts:
             with self._lock:
                 self._pending += starts
@@ -302,7 +308,7 @@ class Perception:
             return True
         if track.homography is not None:
             predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
-            aligned = self._align(track.landmark_id, gray, predicted, track.box)
+            aligned = self._align(track, image, gray, predicted)
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
             if aligned is not None:
@@ -312,11 +318,15 @@ class Perception:
             self._recover_corners(track, image, gray)
         return True
 
-    def _align(self, lid: str, gray: npt.NDArray[np.uint8], hom: FloatArray,
-               box: Box, verify: bool = False) -> FloatArray | None:
-        """ECC alignment of the reference, kept only if it agrees with the tracker's box."""
-        ref = self.matcher.references[lid]
-        aligned = self._ecc(ref, gray, hom, verify)
+    def _align(self, track: Track, image: npt.NDArray[np.uint8], gray: npt.NDArray[np.uint8],
+               hom: FloatArray, verify: bool = False) -> FloatArray | None:
+        """ECC alignment of the reference on the tracker's best colour feature (grey levels
+        for a grey target), kept only if it agrees with the tracker's box."""
+        ref = self.matcher.references[track.landmark_id]
+        weights = track.align_weights
+        frame = gray if weights is None else image
+        aligned = self._ecc(ref, frame, hom, verify, weights)
+        box = track.box
         if aligned is None:
             return None
         corners = project_corners(ref, aligned)
@@ -326,16 +336,14 @@ class Perception:
             return None  # the alignment wandered off: keep the box, drop the corners
         return aligned
 
-    def _ecc(self, ref: Reference, gray: npt.NDArray[np.uint8], hom: FloatArray,
-             verify: bool = True) -> FloatArray | None:
+    def _ecc(self, ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
+             verify: bool = True, weights: Weights | None = None) -> FloatArray | None:
         """ECC alignment with this perception's settings; ``verify``: a new sighting,
         held to ``verify_correlation`` (a running track to refine_ecc's default)."""
         cfg = self.config
-        if verify:
-            return refine_ecc(ref, gray, hom, cfg.ecc_iterations, cfg.verify_correlation,
-                              cfg.ecc_fine_iterations)
-        return refine_ecc(ref, gray, hom, cfg.ecc_iterations,
-                          fine_iterations=cfg.ecc_fine_iterations)
+        least = cfg.verify_correlation if verify else TRACK_MIN_CORRELATION
+        return refine_ecc(ref, frame, hom, cfg.ecc_iterations, least, cfg.ecc_fine_iterations,
+                          weights)
 
     def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8],
                          gray: npt.NDArray[np.uint8]) -> None:
@@ -344,8 +352,8 @@ class Perception:
         first: it is cheaper, and finds plates too small or plain for feature matching."""
         lid = track.landmark_id
         ref = self.matcher.references[lid]
-        aligned = self._align(lid, gray, homography_to(ref, box_corners(track.box)),
-                              track.box, verify=True)
+        aligned = self._align(track, image, gray, homography_to(ref, box_corners(track.box)),
+                              verify=True)
         if aligned is not None:
             track.homography, track.corners = aligned, project_corners(ref, aligned)
             track.misses = 0
@@ -399,7 +407,9 @@ class Perception:
         """A tracker for landmark ``lid`` in ``box`` with a verified homography."""
         tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + self._busy(starts))
         tracker.init(image, box)
-        return Start(Track(lid, tracker, box, hom, corners=corners),
+        track = Track(lid, tracker, box, hom, corners=corners,
+                      align_weights=feature_weights_bgr(tracker.features))
+        return Start(track,
                      {"event": "acquired", "landmark": lid, "by": by,
                       "box": [round(v, 1) for v in box]})
 
@@ -570,33 +580,6 @@ class PerceptionWrapper:
 
     def close(self) -> None:
         self.perception.close()
-
-
-def box_corners(box: Box) -> FloatArray:
-    """The corners TL, TR, BR, BL of an (x, y, w, h) box."""
-    x, y, w, h = box
-    return np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], np.float64)
-
-
-def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:
-    """All corners at least ``margin`` px inside the image."""
-    return bool(np.all(corners >= margin) and np.all(corners[:, 0] <= width - margin)
-                and np.all(corners[:, 1] <= height - margin))
-
-
-def in_view_share(corners: FloatArray, width: int, height: int) -> float:
-    """Share of the quadrilateral's area inside the image (0 for a degenerate quad)."""
-    quad = np.asarray(corners, np.float32).reshape(-1, 1, 2)
-    area = abs(float(cv2.contourArea(quad)))
-    if area <= 0.0:
-        return 0.0
-    frame = np.array([[0, 0], [width, 0], [width, height], [0, height]],
-                     np.float32).reshape(-1, 1, 2)
-    try:
-        common, _ = cv2.intersectConvexConvex(quad, frame)
-    except cv2.error:  # not convex: no trustworthy corners either
-        return 0.0
-    return min(1.0, max(0.0, float(common)) / area)
 
 
 def pose_json(fix: PoseFix) -> dict[str, Any]:

@@ -55,6 +55,29 @@ class Reference:
     gray: npt.NDArray[np.float32]
     matchable: bool = True
     colour: npt.NDArray[np.uint8] = field(default_factory=lambda: np.zeros((1, 1, 3), np.uint8))
+    #: ``colour`` projected on colour features (see :func:`reference_plane`), made on demand
+    planes: dict[tuple[float, float, float], npt.NDArray[np.float32]] = field(
+        default_factory=dict, compare=False, repr=False)
+
+
+Weights = tuple[float, float, float]
+
+
+def reference_plane(ref: Reference, weights_bgr: Weights | None) -> npt.NDArray[np.float32]:
+    """The reference as one float plane: grey levels, or ``colour @ weights_bgr`` (kept)."""
+    if weights_bgr is None:
+        return ref.gray
+    plane = ref.planes.get(weights_bgr)
+    if plane is None:  # two threads may both make it: the same values, no harm
+        plane = project(ref.colour, weights_bgr)
+        ref.planes[weights_bgr] = plane
+    return plane
+
+
+def project(image_bgr: npt.NDArray[np.uint8], weights_bgr: Weights) -> npt.NDArray[np.float32]:
+    """``w_b B + w_g G + w_r R`` per pixel, float32."""
+    return np.asarray(cv2.transform(image_bgr.astype(np.float32),
+                                    np.asarray([weights_bgr], np.float32)), np.float32)
 
 
 @dataclass(frozen=True)
@@ -242,9 +265,10 @@ def homography_to(ref: Reference, corners_px: FloatArray) -> FloatArray:
                       np.float64)
 
 
-def refine_ecc(ref: Reference, frame_gray: npt.NDArray[np.uint8], hom: FloatArray,
+def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
                iterations: int = 40, min_correlation: float = 0.6,
-               fine_iterations: int = 10) -> FloatArray | None:
+               fine_iterations: int = 10, weights_bgr: Weights | None = None
+               ) -> FloatArray | None:
     """Sub-pixel homography (reference -> frame) by ECC alignment, from an estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
@@ -259,11 +283,16 @@ def refine_ecc(ref: Reference, frame_gray: npt.NDArray[np.uint8], hom: FloatArra
     ~1 px), then ``fine_iterations`` unsmoothed at full resolution from there (exact, but
     only from close by).  On the simulated world's plates this took the corner error from
     0.45 to 0.13 px RMS (docs/pose.md, "Corner accuracy").
+
+    ``frame`` is grey (H, W) and aligned with the reference's grey levels, or, with
+    ``weights_bgr``, BGR (H, W, 3) and aligned on that colour feature of both (the
+    tracker's best feature separates the plate from what surrounds it, where grey levels
+    may not: an edge without grey contrast cannot hold a corner).
     """
     corners = project_corners(ref, hom)
     if not np.all(np.isfinite(corners)):
         return None
-    height, width = frame_gray.shape[:2]
+    height, width = frame.shape[:2]
     margin = 0.15 * float(np.ptp(corners, axis=0).max()) + 6.0
     x0, y0 = np.floor(np.maximum(corners.min(axis=0) - margin, 0)).astype(int)
     x1 = int(min(np.ceil(corners[:, 0].max() + margin), width))
@@ -273,13 +302,14 @@ def refine_ecc(ref: Reference, frame_gray: npt.NDArray[np.uint8], hom: FloatArra
     w, h = ref.size_px
     quad_area = float(cv2.contourArea(corners.astype(np.float32)))
     scale = float(np.clip(np.sqrt(max(quad_area, 1.0) / (w * h)), 0.05, 1.0))
-    template = np.asarray(cv2.resize(ref.gray, (max(8, round(w * scale)),
-                                                max(8, round(h * scale))),
+    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    template = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
                                      interpolation=cv2.INTER_AREA), np.float32)
     s_ref = resize_map((w, h), template.shape[1::-1])  # ref -> template
     t_roi = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # roi -> frame
     warp = np.linalg.inv(t_roi) @ hom @ np.linalg.inv(s_ref)  # template -> roi
-    roi = frame_gray[y0:y1, x0:x1].astype(np.float32)
+    crop = frame[y0:y1, x0:x1]
+    roi = crop.astype(np.float32) if weights_bgr is None else project(crop, weights_bgr)
     try:
         cc, warp = _ecc_coarse(template, roi, warp, iterations)
         if fine_iterations > 0:

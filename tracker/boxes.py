@@ -1,0 +1,58 @@
+"""Boxes and quadrilaterals in image pixels: overlap, clipping, corners, share in view.
+
+Boxes are (x, y, w, h) with (x, y) the top-left corner; quadrilaterals are 4x2 corner
+arrays TL, TR, BR, BL.  Pure numpy / OpenCV.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from tracker.geometry import FloatArray
+from tracker.types import Box
+
+
+def box_iou(a: Box, b: Box) -> float:
+    """Intersection over union of two (x, y, w, h) boxes."""
+    x0, y0 = max(a[0], b[0]), max(a[1], b[1])
+    x1, y1 = min(a[0] + a[2], b[0] + b[2]), min(a[1] + a[3], b[1] + b[3])
+    inter = max(0.0, x1 - x0) * max(0.0, y1 - y0)
+    union = a[2] * a[3] + b[2] * b[3] - inter
+    return inter / union if union > 0 else 0.0
+
+
+def clip_box(box: Box, width: int, height: int) -> Box | None:
+    """``box`` cut to the image; None when too little is left to track."""
+    x0, y0 = max(0.0, box[0]), max(0.0, box[1])
+    x1, y1 = min(float(width), box[0] + box[2]), min(float(height), box[1] + box[3])
+    if x1 - x0 < 4 or y1 - y0 < 4:
+        return None
+    return (x0, y0, x1 - x0, y1 - y0)
+
+
+def box_corners(box: Box) -> FloatArray:
+    """The corners TL, TR, BR, BL of an (x, y, w, h) box."""
+    x, y, w, h = box
+    return np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], np.float64)
+
+
+def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:
+    """All corners at least ``margin`` px inside the image."""
+    return bool(np.all(corners >= margin) and np.all(corners[:, 0] <= width - margin)
+                and np.all(corners[:, 1] <= height - margin))
+
+
+def in_view_share(corners: FloatArray, width: int, height: int) -> float:
+    """Share of the quadrilateral's area inside the image (0 for a degenerate quad)."""
+    quad = np.asarray(corners, np.float32).reshape(-1, 1, 2)
+    area = abs(float(cv2.contourArea(quad)))
+    if area <= 0.0:
+        return 0.0
+    frame = np.array([[0, 0], [width, 0], [width, height], [0, height]],
+                     np.float32).reshape(-1, 1, 2)
+    try:
+        common, _ = cv2.intersectConvexConvex(quad, frame)
+    except cv2.error:  # not convex: no trustworthy corners either
+        return 0.0
+    return min(1.0, max(0.0, float(common)) / area)
