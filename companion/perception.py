@@ -157,6 +157,10 @@ def feature_weights_bgr(features: Sequence[int]) -> Weights | None:
     return (b, g, r)
 
 
+#: Trackers started n-th re-rank their features n x this many frames apart (a re-rank costs
+#: a few ms: several on one frame showed in the latency's tail).
+RANK_PHASE_STEP = 3
+
 #: How many frames' fixes are kept for housekeeping to look up.
 RECENT_FIXES = 8
 
@@ -405,8 +409,9 @@ class Perception:
     def _start(self, lid: str, image: npt.NDArray[np.uint8], box: Box, hom: FloatArray,
                corners: FloatArray, by: str, starts: Sequence[Start]) -> Start:
         """A tracker for landmark ``lid`` in ``box`` with a verified homography."""
-        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + self._busy(starts))
-        tracker.init(image, box)
+        busy = self._busy(starts)
+        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + busy)
+        tracker.init(image, box, rank_phase=RANK_PHASE_STEP * busy)
         track = Track(lid, tracker, box, hom, corners=corners,
                       align_weights=feature_weights_bgr(tracker.features))
         return Start(track,

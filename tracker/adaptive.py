@@ -69,8 +69,13 @@ class AdaptiveTracker:
         self._shape: tuple[int, ...] | None = None
 
     # ------------------------------------------------------------------ public API
-    def init(self, image_bgr: npt.NDArray[np.uint8], box: Box) -> None:
-        """Start tracking the target inside ``box`` = (x, y, w, h) of the first frame."""
+    def init(self, image_bgr: npt.NDArray[np.uint8], box: Box, rank_phase: int = 0) -> None:
+        """Start tracking the target inside ``box`` = (x, y, w, h) of the first frame.
+
+        ``rank_phase`` shifts the periodic re-ranking by that many frames: trackers started
+        together with different phases do not all re-rank on the same frame (a caller
+        tracking several targets in real time keeps its per-frame cost even).
+        """
         image = check_image(image_bgr)
         x, y, w, h = check_box(box, image.shape)
         cfg = self.config
@@ -88,7 +93,7 @@ class AdaptiveTracker:
         self._model = self._rank(window, self._state)
         self._particles = np.tile(self._state, (cfg.particles, 1))
         self._history: list[tuple[float, float]] = [(self._state[0], self._state[1])]
-        self._since_rank = 0
+        self._since_rank = rank_phase % cfg.rerank_every_frames
         self._low_frames = 0
         self._lost_frames = 0
 
