@@ -258,7 +258,11 @@ class CompanionApp:
         self._slot.close()
 
     async def _handle(self, result: FrameResult) -> None:
+        """The fix goes on the wire first; counting and reporting come after it."""
         now_s = self.clock_s()
+        sent = result.fix is not None and await self.sink.send_fix(result.fix)
+        if sent:
+            self.stats.capture_to_wire_ms.add((now_us() - result.capture_t_us) / 1000.0)
         self.counters.frames += 1
         self.stats.fps.tick(now_s)
         self._recent_bad = [*self._recent_bad[-29:], result.bad_frame]
@@ -273,10 +277,9 @@ class CompanionApp:
             self._ever_tracked = True
         if result.fix is None:
             self.counters.no_fix += 1
-        elif await self.sink.send_fix(result.fix):
+        elif sent:
             self.counters.fixes_sent += 1
             self._last_fix_s = now_s
-            self.stats.capture_to_wire_ms.add((now_us() - result.capture_t_us) / 1000.0)
             if result.pose_json is not None:
                 own = self.sink.autopilot_position_ned()  # to plot the fix against it
                 extra = {} if own is None else {"autopilot_position_ned_m": own}

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import os
+import threading
 import time
 from collections import Counter
 from collections.abc import Iterable, Iterator
@@ -25,28 +27,41 @@ from companion.errors import InputError
 FORMAT = "landmark-companion-flightlog"
 VERSION = 1
 
+log = logging.getLogger(__name__)
+
 
 class FlightLogWriter:
-    """Append-only JSON-lines writer; safe to use from one thread at a time."""
+    """Append-only JSON-lines writer; safe to use from one thread at a time.
 
-    def __init__(self, path: Path, vehicle_id: str, fsync_interval_s: float = 1.0,
-                 clock: Any = time.monotonic) -> None:
+    Records go to the operating system as they are written (line-buffered); the fsync that
+    bounds what a power cut loses runs every ``fsync_interval_s`` on a thread of its own,
+    because an fsync can take milliseconds and the writer is the pipeline's event loop.
+    """
+
+    def __init__(self, path: Path, vehicle_id: str, fsync_interval_s: float = 1.0) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._clock = clock
-        self._fsync_interval_s = fsync_interval_s
         self._file: TextIO = self.path.open("a", encoding="utf-8", buffering=1)
-        self._last_sync_s = self._clock()
         self.records = 0
+        self.syncs = 0
         self._emit({"kind": "header", "format": FORMAT, "version": VERSION,
                     "vehicle": vehicle_id, "started_unix_s": round(time.time(), 3)})
+        self._closing = threading.Event()
+        self._syncer = threading.Thread(target=self._sync_loop, args=(fsync_interval_s,),
+                                        name="flightlog-fsync", daemon=True)
+        self._syncer.start()
 
     def _emit(self, record: dict[str, Any]) -> None:
         self._file.write(json.dumps(record, default=_plain, allow_nan=False) + "\n")
-        now = self._clock()
-        if now - self._last_sync_s >= self._fsync_interval_s:
-            os.fsync(self._file.fileno())
-            self._last_sync_s = now
+
+    def _sync_loop(self, interval_s: float) -> None:
+        fd = self._file.fileno()
+        while not self._closing.wait(interval_s):
+            try:
+                os.fsync(fd)  # what write() handed the OS (each record, line-buffered)
+                self.syncs += 1
+            except OSError as err:  # a full or vanished disk: the writes will say so too
+                log.warning("flight log fsync failed: %s", err)
 
     def write(self, kind: str, t_us: int, **fields: Any) -> None:
         """Append one record of ``kind`` at time ``t_us`` (companion clock, microseconds)."""
@@ -54,7 +69,9 @@ class FlightLogWriter:
         self.records += 1
 
     def close(self) -> None:
-        """Flush and fsync; the file stays valid for readers."""
+        """Stop the fsync thread, flush and fsync; the file stays valid for readers."""
+        self._closing.set()
+        self._syncer.join()
         if not self._file.closed:
             self._file.flush()
             os.fsync(self._file.fileno())

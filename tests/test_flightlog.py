@@ -126,3 +126,20 @@ def test_cli_show_and_export(tmp_path: Path) -> None:
     missing = companion("log", "show", str(tmp_path / "none.jsonl"))
     assert missing.returncode == 2
     assert missing.stderr.strip() == f"{tmp_path / 'none.jsonl'}: no such flight log"
+
+
+def test_fsync_runs_on_its_own_thread_and_close_leaves_none(tmp_path: Path) -> None:
+    """The periodic fsync (power-cut bound) runs off the writer's thread -- the writer is
+    the pipeline's event loop -- and closing stops that thread."""
+    import threading
+    import time
+
+    log = FlightLogWriter(tmp_path / "f.jsonl", "v1", fsync_interval_s=0.02)
+    log.write("fix", 1)
+    deadline = time.monotonic() + 5.0
+    while log.syncs < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert log.syncs >= 2
+    assert any(t.name == "flightlog-fsync" for t in threading.enumerate())
+    log.close()
+    assert not any(t.name == "flightlog-fsync" for t in threading.enumerate())

@@ -6,7 +6,7 @@ import dataclasses
 
 import cv2
 import numpy as np
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from companion.sim.render import Renderer
@@ -31,19 +31,33 @@ def landmark_mask(camera: CameraModel, world: World, state: VehicleState) -> np.
     return diff > contrast / 2
 
 
-def boundary_distance(poly: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+def signed_distance(poly: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """Distance of each (row, col) pixel centre to the outline, positive inside."""
     contour = poly.reshape(-1, 1, 2).astype(np.float32)
-    return np.array([abs(cv2.pointPolygonTest(contour, (float(x), float(y)), True))
+    return np.array([cv2.pointPolygonTest(contour, (float(x), float(y)), True)
                      for y, x in pixels])
 
 
+def boundary_distance(poly: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    return np.abs(signed_distance(poly, pixels))
+
+
 def check_mask_matches(mask: np.ndarray, outline: np.ndarray, min_pixels: int = 500) -> None:
-    truth = np.zeros(mask.shape, np.uint8)
-    cv2.fillPoly(truth, [np.round(outline * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
-    disagree = np.argwhere(mask != truth.astype(bool))
+    """Every pixel the landmark changed has its centre inside the outline and every pixel
+    centre inside it was changed, but for pixels within 1 px of the outline (edge
+    sampling).  The truth is exact: fillPoly's raster only picks the pixels to check (it
+    also takes some centres up to ~1 px outside an edge, which are not the landmark's)."""
+    raster = np.zeros(mask.shape, np.uint8)
+    cv2.fillPoly(raster, [np.round(outline * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
     assert mask.sum() > min_pixels  # the landmark really is in the picture
-    if len(disagree):
-        assert boundary_distance(outline, disagree).max() <= 1.0
+    candidates = np.argwhere(mask != raster.astype(bool))
+    if len(candidates):
+        signed = signed_distance(outline, candidates)
+        inside = signed >= 0.0
+        changed = mask[candidates[:, 0], candidates[:, 1]]
+        wrong = changed != inside
+        if wrong.any():
+            assert np.abs(signed[wrong]).max() <= 1.0
 
 
 def test_corners_and_box_match_rendered_pixels(one_landmark_world, east_state, camera) -> None:
@@ -109,6 +123,9 @@ def test_partly_in_view_is_clipped(one_landmark_world, camera) -> None:
     yaw_deg=st.floats(70.0, 110.0), pitch_deg=st.floats(-15.0, 15.0),
     roll_deg=st.floats(-10.0, 10.0), size=st.floats(0.5, 3.0),
 )
+# found by a full-suite run: fillPoly's raster took a centre 1.012 px outside an edge
+@example(north=-1.3671875, east=11.7890625, down=-1.5, yaw_deg=105.71875,
+         pitch_deg=11.7890625, roll_deg=-4.75, size=3.0)
 def test_truth_matches_pixels_for_random_poses(
     north: float, east: float, down: float, yaw_deg: float, pitch_deg: float,
     roll_deg: float, size: float,
