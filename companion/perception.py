@@ -26,8 +26,7 @@ from __future__ import annotations
 import concurrent.futures
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import cv2
 import numpy as np
@@ -35,6 +34,15 @@ import numpy.typing as npt
 
 from companion.app import Frame, FrameResult
 from companion.fixgate import FixGate, FixGateConfig
+from companion.perception_types import (
+    TRACK_MIN_CORRELATION,
+    DetectFn,
+    PerceptionConfig,
+    SideSensors,
+    Start,
+    Track,
+    feature_weights_bgr,
+)
 from tracker import AdaptiveTracker, TrackerConfig
 from tracker.acquire import (
     AcquireConfig,
@@ -48,113 +56,18 @@ from tracker.acquire import (
 )
 from tracker.boxes import box_corners, box_iou, clip_box, in_view_share, inside
 from tracker.camera import CameraModel, Rectifier
-from tracker.features import colour_weights
 from tracker.pose.config import PoseConfig
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.solve import solve_pose
 from tracker.pose.types import (
-    AltitudeSample,
-    AttitudeSample,
     MapLandmark,
     NoFix,
     Observation,
     PoseFix,
-    RangeSample,
 )
 from tracker.types import Box, TrackResult
 
 FloatArray = npt.NDArray[np.float64]
-COLOUR_WEIGHTS = colour_weights()  # (49, 3) (w_r, w_g, w_b): the tracker's colour features
-
-
-@dataclass(frozen=True)
-class PerceptionConfig:
-    """How often to look for untracked landmarks and how far to trust a track."""
-
-    acquire_every_frames: int = field(default=15, metadata={"ge": 1})
-    max_tracks: int = field(default=8, metadata={"ge": 1})
-    min_track_confidence: float = field(default=0.2, metadata={"ge": 0, "le": 1})
-    refine_corners: bool = True
-    min_corner_agreement: float = field(default=0.5, metadata={"gt": 0, "le": 1})
-    ecc_iterations: int = field(default=10, metadata={"ge": 1})
-    #: Unsmoothed ECC iterations after the smoothed ones (tracker.acquire.refine_ecc).
-    ecc_fine_iterations: int = field(default=6, metadata={"ge": 0})
-    #: A track's corners feed the pose only while this share of its quadrilateral is in
-    #: the image: corners extrapolated from a sliver are off by pixels.
-    min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
-    max_corner_misses: int = field(default=5, metadata={"ge": 1})
-    verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
-    max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
-    #: Without a fix for this long, search the whole frame for one landmark per frame.
-    search_after_s: float = field(default=0.3, metadata={"ge": 0})
-    search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
-    search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
-    #: Acquire with the landmark detector ([detector]) instead of the template search.
-    use_detector: bool = False
-    #: Update the tracks of one frame on two threads (OpenCV and most of numpy release
-    #: the GIL): lower latency with several landmarks in view, the same CPU time.
-    parallel_tracks: bool = True
-
-
-class DetectionLike(Protocol):
-    """What acquisition needs of a detector hit (tracker.detector.Detection has it)."""
-
-    @property
-    def box(self) -> tuple[float, float, float, float]: ...
-    @property
-    def category(self) -> str: ...
-    @property
-    def score(self) -> float: ...
-
-
-#: A detector: image -> detections (``tracker.detector.Detector.detect``).
-DetectFn = Callable[[npt.NDArray[np.uint8]], Sequence[DetectionLike]]
-
-
-@dataclass(frozen=True)
-class SideSensors:
-    """The autopilot's latest attitude, altitude and laser range (any may be missing)."""
-
-    attitude: AttitudeSample | None = None
-    altitude: AltitudeSample | None = None
-    laser: RangeSample | None = None
-
-
-@dataclass
-class Track:
-    """One landmark being followed."""
-
-    landmark_id: str
-    tracker: AdaptiveTracker
-    box: Box
-    homography: FloatArray | None
-    confidence: float = 1.0
-    features: tuple[int, ...] = ()
-    corners: FloatArray | None = None
-    misses: int = 0
-    #: the colour feature the corners are aligned on: the tracker's best at acquisition,
-    #: when the box was verified (None: grey levels)
-    align_weights: Weights | None = None
-
-
-@dataclass(frozen=True)
-class Start:
-    """A tracker started by housekeeping, waiting for ``process`` to adopt it."""
-
-    track: Track
-    event: dict[str, Any]
-
-
-#: ECC correlation a running track's alignment must reach (a new sighting: verify_correlation).
-TRACK_MIN_CORRELATION = 0.6
-
-
-def feature_weights_bgr(features: Sequence[int]) -> Weights | None:
-    """(w_b, w_g, w_r) of the tracker's best colour feature; None for grey cues or none."""
-    if not features or features[0] >= len(COLOUR_WEIGHTS):
-        return None
-    r, g, b = (float(v) for v in COLOUR_WEIGHTS[features[0]])
-    return (b, g, r)
 
 
 #: Trackers started n-th re-rank their features n x this many frames apart (a re-rank costs
@@ -537,8 +450,19 @@ class Perception:
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
-                                   frame_index=frame_index))
+                                   frame_index=frame_index,
+                                   corner_sigma_px=self._corner_sigma(corners)))
         return out
+
+    def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None) -> float | None:
+        """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``)."""
+        if corners is None:
+            return None
+        cfg = self.config
+        quad = np.asarray(corners, np.float64)
+        width = max(float(np.ptp(quad[:, 0])), 1.0)
+        return float(self.pose_config.pixel_sigma_px
+                     * (cfg.corner_sigma_ref_px / width) ** cfg.corner_sigma_exponent)
 
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
         tracks = tuple(

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from companion.demo import map_landmarks
-from companion.perception import Perception, SideSensors
+from companion.perception import Perception, PerceptionConfig, SideSensors
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
+from tracker.pose.config import PoseConfig
 from tracker.pose.types import AttitudeSample, PoseFix
 
 
@@ -93,3 +94,28 @@ def test_acquisition_never_invents_a_landmark(scenario: str) -> None:
     for result, truth, _ in out:
         in_view = {b.landmark_id for b in truth.boxes if b.in_view_frac > 0.5}
         assert {t["landmark_id"] for t in result.tracks} <= in_view
+
+
+def test_small_plates_corners_carry_a_larger_sigma() -> None:
+    """Each observation's corner sigma follows its plate's width in the image:
+    pose.pixel_sigma_px at perception.corner_sigma_ref_px, (ref / width) ** exponent
+    elsewhere, and the configured sigma for every plate with exponent 0."""
+    sim = Simulator(load_scenario("survey"))
+    landmarks, references = map_landmarks(sim)
+    perception = Perception(sim.scenario.camera, landmarks, references,
+                            pose_config=PoseConfig(pixel_sigma_px=0.2))
+
+    def plate(width: float) -> tuple[tuple[float, float], ...]:
+        return ((100.0, 100.0), (100.0 + width, 100.0), (100.0 + width, 160.0), (100.0, 160.0))
+
+    sigma = perception._corner_sigma
+    assert sigma(plate(100.0)) == pytest.approx(0.2)
+    assert sigma(plate(50.0)) == pytest.approx(0.2 * 2.0**0.8)
+    assert (sigma(plate(200.0)) or 1.0) < 0.2
+    assert sigma(None) is None
+    flat = Perception(sim.scenario.camera, landmarks, references,
+                      config=PerceptionConfig(corner_sigma_exponent=0.0),
+                      pose_config=PoseConfig(pixel_sigma_px=0.2))
+    assert flat._corner_sigma(plate(37.0)) == pytest.approx(0.2)
+    perception.close()
+    flat.close()

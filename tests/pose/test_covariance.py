@@ -68,6 +68,22 @@ def test_more_pixel_noise_gives_a_larger_covariance(camera: CameraModel) -> None
     assert large.quality <= small.quality
 
 
+def test_an_observations_own_corner_sigma_replaces_the_configured_one(
+        camera: CameraModel) -> None:
+    """A detector that knows its corners' sigma (a small plate's are less certain) passes
+    it with the observation; the fix then is the one the solver would give at that sigma."""
+    lms = wall()
+    obs = see(lms, camera)
+    assert all(o.corners_px is not None for o in obs)
+    own = [replace(o, corner_sigma_px=2.0) for o in obs]
+    by_obs = solve_pose(own, lms, camera, 0, config=PoseConfig(pixel_sigma_px=0.5))
+    by_cfg = solve_pose(obs, lms, camera, 0, config=PoseConfig(pixel_sigma_px=2.0))
+    assert isinstance(by_obs, PoseFix) and isinstance(by_cfg, PoseFix)
+    np.testing.assert_allclose(by_obs.covariance, by_cfg.covariance, rtol=1e-9, atol=1e-15)
+    bad = solve_pose([replace(obs[0], corner_sigma_px=-1.0), *obs[1:]], lms, camera, 0)
+    assert isinstance(bad, NoFix) and "corner_sigma_px" in bad.reason
+
+
 _num = st.floats(allow_nan=True, allow_infinity=True, width=64) | st.floats(-2000, 2000)
 _pair = st.tuples(_num, _num)
 

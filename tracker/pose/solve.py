@@ -191,7 +191,8 @@ def _make_groups(
     for i, lm in best.values():
         obs = observations[i]
         if obs.corners_px is not None:
-            pts, sig = landmark_corners_ned(lm), cfg.pixel_sigma_px
+            pts = landmark_corners_ned(lm)
+            sig = cfg.pixel_sigma_px if obs.corner_sigma_px is None else obs.corner_sigma_px
             px = np.array(obs.corners_px, dtype=np.float64)
         else:
             pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma

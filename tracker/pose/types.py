@@ -34,6 +34,8 @@ class Observation:
     top-right, bottom-right, bottom-left as seen from the front), when known.
     ``signature`` is an optional appearance descriptor (e.g. a normalised colour
     histogram) compared with :attr:`MapLandmark.signature` by the Bhattacharyya distance.
+    ``corner_sigma_px``: the corners' own 1-sigma when the detector knows it (a small plate's
+    corners are less certain than a big one's); None: the solver's ``pixel_sigma_px``.
     """
 
     centre_px: tuple[float, float]
@@ -44,6 +46,7 @@ class Observation:
     corners_px: tuple[tuple[float, float], ...] | None = None
     frame_index: int = 0
     signature: tuple[float, ...] | None = None
+    corner_sigma_px: float | None = None
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,9 @@ def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
             return f"corners_px must be four (u, v) pairs, got {len(obs.corners_px)}"
         if not _finite(flat):
             return "corners_px contains a value that is not finite"
+    sigma = obs.corner_sigma_px
+    if sigma is not None and (not _finite((sigma,)) or sigma <= 0.0):
+        return f"corner_sigma_px must be finite and > 0, got {sigma!r}"
     if obs.signature is not None and not _finite(tuple(obs.signature)):
         return "signature contains a value that is not finite"
     pts = [obs.centre_px, *(obs.corners_px or ())]

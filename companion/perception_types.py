@@ -1,0 +1,118 @@
+"""The perception's values: its configuration, tracks and what other parts hand it.
+
+Split from :mod:`companion.perception` (which re-exports them) to keep that module
+readable; nothing here runs anything.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from tracker import AdaptiveTracker
+from tracker.acquire import Weights
+from tracker.features import colour_weights
+from tracker.pose.types import AltitudeSample, AttitudeSample, RangeSample
+from tracker.types import Box
+
+FloatArray = npt.NDArray[np.float64]
+COLOUR_WEIGHTS = colour_weights()  # (49, 3) (w_r, w_g, w_b): the tracker's colour features
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """How often to look for untracked landmarks and how far to trust a track."""
+
+    acquire_every_frames: int = field(default=15, metadata={"ge": 1})
+    max_tracks: int = field(default=8, metadata={"ge": 1})
+    min_track_confidence: float = field(default=0.2, metadata={"ge": 0, "le": 1})
+    refine_corners: bool = True
+    min_corner_agreement: float = field(default=0.5, metadata={"gt": 0, "le": 1})
+    ecc_iterations: int = field(default=10, metadata={"ge": 1})
+    #: Unsmoothed ECC iterations after the smoothed ones (tracker.acquire.refine_ecc).
+    ecc_fine_iterations: int = field(default=6, metadata={"ge": 0})
+    #: A track's corners feed the pose only while this share of its quadrilateral is in
+    #: the image: corners extrapolated from a sliver are off by pixels.
+    min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
+    #: Corner 1-sigma by plate size: ``pose.pixel_sigma_px`` for a plate
+    #: ``corner_sigma_ref_px`` wide, times (that width / the plate's) ** this exponent
+    #: (0: one sigma for all).  Alignment has fewer pixels to go by on a small plate.
+    corner_sigma_exponent: float = field(default=0.8, metadata={"ge": 0, "le": 2})
+    corner_sigma_ref_px: float = field(default=100.0, metadata={"gt": 0})
+    max_corner_misses: int = field(default=5, metadata={"ge": 1})
+    verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
+    max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
+    #: Without a fix for this long, search the whole frame for one landmark per frame.
+    search_after_s: float = field(default=0.3, metadata={"ge": 0})
+    search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
+    search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
+    #: Acquire with the landmark detector ([detector]) instead of the template search.
+    use_detector: bool = False
+    #: Update the tracks of one frame on two threads (OpenCV and most of numpy release
+    #: the GIL): lower latency with several landmarks in view, the same CPU time.
+    parallel_tracks: bool = True
+
+
+class DetectionLike(Protocol):
+    """What acquisition needs of a detector hit (tracker.detector.Detection has it)."""
+
+    @property
+    def box(self) -> tuple[float, float, float, float]: ...
+    @property
+    def category(self) -> str: ...
+    @property
+    def score(self) -> float: ...
+
+
+#: A detector: image -> detections (``tracker.detector.Detector.detect``).
+DetectFn = Callable[[npt.NDArray[np.uint8]], Sequence[DetectionLike]]
+
+
+@dataclass(frozen=True)
+class SideSensors:
+    """The autopilot's latest attitude, altitude and laser range (any may be missing)."""
+
+    attitude: AttitudeSample | None = None
+    altitude: AltitudeSample | None = None
+    laser: RangeSample | None = None
+
+
+@dataclass
+class Track:
+    """One landmark being followed."""
+
+    landmark_id: str
+    tracker: AdaptiveTracker
+    box: Box
+    homography: FloatArray | None
+    confidence: float = 1.0
+    features: tuple[int, ...] = ()
+    corners: FloatArray | None = None
+    misses: int = 0
+    #: the colour feature the corners are aligned on: the tracker's best at acquisition,
+    #: when the box was verified (None: grey levels)
+    align_weights: Weights | None = None
+
+
+@dataclass(frozen=True)
+class Start:
+    """A tracker started by housekeeping, waiting for ``process`` to adopt it."""
+
+    track: Track
+    event: dict[str, Any]
+
+
+#: ECC correlation a running track's alignment must reach (a new sighting: verify_correlation).
+TRACK_MIN_CORRELATION = 0.6
+
+
+def feature_weights_bgr(features: Sequence[int]) -> Weights | None:
+    """(w_b, w_g, w_r) of the tracker's best colour feature; None for grey cues or none."""
+    if not features or features[0] >= len(COLOUR_WEIGHTS):
+        return None
+    r, g, b = (float(v) for v in COLOUR_WEIGHTS[features[0]])
+    return (b, g, r)
