@@ -333,3 +333,17 @@ def test_two_detections_claiming_one_landmark_are_both_left_out(camera: CameraMo
     fix = _fix(solve_pose(obs, lms, camera, T_US))
     assert fix.landmark_ids == ("B", "C")
     assert any("'A' claimed by observations [0, 3]" in n for n in fix.notes)
+
+
+def test_a_single_landmark_left_after_a_double_claim_gives_no_fix(camera: CameraModel) -> None:
+    """Two detections claim A, a third is named B: A is left out, and B alone could be the
+    misnamed one with nothing to check it against -- no fix, with the reason."""
+    lms = wall()
+    obs = see(lms, camera)
+    two_a_one_b = [obs[0], replace(obs[2], landmark_id="A"), obs[1]]
+    result = solve_pose(two_a_one_b, lms, camera, T_US)
+    assert isinstance(result, NoFix)
+    assert "claimed twice" in result.reason
+    assert any("'A' claimed by observations [0, 1]" in n for n in result.notes)
+    alone = solve_pose([obs[1]], lms, camera, T_US)  # B alone, no conflict: a fix
+    assert isinstance(alone, PoseFix)

@@ -156,6 +156,11 @@ def solve_pose(
     )
     if not groups:
         return NoFix(time_us, "no identified landmark in view", tuple(notes))
+    if len(groups) == 1 and any(n.endswith(CLAIM_CONFLICT) for n in notes):
+        # a misnamed detection was seen in this frame: the one landmark left may be the
+        # misnamed one, and alone it cannot be cross-checked
+        return NoFix(time_us, "after a landmark claimed twice only one is left: not trusted",
+                     tuple(notes))
     return _solve_robust(ctx, groups, time_us, reset_counter, notes)
 
 
@@ -166,6 +171,10 @@ def _camera_arrays(camera: CameraModel) -> tuple[FloatArray, FloatArray, FloatAr
     for a in arrays:
         a.setflags(write=False)
     return arrays
+
+
+#: The end of the note on a landmark that several observations claimed (all left out).
+CLAIM_CONFLICT = "not used"
 
 
 def _make_groups(
@@ -184,7 +193,8 @@ def _make_groups(
         if len(who) == 1:
             best[lm.landmark_id] = (i, lm)
         elif i == who[0]:  # one landmark, several detections: at least one is misnamed
-            notes.append(f"landmark {lm.landmark_id!r} claimed by observations {who}: not used")
+            notes.append(f"landmark {lm.landmark_id!r} claimed by observations {who}: "
+                         f"{CLAIM_CONFLICT}")
     cfg = ctx.config
     centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
     groups = []
