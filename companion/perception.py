@@ -28,7 +28,6 @@ import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -145,9 +144,8 @@ class Perception:
                 self._rectified[frame.index] = image
                 for old in [i for i in self._rectified if i <= frame.index - RECENT_FIXES]:
                     del self._rectified[old]
-        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
         tracks = list(self.tracks.values())
-        for track, alive in zip(tracks, self._update_tracks(tracks, image, gray), strict=True):
+        for track, alive in zip(tracks, self._update_tracks(tracks, image), strict=True):
             if not alive:
                 del self.tracks[track.landmark_id]
                 events.append({"event": "lost", "landmark": track.landmark_id})
@@ -159,14 +157,13 @@ class Perception:
         if self._pool is not None:
             self._pool.shutdown(wait=True)
 
-    def _update_tracks(self, tracks: list[Track], image: npt.NDArray[np.uint8],
-                       gray: npt.NDArray[np.uint8]) -> list[bool]:
+    def _update_tracks(self, tracks: list[Track], image: npt.NDArray[np.uint8]) -> list[bool]:
         """Update every track; with two or more, every other one on the second thread.
         Each track touches only its own state."""
         if self._pool is None or len(tracks) < 2:
-            return [self._update_track(t, image, gray) for t in tracks]
-        there = [self._pool.submit(self._update_track, t, image, gray) for t in tracks[::2]]
-        here = [self._update_track(t, image, gray) for t in tracks[1::2]]
+            return [self._update_track(t, image) for t in tracks]
+        there = [self._pool.submit(self._update_track, t, image) for t in tracks[::2]]
+        here = [self._update_track(t, image) for t in tracks[1::2]]
         there_ok = [f.result() for f in there]
         return [there_ok[i // 2] if i % 2 == 0 else here[i // 2] for i in range(len(tracks))]
 
@@ -213,8 +210,7 @@ class Perception:
 
     # -- tracking ---------------------------------------------------------------------
 
-    def _update_track(self, track: Track, image: npt.NDArray[np.uint8],
-                      gray: npt.NDArray[np.uint8]) -> bool:
+    def _update_track(self, track: Track, image: npt.NDArray[np.uint8]) -> bool:
         result: TrackResult = track.tracker.update(image)
         if result.box is None or result.confidence < self.config.min_track_confidence:
             return False
@@ -225,24 +221,22 @@ class Perception:
             return True
         if track.homography is not None:
             predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
-            aligned = self._align(track, image, gray, predicted)
+            aligned = self._align(track, image, predicted)
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
             if aligned is not None:
                 track.corners = project_corners(self.matcher.references[track.landmark_id],
                                                 aligned)
         if track.homography is None or track.misses >= self.config.max_corner_misses:
-            self._recover_corners(track, image, gray)
+            self._recover_corners(track, image)
         return True
 
-    def _align(self, track: Track, image: npt.NDArray[np.uint8], gray: npt.NDArray[np.uint8],
-               hom: FloatArray, verify: bool = False) -> FloatArray | None:
+    def _align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
+               verify: bool = False) -> FloatArray | None:
         """ECC alignment of the reference on the tracker's best colour feature (grey levels
         for a grey target), kept only if it agrees with the tracker's box."""
         ref = self.matcher.references[track.landmark_id]
-        weights = track.align_weights
-        frame = gray if weights is None else image
-        aligned = self._ecc(ref, frame, hom, verify, weights)
+        aligned = self._ecc(ref, image, hom, verify, track.align_weights)
         box = track.box
         if aligned is None:
             return None
@@ -256,20 +250,19 @@ class Perception:
     def _ecc(self, ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
              verify: bool = True, weights: Weights | None = None) -> FloatArray | None:
         """ECC alignment with this perception's settings; ``verify``: a new sighting,
-        held to ``verify_correlation`` (a running track to refine_ecc's default)."""
+        held to ``verify_correlation`` (a running track to ``TRACK_MIN_CORRELATION``)."""
         cfg = self.config
         least = cfg.verify_correlation if verify else TRACK_MIN_CORRELATION
         return refine_ecc(ref, frame, hom, cfg.ecc_iterations, least, cfg.ecc_fine_iterations,
                           weights)
 
-    def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8],
-                         gray: npt.NDArray[np.uint8]) -> None:
+    def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """Get the homography back: align the reference onto the tracked box (held to
         ``verify_correlation``), else re-match its features around the box.  Alignment
         first: it is cheaper, and finds plates too small or plain for feature matching."""
         lid = track.landmark_id
         ref = self.matcher.references[lid]
-        aligned = self._align(track, image, gray, homography_to(ref, box_corners(track.box)),
+        aligned = self._align(track, image, homography_to(ref, box_corners(track.box)),
                               verify=True)
         if aligned is not None:
             track.homography, track.corners = aligned, project_corners(ref, aligned)
@@ -337,13 +330,12 @@ class Perception:
         assert self.detect is not None
         starts: list[Start] = []
         category = {lm.landmark_id: lm.category for lm in self.landmarks}
-        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
         for det in self.detect(image):
             for lid, ref in self.matcher.references.items():
                 if self._taken(lid, starts) or category.get(lid) not in (det.category, ""):
                     continue
                 start = homography_to(ref, box_corners(det.box))
-                aligned = self._ecc(ref, gray, start)
+                aligned = self._ecc(ref, image, start)
                 if aligned is None:
                     continue
                 quad = project_corners(ref, aligned)
@@ -367,8 +359,7 @@ class Perception:
         found = search_template(ref, image, self.config.search_widths_px)
         if found is None or found[0] < self.config.search_min_score:
             return []
-        gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
-        aligned = self._ecc(ref, gray, found[1])
+        aligned = self._ecc(ref, image, found[1])
         if aligned is None:
             return []
         quad = project_corners(ref, aligned)
@@ -389,7 +380,6 @@ class Perception:
         """
         starts: list[Start] = list(earlier)
         height, width = image.shape[:2]
-        gray: npt.NDArray[np.uint8] | None = None
         for lm in self.landmarks:
             lid = lm.landmark_id
             if self._taken(lid, starts) or lid not in self.matcher.references:
@@ -399,10 +389,8 @@ class Perception:
             corners = self._project(lm, fix)
             if corners is None or not inside(corners, width, height, margin=4.0):
                 continue
-            gray = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8) \
-                if gray is None else gray
             ref = self.matcher.references[lid]
-            aligned = self._ecc(ref, gray, homography_to(ref, corners))
+            aligned = self._ecc(ref, image, homography_to(ref, corners))
             if aligned is None:
                 continue
             quad = project_corners(ref, aligned)

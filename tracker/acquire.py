@@ -284,8 +284,8 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     only from close by).  On the simulated world's plates this took the corner error from
     0.45 to 0.13 px RMS (docs/pose.md, "Corner accuracy").
 
-    ``frame`` is grey (H, W) and aligned with the reference's grey levels, or, with
-    ``weights_bgr``, BGR (H, W, 3) and aligned on that colour feature of both (the
+    ``frame`` is grey (H, W) or BGR (H, W, 3), aligned with the reference's grey levels;
+    with ``weights_bgr`` it is BGR and aligned on that colour feature of both (the
     tracker's best feature separates the plate from what surrounds it, where grey levels
     may not: an edge without grey contrast cannot hold a corner).
     """
@@ -309,7 +309,12 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     t_roi = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # roi -> frame
     warp = np.linalg.inv(t_roi) @ hom @ np.linalg.inv(s_ref)  # template -> roi
     crop = frame[y0:y1, x0:x1]
-    roi = crop.astype(np.float32) if weights_bgr is None else project(crop, weights_bgr)
+    if weights_bgr is not None:
+        roi = project(crop, weights_bgr)
+    elif crop.ndim == 3:  # grey levels of the region only, not of the whole frame
+        roi = np.asarray(cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY), np.float32)
+    else:
+        roi = crop.astype(np.float32)
     try:
         cc, warp = _ecc_coarse(template, roi, warp, iterations)
         if fine_iterations > 0:
