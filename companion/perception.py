@@ -189,9 +189,10 @@ class Perception:
             return
         with self._lock:
             fix = self._fixes.get(frame.index)
-            image = self._rectified.pop(frame.index, frame.image)
+            rectified = self._rectified.pop(frame.index, None)
             for old in [i for i in self._rectified if i < frame.index]:
                 del self._rectified[old]
+        image = self._rectified_image(frame) if rectified is None else rectified
         starts: list[Start] = []
         if self._should_acquire(frame.index):
             self._acquired_frame = frame.index
@@ -207,6 +208,12 @@ class Perception:
         if starts:
             with self._lock:
                 self._pending += starts
+
+    def _rectified_image(self, frame: Frame) -> npt.NDArray[np.uint8]:
+        """The frame as tracking sees it: rectified for a distorted camera.  Housekeeping
+        reuses what ``process`` rectified; this is for a frame ``process`` has let go of
+        (housekeeping lagging more than ``RECENT_FIXES`` frames) or never saw."""
+        return frame.image if self._rectify is None else self._rectify(frame.image)
 
     # -- tracking ---------------------------------------------------------------------
 

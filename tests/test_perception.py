@@ -119,3 +119,26 @@ def test_small_plates_corners_carry_a_larger_sigma() -> None:
     assert flat._corner_sigma(plate(37.0)) == pytest.approx(0.2)
     perception.close()
     flat.close()
+
+
+def test_housekeeping_sees_rectified_frames_even_ones_process_let_go() -> None:
+    """With a distorted camera, acquisition must look at the rectified frame: the one
+    ``process`` made, or -- when housekeeping lags behind what ``process`` keeps, or never
+    had the frame -- one it rectifies itself, never the raw distorted frame."""
+    sim = Simulator(load_scenario("survey_distorted"))
+    landmarks, references = map_landmarks(sim)
+    perception = Perception(sim.scenario.camera, landmarks, references)
+    seen: list[np.ndarray] = []
+
+    def acquire(image: np.ndarray) -> list[Any]:
+        seen.append(image)
+        return []
+
+    perception._acquire = acquire  # type: ignore[method-assign]
+    raw = sim.render(3)[0]
+    perception.housekeeping(Frame(3, 100_000, raw))  # a frame process never saw
+    assert perception._rectify is not None
+    rectified = perception._rectify(raw)
+    assert len(seen) == 1 and np.array_equal(seen[0], rectified)
+    assert not np.array_equal(rectified, raw)
+    perception.close()
