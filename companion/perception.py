@@ -430,8 +430,9 @@ class Perception:
         """
         out = []
         size = (self.camera.width, self.camera.height)
+        cfg = self.config
         usable = {t.landmark_id: t.corners is not None
-                  and in_view_share(t.corners, *size) >= self.config.min_corner_in_view
+                  and in_view_share(t.corners, *size) >= cfg.min_corner_in_view
                   for t in self.tracks.values()}
         tracks = list(self.tracks.values())
         if any(usable.values()):
@@ -450,14 +451,23 @@ class Perception:
         return out
 
     def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None) -> float | None:
-        """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``)."""
+        """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``).
+
+        In a rectified frame, the plate was imaged ``s`` times smaller than it is drawn
+        (``s``: rectified px per raw px at its centre, above 1 towards the edges of a
+        barrel-distorted frame), so its corners have the raw sigma of a plate ``width / s``
+        wide, stretched by ``s``."""
         if corners is None:
             return None
         cfg = self.config
         quad = np.asarray(corners, np.float64)
         width = max(float(np.ptp(quad[:, 0])), 1.0)
-        return float(self.pose_config.pixel_sigma_px
-                     * (cfg.corner_sigma_ref_px / width) ** cfg.corner_sigma_exponent)
+        s = 1.0
+        if self._rectify is not None:
+            centre = quad.mean(axis=0)
+            s = self._rectify.scale_at((float(centre[0]), float(centre[1])))
+        return float(s * self.pose_config.pixel_sigma_px
+                     * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
 
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
         tracks = tuple(

@@ -121,6 +121,28 @@ def test_small_plates_corners_carry_a_larger_sigma() -> None:
     flat.close()
 
 
+def test_a_plate_at_the_edge_of_a_rectified_frame_carries_a_larger_corner_sigma() -> None:
+    """Rectifying a barrel-distorted frame stretches its edges by ``s`` (rectified px per
+    raw px): a plate drawn ``w`` px wide there was imaged ``w / s`` px wide, so its corners
+    get the sigma of that narrower plate, times ``s``: ``sigma(w) * s ** (1 + exponent)``."""
+    sim = Simulator(load_scenario("survey_distorted"))
+    landmarks, references = map_landmarks(sim)
+    perception = Perception(sim.scenario.camera, landmarks, references,
+                            pose_config=PoseConfig(pixel_sigma_px=0.2))
+
+    def plate(x: float, y: float) -> tuple[tuple[float, float], ...]:
+        return ((x - 40, y - 30), (x + 40, y - 30), (x + 40, y + 30), (x - 40, y + 30))
+
+    assert perception._rectify is not None
+    centre = perception._corner_sigma(plate(319.5, 239.5))
+    assert centre == pytest.approx(0.2 * (100 / 80) ** 0.8, rel=1e-3)
+    s = perception._rectify.scale_at((580.0, 420.0))
+    assert s > 1.2
+    assert perception._corner_sigma(plate(580.0, 420.0)) == pytest.approx(centre * s**1.8,
+                                                                        rel=1e-6)
+    perception.close()
+
+
 def test_housekeeping_sees_rectified_frames_even_ones_process_let_go() -> None:
     """With a distorted camera, acquisition must look at the rectified frame: the one
     ``process`` made, or -- when housekeeping lags behind what ``process`` keeps, or never
