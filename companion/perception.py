@@ -53,7 +53,14 @@ from tracker.acquire import (
     refine_ecc,
     search_template,
 )
-from tracker.boxes import box_corners, box_iou, clip_box, in_view_share, inside
+from tracker.boxes import (
+    box_corners,
+    box_iou,
+    clip_box,
+    in_view_share,
+    inside,
+    saturated_share,
+)
 from tracker.camera import CameraModel, Rectifier
 from tracker.pose.config import PoseConfig
 from tracker.pose.landmarks import landmark_corners_ned
@@ -236,6 +243,7 @@ class Perception:
                                                 aligned)
         if track.homography is None or track.misses >= self.config.max_corner_misses:
             self._recover_corners(track, image)
+        track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
         return True
 
     def _align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
@@ -433,6 +441,7 @@ class Perception:
         cfg = self.config
         usable = {t.landmark_id: t.corners is not None
                   and in_view_share(t.corners, *size) >= cfg.min_corner_in_view
+                  and t.saturated <= cfg.max_corner_saturated
                   for t in self.tracks.values()}
         tracks = list(self.tracks.values())
         if any(usable.values()):

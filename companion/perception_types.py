@@ -38,6 +38,10 @@ class PerceptionConfig:
     #: A track's corners feed the pose only while this share of its quadrilateral is in
     #: the image: corners extrapolated from a sliver are off by pixels.
     min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
+    #: ... and while at most this share of its pixels is saturated: over-exposed plates
+    #: (58 % of their pixels at 255) put the corners 0.4 px off, 4x the error of the same
+    #: plate in normal light (docs/pose.md).  White print on a plate saturates 0-4 %.
+    max_corner_saturated: float = field(default=0.25, metadata={"ge": 0, "le": 1})
     #: Corner 1-sigma by plate size: ``pose.pixel_sigma_px`` for a plate
     #: ``corner_sigma_ref_px`` wide, times (that width / the plate's) ** this exponent
     #: (0: one sigma for all).  Alignment has fewer pixels to go by on a small plate.
@@ -93,6 +97,8 @@ class Track:
     features: tuple[int, ...] = ()
     corners: FloatArray | None = None
     misses: int = 0
+    #: share of the aligned quadrilateral's pixels that are saturated in this frame
+    saturated: float = 0.0
     #: the colour feature the corners are aligned on: the tracker's best at acquisition,
     #: when the box was verified (None: grey levels)
     align_weights: Weights | None = None

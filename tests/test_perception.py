@@ -143,6 +143,22 @@ def test_a_plate_at_the_edge_of_a_rectified_frame_carries_a_larger_corner_sigma(
     perception.close()
 
 
+def test_an_over_exposed_plates_corners_are_not_used() -> None:
+    """sudden_light hovers before one plate; from 12 s (frame 360) the light is at 160 %
+    and over half the plate's pixels saturate, which pulled its corners 0.4 px off
+    (docs/pose.md).  Its corners then stay out of the pose: one plate without corners
+    gives no fix.  Before, in normal light, the same track gives fixes from its corners."""
+    _, perception, out = flight("sudden_light", range(320, 400))
+    before = [r for r, _, _ in out[:40]]
+    after = [r for r, _, _ in out[45:]]  # from frame 365
+    assert sum(isinstance(r.fix, PoseFix) for r in before) >= 20
+    assert all(t["corners"] is not None for r in after for t in r.tracks), \
+        "the alignment lost the plate: the test would not show the saturation rule"
+    assert after and all(r.fix is None for r in after)
+    assert all("unobservable" in (r.no_fix_reason or "") for r in after)
+    perception.close()
+
+
 def test_housekeeping_sees_rectified_frames_even_ones_process_let_go() -> None:
     """With a distorted camera, acquisition must look at the rectified frame: the one
     ``process`` made, or -- when housekeeping lags behind what ``process`` keeps, or never

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.boxes import box_corners, box_iou, clip_box, in_view_share
+from tracker.boxes import box_corners, box_iou, clip_box, in_view_share, saturated_share
 from tracker.camera import CameraModel, Rectifier
 
 
@@ -52,6 +52,17 @@ def test_rectifier_scale_is_how_far_a_raw_pixel_step_moves_in_the_rectified_fram
     expected = np.sqrt(np.sum(jac**2) / 2.0)
     assert expected > 1.2  # the lens squeezes the edge: rectifying stretches it
     assert rect.scale_at(edge) == pytest.approx(expected, rel=1e-3)
+
+
+def test_saturated_share_counts_pixels_inside_the_quadrilateral() -> None:
+    image = np.zeros((100, 100, 3), np.uint8)
+    image[:, 50:, 2] = 255  # the right half has a saturated red channel
+    quad = box_corners((30.0, 20.0, 40.0, 40.0))  # 30..70: half of it on each side
+    assert saturated_share(image, quad) == pytest.approx(0.5, abs=0.03)
+    assert saturated_share(image, box_corners((5.0, 5.0, 30.0, 30.0))) == 0.0
+    assert saturated_share(image, box_corners((80.0, 10.0, 40.0, 20.0))) == 1.0  # in view: all hot
+    assert saturated_share(image, box_corners((200.0, 10.0, 5.0, 5.0))) == 0.0  # out of view
+    assert saturated_share(image[:, :, 2], quad) == pytest.approx(0.5, abs=0.03)  # grey
 
 
 def test_box_helpers() -> None:
