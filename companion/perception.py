@@ -452,12 +452,22 @@ class Perception:
                 (float(u), float(v)) for u, v in t.corners)
             centre = ((x + w / 2, y + h / 2) if corners is None
                       else tuple(float(c) for c in np.mean(corners, axis=0)))
+            scale = None if corners is None else \
+                self.config.corner_scale_sigma_px * self._stretch(corners)
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
                                    frame_index=frame_index,
-                                   corner_sigma_px=self._corner_sigma(corners)))
+                                   corner_sigma_px=self._corner_sigma(corners),
+                                   corner_scale_sigma_px=scale))
         return out
+
+    def _stretch(self, corners: Sequence[tuple[float, float]]) -> float:
+        """Rectified px per raw px at the plate's centre (1 without rectification)."""
+        if self._rectify is None:
+            return 1.0
+        centre = np.asarray(corners, np.float64).mean(axis=0)
+        return self._rectify.scale_at((float(centre[0]), float(centre[1])))
 
     def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None) -> float | None:
         """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``).
@@ -471,10 +481,7 @@ class Perception:
         cfg = self.config
         quad = np.asarray(corners, np.float64)
         width = max(float(np.ptp(quad[:, 0])), 1.0)
-        s = 1.0
-        if self._rectify is not None:
-            centre = quad.mean(axis=0)
-            s = self._rectify.scale_at((float(centre[0]), float(centre[1])))
+        s = self._stretch(corners)
         return float(s * self.pose_config.pixel_sigma_px
                      * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
 

@@ -47,6 +47,13 @@ class PerceptionConfig:
     #: (0: one sigma for all).  Alignment has fewer pixels to go by on a small plate.
     corner_sigma_exponent: float = field(default=0.8, metadata={"ge": 0, "le": 2})
     corner_sigma_ref_px: float = field(default=100.0, metadata={"gt": 0})
+    #: 1-sigma (px) of an error the four corners share, scaling the plate about its centre
+    #: (given as the change of its width; ``Observation.corner_scale_sigma_px``; times the
+    #: rectification's stretch).  The alignment draws outlines in as a whole (plate widths
+    #: 0.15-0.22 px short on average in every rendered scenario), but with the width-only
+    #: corner sigma no setting tried kept every scenario's fixes consistent (docs/pose.md,
+    #: "Corner errors are not independent"), so it is off: corners independent.
+    corner_scale_sigma_px: float = field(default=0.0, metadata={"ge": 0})
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})

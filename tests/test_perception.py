@@ -64,6 +64,15 @@ def test_no_track_for_a_landmark_out_of_view() -> None:
     visible = {b.landmark_id for _, truth, _ in out for b in truth.boxes if b.in_view_frac > 0}
     assert perception.tracks, "nothing was acquired: the test would prove nothing"
     assert set(perception.tracks) <= visible
+    # what the solver is told of the corners: their sigma and the outline's common scale
+    obs = [o for o in perception.observations(199) if o.corners_px is not None]
+    assert obs, "no corners: the rest would prove nothing"
+    for o in obs:
+        assert o.corner_sigma_px == perception._corner_sigma(o.corners_px)
+        assert o.corner_scale_sigma_px == perception.config.corner_scale_sigma_px
+    perception.config = dataclasses.replace(perception.config, corner_scale_sigma_px=0.2)
+    assert all(o.corner_scale_sigma_px == 0.2 for o in perception.observations(199)
+               if o.corners_px is not None)
 
 
 def test_a_detector_hit_restarts_a_track_when_the_reference_aligns_there() -> None:
@@ -140,6 +149,8 @@ def test_a_plate_at_the_edge_of_a_rectified_frame_carries_a_larger_corner_sigma(
     assert s > 1.2
     assert perception._corner_sigma(plate(580.0, 420.0)) == pytest.approx(centre * s**1.8,
                                                                         rel=1e-6)
+    assert perception._stretch(plate(580.0, 420.0)) == s  # the outline's scale error too
+    assert perception._stretch(plate(319.5, 239.5)) == pytest.approx(1.0, abs=1e-3)
     perception.close()
 
 
