@@ -160,10 +160,9 @@ def _decorrelate(rows: FloatArray, pts: PointSet) -> FloatArray:
     assert pts.scale_dir is not None and pts.scale_beta is not None
     n = pts.points_ned.shape[0]
     r = rows.reshape(n, 2, -1)
-    along = np.einsum("nk,nkc->nc", pts.scale_dir, r)  # each point's share of u^T r
-    per_landmark = np.zeros((int(pts.landmark_index.max()) + 1, r.shape[2]))
-    np.add.at(per_landmark, pts.landmark_index, along)
-    back = pts.scale_beta[:, None] * per_landmark[pts.landmark_index]  # N x C
+    along = pts.scale_dir[:, 0, None] * r[:, 0] + pts.scale_dir[:, 1, None] * r[:, 1]  # N x C
+    same = pts.landmark_index[:, None] == pts.landmark_index[None, :]  # N x N
+    back = pts.scale_beta[:, None] * (same @ along)  # beta u^T r of each point's landmark
     return np.asarray((r - pts.scale_dir[:, :, None] * back[:, None, :]).reshape(rows.shape))
 
 

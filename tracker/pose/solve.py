@@ -224,14 +224,15 @@ def _scale_error(
     of ``width_sigma`` px in the plate's width (``Sigma = sigma^2 I + (s / w)^2 u u^T``)."""
     if not width_sigma:
         return None, 0.0
-    u = corners - corners.mean(axis=0)
-    norm = float(np.linalg.norm(u))
-    width = 0.5 * float(np.linalg.norm(corners[1] - corners[0])
-                        + np.linalg.norm(corners[2] - corners[3]))
+    c = corners.tolist()
+    cu, cv = sum(p[0] for p in c) / len(c), sum(p[1] for p in c) / len(c)
+    norm = math.sqrt(sum((p[0] - cu) ** 2 + (p[1] - cv) ** 2 for p in c))
+    width = 0.5 * (math.dist(c[1], c[0]) + math.dist(c[2], c[3]))
     if norm <= 0.0 or width <= 0.0:
         return None, 0.0
     a_uu = (width_sigma / width) ** 2 * norm**2
-    return u / norm, 1.0 - sigma / math.sqrt(sigma**2 + a_uu)
+    u = (corners - (cu, cv)) / norm
+    return u, 1.0 - sigma / math.sqrt(sigma**2 + a_uu)
 
 
 def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
