@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from tracker.pose.scenarios import Scenario, ScenarioResult, run_scenario, scenarios
+from tracker.pose.scenarios import Scenario, ScenarioResult, reference_flights, run_scenario
 
 #: Regression gates, per scenario: (largest multi-landmark RMSE in % of distance or None,
 #: smallest share of fixes with NEES inside the 95 % bounds), for the calibrated noise
@@ -58,15 +58,7 @@ def _runs(pixel_sigma: float | None, centre_sigma: float | None) -> list[Scenari
     """The reference scenarios plus the two-landmark pair with a 0.25 deg yaw prior;
     ``pixel_sigma`` / ``centre_sigma`` replace the corner / box-centre noise of every flight
     (the solver's sigmas follow, see ``solver_config``)."""
-    runs = scenarios()
-    pair = next(s for s in runs if s.name == "two_landmarks_attitude")
-    runs.append(
-        replace(
-            pair,
-            name="two_landmarks_attitude_yaw0.25",
-            noise=replace(pair.noise, yaw_sigma_rad=float(np.deg2rad(0.25))),
-        )
-    )
+    runs = reference_flights()
     if pixel_sigma is not None:
         runs = [replace(s, noise=replace(s.noise, pixel_sigma_px=pixel_sigma)) for s in runs]
     if centre_sigma is not None:

@@ -33,6 +33,7 @@ from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
 from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.fake_drift import AttitudeErrorConfig
 from tracker.pose.types import MapLandmark, PoseFix
 
 log = logging.getLogger(__name__)
@@ -89,8 +90,12 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     o = sim.scenario.origin
     pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
     # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
+    # an autopilot's ATTITUDE is an estimate: the fake's carries the slowly varying error
+    # the pose solver assumes (0.2 deg roll/pitch, 1 deg yaw; docs/decisions.md)
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                             endpoint="udpin:127.0.0.1:0"), truth=sim.truth_fn)
+                                             endpoint="udpin:127.0.0.1:0",
+                                             attitude_error=AttitudeErrorConfig()),
+                         truth=sim.truth_fn)
     await fake.start()
     source = SimCameraSource(sim, realtime=True, seconds=seconds,
                              t0_us=fake.start_ns // 1000)

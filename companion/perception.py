@@ -53,7 +53,14 @@ from tracker.acquire import (
     refine_ecc,
     search_template,
 )
-from tracker.boxes import box_corners, box_iou, clip_box, in_view_share, inside
+from tracker.boxes import (
+    box_corners,
+    box_iou,
+    clip_box,
+    in_view_share,
+    inside,
+    saturated_share,
+)
 from tracker.camera import CameraModel, Rectifier
 from tracker.pose.config import PoseConfig
 from tracker.pose.landmarks import landmark_corners_ned
@@ -236,6 +243,7 @@ class Perception:
                                                 aligned)
         if track.homography is None or track.misses >= self.config.max_corner_misses:
             self._recover_corners(track, image)
+        track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
         return True
 
     def _align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
@@ -430,8 +438,10 @@ class Perception:
         """
         out = []
         size = (self.camera.width, self.camera.height)
+        cfg = self.config
         usable = {t.landmark_id: t.corners is not None
-                  and in_view_share(t.corners, *size) >= self.config.min_corner_in_view
+                  and in_view_share(t.corners, *size) >= cfg.min_corner_in_view
+                  and t.saturated <= cfg.max_corner_saturated
                   for t in self.tracks.values()}
         tracks = list(self.tracks.values())
         if any(usable.values()):
@@ -442,22 +452,38 @@ class Perception:
                 (float(u), float(v)) for u, v in t.corners)
             centre = ((x + w / 2, y + h / 2) if corners is None
                       else tuple(float(c) for c in np.mean(corners, axis=0)))
+            scale = None if corners is None else \
+                self.config.corner_scale_sigma_px * self._stretch(corners)
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
                                    frame_index=frame_index,
-                                   corner_sigma_px=self._corner_sigma(corners)))
+                                   corner_sigma_px=self._corner_sigma(corners),
+                                   corner_scale_sigma_px=scale))
         return out
 
+    def _stretch(self, corners: Sequence[tuple[float, float]]) -> float:
+        """Rectified px per raw px at the plate's centre (1 without rectification)."""
+        if self._rectify is None:
+            return 1.0
+        centre = np.asarray(corners, np.float64).mean(axis=0)
+        return self._rectify.scale_at((float(centre[0]), float(centre[1])))
+
     def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None) -> float | None:
-        """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``)."""
+        """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``).
+
+        In a rectified frame, the plate was imaged ``s`` times smaller than it is drawn
+        (``s``: rectified px per raw px at its centre, above 1 towards the edges of a
+        barrel-distorted frame), so its corners have the raw sigma of a plate ``width / s``
+        wide, stretched by ``s``."""
         if corners is None:
             return None
         cfg = self.config
         quad = np.asarray(corners, np.float64)
         width = max(float(np.ptp(quad[:, 0])), 1.0)
-        return float(self.pose_config.pixel_sigma_px
-                     * (cfg.corner_sigma_ref_px / width) ** cfg.corner_sigma_exponent)
+        s = self._stretch(corners)
+        return float(s * self.pose_config.pixel_sigma_px
+                     * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
 
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
         tracks = tuple(

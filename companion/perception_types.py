@@ -38,11 +38,22 @@ class PerceptionConfig:
     #: A track's corners feed the pose only while this share of its quadrilateral is in
     #: the image: corners extrapolated from a sliver are off by pixels.
     min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
+    #: ... and while at most this share of its pixels is saturated: over-exposed plates
+    #: (58 % of their pixels at 255) put the corners 0.4 px off, 4x the error of the same
+    #: plate in normal light (docs/pose.md).  White print on a plate saturates 0-4 %.
+    max_corner_saturated: float = field(default=0.25, metadata={"ge": 0, "le": 1})
     #: Corner 1-sigma by plate size: ``pose.pixel_sigma_px`` for a plate
     #: ``corner_sigma_ref_px`` wide, times (that width / the plate's) ** this exponent
     #: (0: one sigma for all).  Alignment has fewer pixels to go by on a small plate.
     corner_sigma_exponent: float = field(default=0.8, metadata={"ge": 0, "le": 2})
     corner_sigma_ref_px: float = field(default=100.0, metadata={"gt": 0})
+    #: 1-sigma (px) of an error the four corners share, scaling the plate about its centre
+    #: (given as the change of its width; ``Observation.corner_scale_sigma_px``; times the
+    #: rectification's stretch).  The alignment draws outlines in as a whole (plate widths
+    #: 0.15-0.22 px short on average in every rendered scenario), but with the width-only
+    #: corner sigma no setting tried kept every scenario's fixes consistent (docs/pose.md,
+    #: "Corner errors are not independent"), so it is off: corners independent.
+    corner_scale_sigma_px: float = field(default=0.0, metadata={"ge": 0})
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
@@ -93,6 +104,8 @@ class Track:
     features: tuple[int, ...] = ()
     corners: FloatArray | None = None
     misses: int = 0
+    #: share of the aligned quadrilateral's pixels that are saturated in this frame
+    saturated: float = 0.0
     #: the colour feature the corners are aligned on: the tracker's best at acquisition,
     #: when the box was verified (None: grey levels)
     align_weights: Weights | None = None

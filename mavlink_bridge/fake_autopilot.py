@@ -34,6 +34,7 @@ import pymap3d
 
 from mavlink_bridge.codec import Codec, MAVLinkMessage
 from mavlink_bridge.endpoint import Connection, open_connection, parse_endpoint
+from mavlink_bridge.fake_drift import AttitudeDrift, AttitudeErrorConfig
 from mavlink_bridge.fake_faults import FaultInjector
 from mavlink_bridge.fake_rules import FakeRules, VisionJudge, VisionRecord, judge_landing_target
 from mavlink_bridge.telemetry import quaternion_from_rpy
@@ -70,6 +71,9 @@ class FakeAutopilotConfig:
     send_truth: bool = True
     # where truth NED (0, 0, 0) is (lat_deg, lon_deg, alt_m); None: the EKF origin once set
     home: tuple[float, float, float] | None = None
+    # the EKF's attitude error on ATTITUDE (and the heading of GLOBAL_POSITION_INT), slowly
+    # varying; None: the true attitude.  Truth streams (SIM_STATE ...) stay exact.
+    attitude_error: AttitudeErrorConfig | None = None
 
 
 _TRUTH_BY_PROFILE: dict[str, tuple[str, ...]] = {
@@ -97,6 +101,8 @@ class FakeAutopilot:
         self.truth = truth or hover_then_circle()
         self.clock_ns = clock_ns
         self.faults = FaultInjector(np.random.default_rng(config.seed), clock_ns)
+        self.attitude_drift = None if config.attitude_error is None else AttitudeDrift(
+            config.attitude_error, config.seed)
         self.judge = VisionJudge(config.profile, config.rules)
         self.vision: list[VisionRecord] = []
         self.landing_targets: list[dict[str, Any]] = []
@@ -231,7 +237,8 @@ class FakeAutopilot:
         boot_ms = int(self.boot_s() * 1000) & 0xFFFFFFFF
         n, e, d = s.position_ned_m
         vn, ve, vd = s.velocity_ned_m_s
-        r, p, y = s.attitude_rpy_rad
+        r, p, y = s.attitude_rpy_rad if self.attitude_drift is None \
+            else self.attitude_drift.attitude(s)
         if name == "HEARTBEAT":
             ap = 3 if self.config.profile == "ardupilot" else 12  # ARDUPILOTMEGA / PX4
             mav.heartbeat_send(2, ap, 0x81, 0, 4)  # QUADROTOR, armed|custom, ACTIVE

@@ -64,6 +64,15 @@ def test_no_track_for_a_landmark_out_of_view() -> None:
     visible = {b.landmark_id for _, truth, _ in out for b in truth.boxes if b.in_view_frac > 0}
     assert perception.tracks, "nothing was acquired: the test would prove nothing"
     assert set(perception.tracks) <= visible
+    # what the solver is told of the corners: their sigma and the outline's common scale
+    obs = [o for o in perception.observations(199) if o.corners_px is not None]
+    assert obs, "no corners: the rest would prove nothing"
+    for o in obs:
+        assert o.corner_sigma_px == perception._corner_sigma(o.corners_px)
+        assert o.corner_scale_sigma_px == perception.config.corner_scale_sigma_px
+    perception.config = dataclasses.replace(perception.config, corner_scale_sigma_px=0.2)
+    assert all(o.corner_scale_sigma_px == 0.2 for o in perception.observations(199)
+               if o.corners_px is not None)
 
 
 def test_a_detector_hit_restarts_a_track_when_the_reference_aligns_there() -> None:
@@ -119,6 +128,46 @@ def test_small_plates_corners_carry_a_larger_sigma() -> None:
     assert flat._corner_sigma(plate(37.0)) == pytest.approx(0.2)
     perception.close()
     flat.close()
+
+
+def test_a_plate_at_the_edge_of_a_rectified_frame_carries_a_larger_corner_sigma() -> None:
+    """Rectifying a barrel-distorted frame stretches its edges by ``s`` (rectified px per
+    raw px): a plate drawn ``w`` px wide there was imaged ``w / s`` px wide, so its corners
+    get the sigma of that narrower plate, times ``s``: ``sigma(w) * s ** (1 + exponent)``."""
+    sim = Simulator(load_scenario("survey_distorted"))
+    landmarks, references = map_landmarks(sim)
+    perception = Perception(sim.scenario.camera, landmarks, references,
+                            pose_config=PoseConfig(pixel_sigma_px=0.2))
+
+    def plate(x: float, y: float) -> tuple[tuple[float, float], ...]:
+        return ((x - 40, y - 30), (x + 40, y - 30), (x + 40, y + 30), (x - 40, y + 30))
+
+    assert perception._rectify is not None
+    centre = perception._corner_sigma(plate(319.5, 239.5))
+    assert centre == pytest.approx(0.2 * (100 / 80) ** 0.8, rel=1e-3)
+    s = perception._rectify.scale_at((580.0, 420.0))
+    assert s > 1.2
+    assert perception._corner_sigma(plate(580.0, 420.0)) == pytest.approx(centre * s**1.8,
+                                                                        rel=1e-6)
+    assert perception._stretch(plate(580.0, 420.0)) == s  # the outline's scale error too
+    assert perception._stretch(plate(319.5, 239.5)) == pytest.approx(1.0, abs=1e-3)
+    perception.close()
+
+
+def test_an_over_exposed_plates_corners_are_not_used() -> None:
+    """sudden_light hovers before one plate; from 12 s (frame 360) the light is at 160 %
+    and over half the plate's pixels saturate, which pulled its corners 0.4 px off
+    (docs/pose.md).  Its corners then stay out of the pose: one plate without corners
+    gives no fix.  Before, in normal light, the same track gives fixes from its corners."""
+    _, perception, out = flight("sudden_light", range(320, 400))
+    before = [r for r, _, _ in out[:40]]
+    after = [r for r, _, _ in out[45:]]  # from frame 365
+    assert sum(isinstance(r.fix, PoseFix) for r in before) >= 20
+    assert all(t["corners"] is not None for r in after for t in r.tracks), \
+        "the alignment lost the plate: the test would not show the saturation rule"
+    assert after and all(r.fix is None for r in after)
+    assert all("unobservable" in (r.no_fix_reason or "") for r in after)
+    perception.close()
 
 
 def test_housekeeping_sees_rectified_frames_even_ones_process_let_go() -> None:

@@ -56,3 +56,28 @@ def in_view_share(corners: FloatArray, width: int, height: int) -> float:
     except cv2.error:  # not convex: no trustworthy corners either
         return 0.0
     return min(1.0, max(0.0, float(common)) / area)
+
+
+#: A pixel with a channel at this level is saturated: the scene may be brighter.
+SATURATED_LEVEL = 255
+
+
+def saturated_share(image: np.ndarray, corners: FloatArray) -> float:
+    """Share of the quadrilateral's pixels (those inside the image) with a saturated
+    channel; 0 when none of it is in the image."""
+    quad = np.asarray(corners, np.float64)
+    height, width = image.shape[:2]
+    x0, y0 = np.maximum(np.floor(quad.min(axis=0)).astype(int), 0)
+    x1 = int(min(np.ceil(quad[:, 0].max()) + 1, width))
+    y1 = int(min(np.ceil(quad[:, 1].max()) + 1, height))
+    if x1 <= x0 or y1 <= y0:
+        return 0.0
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    cv2.fillConvexPoly(mask, np.round(quad - (x0, y0)).astype(np.int32), 1)
+    inside_px = mask.astype(bool)
+    if not inside_px.any():
+        return 0.0
+    hot = np.asarray(image[y0:y1, x0:x1] >= SATURATED_LEVEL)
+    if hot.ndim == 3:
+        hot = np.asarray(hot.any(axis=2))
+    return float(np.count_nonzero(hot & inside_px)) / float(np.count_nonzero(inside_px))

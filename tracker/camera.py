@@ -77,6 +77,7 @@ class Rectifier:
     """
 
     def __init__(self, camera: CameraModel) -> None:
+        self.source = camera
         self.camera = replace(camera, distortion=(0.0,) * len(camera.distortion))
         self._maps = cv2.initUndistortRectifyMap(
             camera.matrix, camera.dist_coeffs, None, camera.matrix,
@@ -86,3 +87,22 @@ class Rectifier:
         """``image`` (the camera's size) as the undistorted camera would have seen it."""
         return np.asarray(cv2.remap(image, self._maps[0], self._maps[1], cv2.INTER_LINEAR),
                           np.uint8)
+
+    def scale_at(self, point_px: tuple[float, float]) -> float:
+        """Rectified pixels per raw (distorted) pixel at a rectified point: the RMS over
+        directions, ``sqrt((1/s1^2 + 1/s2^2) / 2)`` for the singular values ``s`` of the
+        raw-from-rectified Jacobian.  Above 1 where rectification stretches the image (the
+        edges of a barrel-distorted frame): there a rectified pixel holds less of the scene,
+        and isotropic noise of one raw pixel becomes this many rectified pixels (RMS)."""
+        u, v = point_px
+        h = 0.5
+        rect = np.array([[u - h, v], [u + h, v], [u, v - h], [u, v + h]], np.float64)
+        k = self.camera.matrix
+        rays = np.column_stack([(rect[:, 0] - k[0, 2]) / k[0, 0], (rect[:, 1] - k[1, 2]) / k[1, 1],
+                                np.ones(4)])
+        raw = self.source.project_camera_points(rays)
+        jac = np.column_stack([raw[1] - raw[0], raw[3] - raw[2]]) / (2 * h)  # d raw / d rect
+        sv = np.linalg.svd(jac, compute_uv=False)
+        if sv[-1] <= 0.0:
+            return 1.0
+        return float(np.sqrt(np.mean(1.0 / sv**2)))

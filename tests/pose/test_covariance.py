@@ -84,6 +84,49 @@ def test_an_observations_own_corner_sigma_replaces_the_configured_one(
     assert isinstance(bad, NoFix) and "corner_sigma_px" in bad.reason
 
 
+def test_a_plates_common_scale_error_is_in_its_covariance(camera: CameraModel) -> None:
+    """Corners whose errors share a scale about the plate's centre (an outline drawn in or
+    out as a whole, N(0, s) in the plate's width) besides independent noise: told so
+    (``corner_scale_sigma_px``), one plate's fixes have NEES ~ chi-square(3); treated as
+    independent they are overconfident along the line of sight.  0 changes nothing."""
+    lms = wall()[:1]
+    clean = see(lms, camera)[0]
+    assert clean.corners_px is not None
+    c = np.array(clean.corners_px)
+    width = 0.5 * (np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3]))
+    sigma, scale = 0.2, 0.6
+    exact = AttitudeSample(0, *TRUE_RPY)
+    att_sigma = [exact.roll_pitch_sigma_rad, exact.roll_pitch_sigma_rad, exact.yaw_sigma_rad]
+    rng = np.random.default_rng(11)
+    told, untold = [], []
+    for _ in range(200):
+        r, p, y = (float(v) for v in np.asarray(TRUE_RPY) + rng.normal(0.0, att_sigma))
+        att = replace(exact, roll_rad=r, pitch_rad=p, yaw_rad=y)
+        eps = rng.normal(0.0, scale / width)
+        noisy = c.mean(axis=0) + (1.0 + eps) * (c - c.mean(axis=0))
+        noisy = noisy + rng.normal(0.0, sigma, c.shape)
+        obs = replace(clean, corners_px=tuple((float(u), float(v)) for u, v in noisy),
+                      corner_sigma_px=sigma)
+        for out, extra in ((told, scale), (untold, None)):
+            fix = solve_pose([replace(obs, corner_scale_sigma_px=extra)], lms, camera, 0,
+                             attitude=att)
+            assert isinstance(fix, PoseFix), getattr(fix, "reason", "")
+            e = np.asarray(fix.position_ned_m) - TRUE_P
+            out.append(float(e @ np.linalg.solve(fix.covariance[:3, :3], e)))
+    nees, naive = np.array(told), np.array(untold)
+    assert 2.4 < nees.mean() < 3.6
+    assert np.mean((nees >= NEES_LOW_3DOF) & (nees <= NEES_HIGH_3DOF)) >= 0.9
+    assert naive.mean() > 4.5  # without it the scale error is unaccounted for
+    zero = solve_pose([replace(clean, corner_scale_sigma_px=0.0)], lms, camera, 0,
+                      attitude=exact)
+    none = solve_pose([clean], lms, camera, 0, attitude=exact)
+    assert isinstance(zero, PoseFix) and isinstance(none, PoseFix)
+    np.testing.assert_array_equal(zero.covariance, none.covariance)
+    for bad in (-0.1, float("nan")):
+        out = solve_pose([replace(clean, corner_scale_sigma_px=bad)], lms, camera, 0)
+        assert isinstance(out, NoFix) and "corner_scale_sigma_px" in out.reason
+
+
 _num = st.floats(allow_nan=True, allow_infinity=True, width=64) | st.floats(-2000, 2000)
 _pair = st.tuples(_num, _num)
 

@@ -50,3 +50,50 @@ def test_wrap_angle() -> None:
     np.testing.assert_allclose(
         wrap_angle(np.array([3 * np.pi, -3.5 * np.pi, 0.1])), [-np.pi, 0.5 * np.pi, 0.1]
     )
+
+
+def _with_scale_error(ps: PointSet, groups: np.ndarray, width_sigma: float) -> PointSet:
+    """``ps`` with points grouped as landmarks whose outline may scale as a whole."""
+    dirs, beta = np.zeros((len(groups), 2)), np.zeros(len(groups))
+    for g in np.unique(groups):
+        sel = groups == g
+        u = ps.pixels[sel] - ps.pixels[sel].mean(axis=0)
+        norm = np.linalg.norm(u)
+        sigma = ps.sigma_px[sel][0]
+        a_uu = (width_sigma / 40.0) ** 2 * norm**2  # a plate 40 px wide
+        dirs[sel], beta[sel] = u / norm, 1.0 - sigma / np.sqrt(sigma**2 + a_uu)
+    return PointSet(ps.points_ned, ps.pixels, ps.sigma_px, groups, dirs, beta)
+
+
+def test_a_common_scale_error_is_whitened_like_its_full_covariance() -> None:
+    """With a landmark's pixel errors ``sigma^2 I + (s/w)^2 u u^T``, the residuals and the
+    Jacobian are whitened by that covariance's inverse square root: ``J^T J`` and ``r^T r``
+    equal those of a dense whitening, and the Jacobian still matches finite differences."""
+    k, r_bc, ps, priors, x = _problem()
+    groups = np.array([0, 0, 0, 0, 1, 1, 1], dtype=np.int64)
+    sigma = np.where(groups == 0, 0.7, 1.3)
+    ps = PointSet(ps.points_ned, ps.pixels, sigma, groups)
+    scaled = _with_scale_error(ps, groups, width_sigma=0.5)
+    plain_r, plain_j, _ = _residuals(x, k, r_bc, ps, Priors())
+    r, j, _ = _residuals(x, k, r_bc, scaled, Priors())
+    # dense: undo the plain 1/sigma whitening, then whiten by Sigma^-1/2 per landmark
+    raw_r, raw_j = plain_r * np.repeat(sigma, 2), plain_j * np.repeat(sigma, 2)[:, None]
+    want_rr, want_jj = 0.0, np.zeros((6, 6))
+    for g in (0, 1):
+        rows = np.repeat(groups == g, 2)
+        u = (ps.pixels[groups == g] - ps.pixels[groups == g].mean(axis=0)).ravel()
+        cov = sigma[groups == g][0] ** 2 * np.eye(rows.sum()) + (0.5 / 40.0) ** 2 * np.outer(u, u)
+        inv = np.linalg.inv(cov)
+        want_rr += raw_r[rows] @ inv @ raw_r[rows]
+        want_jj += raw_j[rows].T @ inv @ raw_j[rows]
+    np.testing.assert_allclose(r @ r, want_rr, rtol=1e-10)
+    np.testing.assert_allclose(j.T @ j, want_jj, rtol=1e-10)
+    assert not np.allclose(j.T @ j, plain_j.T @ plain_j, rtol=1e-3)  # it does change things
+    _, jac, _ = _residuals(x, k, r_bc, scaled, priors)
+    num = np.zeros_like(jac)
+    for i in range(6):
+        dx = np.zeros(6)
+        dx[i] = 1e-6
+        num[:, i] = (_residuals(x + dx, k, r_bc, scaled, priors)[0]
+                     - _residuals(x - dx, k, r_bc, scaled, priors)[0]) / 2e-6
+    np.testing.assert_allclose(jac, num, rtol=1e-5, atol=1e-5 * np.abs(num).max())

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.boxes import box_corners, box_iou, clip_box, in_view_share
+from tracker.boxes import box_corners, box_iou, clip_box, in_view_share, saturated_share
 from tracker.camera import CameraModel, Rectifier
 
 
@@ -28,6 +28,41 @@ def test_rectified_frame_puts_a_point_where_the_pinhole_camera_would() -> None:
     ys, xs = np.mgrid[: grey.shape[0], : grey.shape[1]]
     centre = np.array([(xs * grey).sum(), (ys * grey).sum()]) / grey.sum()
     assert np.linalg.norm(centre - pinhole) < 0.5
+
+
+def test_rectifier_scale_is_how_far_a_raw_pixel_step_moves_in_the_rectified_frame() -> None:
+    """``scale_at``: 1 at the centre and everywhere without distortion; towards the edge of a
+    barrel-distorted frame, the RMS over two perpendicular directions of how far a 1 px
+    step of the raw (distorted) image moves a point once rectified."""
+    cam = CameraModel(distortion=(-0.28, 0.09, 0.0005, -0.0005, 0.0))
+    rect = Rectifier(cam)
+    assert rect.scale_at((cam.cx, cam.cy)) == pytest.approx(1.0, abs=1e-3)
+    assert Rectifier(CameraModel(distortion=(0.0,) * 5)).scale_at((600.0, 450.0)) == \
+        pytest.approx(1.0, abs=1e-9)
+    edge = (600.0, 450.0)  # a rectified point near the lower-right corner
+    ray = np.array([[(edge[0] - cam.cx) / cam.fx, (edge[1] - cam.cy) / cam.fy, 1.0]])
+    raw = cam.project_camera_points(ray)[0]
+    steps = raw + np.array([[0.0, 0.0], [0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5]])
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+    back = cv2.undistortPoints(steps.reshape(-1, 1, 2), cam.matrix, cam.dist_coeffs, None, None,
+                               cam.matrix, criteria).reshape(-1, 2)
+    assert np.linalg.norm(back[0] - edge) < 1e-3  # the round trip lands where it started
+    # the raw -> rectified Jacobian from the two unit steps; its RMS gain over directions
+    jac = np.column_stack([back[1] - back[2], back[3] - back[4]])
+    expected = np.sqrt(np.sum(jac**2) / 2.0)
+    assert expected > 1.2  # the lens squeezes the edge: rectifying stretches it
+    assert rect.scale_at(edge) == pytest.approx(expected, rel=1e-3)
+
+
+def test_saturated_share_counts_pixels_inside_the_quadrilateral() -> None:
+    image = np.zeros((100, 100, 3), np.uint8)
+    image[:, 50:, 2] = 255  # the right half has a saturated red channel
+    quad = box_corners((30.0, 20.0, 40.0, 40.0))  # 30..70: half of it on each side
+    assert saturated_share(image, quad) == pytest.approx(0.5, abs=0.03)
+    assert saturated_share(image, box_corners((5.0, 5.0, 30.0, 30.0))) == 0.0
+    assert saturated_share(image, box_corners((80.0, 10.0, 40.0, 20.0))) == 1.0  # in view: all hot
+    assert saturated_share(image, box_corners((200.0, 10.0, 5.0, 5.0))) == 0.0  # out of view
+    assert saturated_share(image[:, :, 2], quad) == pytest.approx(0.5, abs=0.03)  # grey
 
 
 def test_box_helpers() -> None:

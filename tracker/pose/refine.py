@@ -15,7 +15,7 @@ whitened normal matrix ``P = (J^T J)^-1`` (first order, Cramer-Rao for Gaussian 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -29,12 +29,22 @@ _MIN_DEPTH_M = 1e-3
 
 @dataclass(frozen=True)
 class PointSet:
-    """Correspondences: Nx3 NED points, Nx2 ideal pixels, N sigmas (px), N landmark indices."""
+    """Correspondences: Nx3 NED points, Nx2 ideal pixels, N sigmas (px), N landmark indices.
+
+    ``scale_dir`` / ``scale_beta`` (optional): a landmark's pixel errors may share a part
+    that scales its quadrilateral about its centre, ``Sigma = sigma^2 I + a u u^T`` over its
+    2k pixel coordinates (``u``: the corners' offsets from their centre).  ``scale_dir`` holds
+    each point's two components of the landmark's unit ``u`` (N x 2), ``scale_beta`` the
+    landmark's ``beta = 1 - sigma / sqrt(sigma^2 + a |u|^2)`` for each point (0: none), so
+    that ``(I - beta u u^T) / sigma`` whitens them (:func:`_decorrelate`).
+    """
 
     points_ned: FloatArray
     pixels: FloatArray
     sigma_px: FloatArray
     landmark_index: IntArray
+    scale_dir: FloatArray | None = None
+    scale_beta: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -135,11 +145,25 @@ def _residuals(
         :, :, None
     ]
     jac = jac.reshape(2 * n, 6)
+    if pts.scale_dir is not None and pts.scale_beta is not None:
+        both = _decorrelate(np.column_stack([res, jac]), pts)
+        res, jac = both[:, 0], both[:, 1:]
     rows_r, rows_j = [res], [jac]
     _prior_rows(x, r_nb, list(dr_nb), priors, rows_r, rows_j)
     if len(rows_r) == 1:
         return res, jac, z
     return np.concatenate(rows_r), np.vstack(rows_j), z
+
+
+def _decorrelate(rows: FloatArray, pts: PointSet) -> FloatArray:
+    """``(I - beta u u^T)`` applied, landmark by landmark, to (2N, C) whitened pixel rows."""
+    assert pts.scale_dir is not None and pts.scale_beta is not None
+    n = pts.points_ned.shape[0]
+    r = rows.reshape(n, 2, -1)
+    along = pts.scale_dir[:, 0, None] * r[:, 0] + pts.scale_dir[:, 1, None] * r[:, 1]  # N x C
+    same = pts.landmark_index[:, None] == pts.landmark_index[None, :]  # N x N
+    back = pts.scale_beta[:, None] * (same @ along)  # beta u^T r of each point's landmark
+    return np.asarray((r - pts.scale_dir[:, :, None] * back[:, None, :]).reshape(rows.shape))
 
 
 def _prior_rows(
@@ -184,7 +208,8 @@ def point_errors_px(
     k: FloatArray, r_body_cam: FloatArray, pts: PointSet, x: FloatArray
 ) -> FloatArray:
     """Reprojection error magnitude (px, ideal pixels) of every point at ``x``."""
-    r, _, _ = _residuals(np.asarray(x, dtype=np.float64), k, r_body_cam, pts, Priors())
+    plain = replace(pts, scale_dir=None, scale_beta=None)
+    r, _, _ = _residuals(np.asarray(x, dtype=np.float64), k, r_body_cam, plain, Priors())
     n = pts.points_ned.shape[0]
     return np.asarray(np.sqrt(np.sum(r.reshape(n, 2) ** 2, axis=1)) * pts.sigma_px)
 

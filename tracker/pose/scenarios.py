@@ -364,3 +364,12 @@ def scenarios(make: Callable[..., Scenario] = Scenario) -> list[Scenario]:
             misname_rate=0.1,
         ),
     ]
+
+
+def reference_flights() -> list[Scenario]:
+    """:func:`scenarios` and, last, the two-landmark pair by box centres with a 0.25 deg yaw
+    prior (``two_landmarks_attitude_yaw0.25``): the flights the benchmarks report."""
+    runs = scenarios()
+    pair = next(s for s in runs if s.name == "two_landmarks_attitude")
+    yaw = replace(pair.noise, yaw_sigma_rad=float(np.deg2rad(0.25)))
+    return [*runs, replace(pair, name="two_landmarks_attitude_yaw0.25", noise=yaw)]

@@ -86,6 +86,10 @@ class _Group:
     pixels_distorted: FloatArray
     pixels_ideal: FloatArray
     sigma_px: float
+    #: the unit offsets of the points from their centre (k x 2) and beta of the plate's
+    #: common scale error (see refine.PointSet); beta 0: none
+    scale_dir: FloatArray | None = None
+    scale_beta: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -208,8 +212,27 @@ def _make_groups(
             pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma
             px = np.array([obs.centre_px], dtype=np.float64)
         ideal = _undistort(ctx, px) if ctx.distorted else px
-        groups.append(_Group(lm, obs, pts, px, ideal, sig))
+        scale = obs.corner_scale_sigma_px if obs.corners_px is not None else None
+        groups.append(_Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale)))
     return groups
+
+
+def _scale_error(
+    corners: FloatArray, sigma: float, width_sigma: float | None
+) -> tuple[FloatArray | None, float]:
+    """Unit offsets of the corners from their centre and ``beta`` for a common scale error
+    of ``width_sigma`` px in the plate's width (``Sigma = sigma^2 I + (s / w)^2 u u^T``)."""
+    if not width_sigma:
+        return None, 0.0
+    c = corners.tolist()
+    cu, cv = sum(p[0] for p in c) / len(c), sum(p[1] for p in c) / len(c)
+    norm = math.sqrt(sum((p[0] - cu) ** 2 + (p[1] - cv) ** 2 for p in c))
+    width = 0.5 * (math.dist(c[1], c[0]) + math.dist(c[2], c[3]))
+    if norm <= 0.0 or width <= 0.0:
+        return None, 0.0
+    a_uu = (width_sigma / width) ** 2 * norm**2
+    u = (corners - (cu, cv)) / norm
+    return u, 1.0 - sigma / math.sqrt(sigma**2 + a_uu)
 
 
 def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
@@ -269,11 +292,18 @@ def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int
 def _point_set(groups: list[_Group]) -> PointSet:
     """Stack every landmark's points for the refinement."""
     counts = [g.points_ned.shape[0] for g in groups]
+    scale_dir = scale_beta = None
+    if any(g.scale_beta > 0.0 for g in groups):
+        scale_dir = np.vstack([np.zeros((n, 2)) if g.scale_dir is None else g.scale_dir
+                               for g, n in zip(groups, counts, strict=True)])
+        scale_beta = np.repeat([g.scale_beta for g in groups], counts)
     return PointSet(
         np.vstack([g.points_ned for g in groups]),
         np.vstack([g.pixels_ideal for g in groups]),
         np.repeat([g.sigma_px for g in groups], counts),
         np.repeat(np.arange(len(groups), dtype=np.int64), counts),
+        scale_dir,
+        scale_beta,
     )
 
 
@@ -541,7 +571,11 @@ def _make_fix(
     inlier_ratio = len(groups) / (len(groups) + dropped)
     quality = 100.0 * inlier_ratio * 2.0 ** (-sigma_max / ctx.config.quality_sigma_ref_m)
     pts = out.points
-    rms = math.sqrt(float(np.mean(ref.point_errors * pts.sigma_px**2)) / 2.0)
+    if pts.scale_beta is None:
+        rms = math.sqrt(float(np.mean(ref.point_errors * pts.sigma_px**2)) / 2.0)
+    else:  # the whitened errors mix a plate's points: take them in pixels
+        x = np.concatenate([ref.position_ned_m, ref.attitude_rpy_rad])
+        rms = math.sqrt(float(np.mean(point_errors_px(ctx.k, ctx.r_body_cam, pts, x) ** 2)) / 2.0)
     p, a = ref.position_ned_m, ref.attitude_rpy_rad
     return PoseFix(
         time_us=time_us,

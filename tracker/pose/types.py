@@ -36,6 +36,10 @@ class Observation:
     histogram) compared with :attr:`MapLandmark.signature` by the Bhattacharyya distance.
     ``corner_sigma_px``: the corners' own 1-sigma when the detector knows it (a small plate's
     corners are less certain than a big one's); None: the solver's ``pixel_sigma_px``.
+    ``corner_scale_sigma_px``: 1-sigma of an error common to all four corners that scales the
+    quadrilateral about its centre, given as the change of the plate's width in pixels (an
+    alignment's outline is drawn in or out as a whole); None or 0: the corners' errors are
+    independent.
     """
 
     centre_px: tuple[float, float]
@@ -47,6 +51,7 @@ class Observation:
     frame_index: int = 0
     signature: tuple[float, ...] | None = None
     corner_sigma_px: float | None = None
+    corner_scale_sigma_px: float | None = None
 
 
 @dataclass(frozen=True)

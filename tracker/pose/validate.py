@@ -38,6 +38,9 @@ def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
     sigma = obs.corner_sigma_px
     if sigma is not None and (not _finite((sigma,)) or sigma <= 0.0):
         return f"corner_sigma_px must be finite and > 0, got {sigma!r}"
+    scale = obs.corner_scale_sigma_px
+    if scale is not None and (not _finite((scale,)) or scale < 0.0):
+        return f"corner_scale_sigma_px must be finite and >= 0, got {scale!r}"
     if obs.signature is not None and not _finite(tuple(obs.signature)):
         return "signature contains a value that is not finite"
     pts = [obs.centre_px, *(obs.corners_px or ())]
