@@ -83,18 +83,23 @@ def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarr
 
 
 async def run_demo(settings: Settings, scenario: str, seconds: float,
-                   progress: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Run the embedded demo and return its summary (see :func:`summary`)."""
+                   progress: Callable[[str], None] | None = None,
+                   attitude_error: bool = False) -> dict[str, Any]:
+    """Run the embedded demo and return its summary (see :func:`summary`).
+
+    ``attitude_error``: the fake autopilot's ATTITUDE carries the slowly varying error the
+    pose solver assumes (0.2 deg roll/pitch, 1 deg yaw), as a real one's estimate does;
+    off, it reports the simulator's exact attitude (docs/decisions.md).
+    """
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin
     pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
     # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
-    # an autopilot's ATTITUDE is an estimate: the fake's carries the slowly varying error
-    # the pose solver assumes (0.2 deg roll/pitch, 1 deg yaw; docs/decisions.md)
+    drift = AttitudeErrorConfig() if attitude_error else None
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
                                              endpoint="udpin:127.0.0.1:0",
-                                             attitude_error=AttitudeErrorConfig()),
+                                             attitude_error=drift),
                          truth=sim.truth_fn)
     await fake.start()
     source = SimCameraSource(sim, realtime=True, seconds=seconds,

@@ -110,3 +110,18 @@ def test_a_missing_detector_model_is_one_line_and_nothing_is_left_running() -> N
         cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert out.returncode == 2
     assert out.stderr.strip().splitlines()[-1] == "/no/such/model.onnx: model file not found"
+
+
+def test_demo_with_a_drifting_autopilot_attitude_still_flies(tmp_path: Path) -> None:
+    """`--attitude-error`: the fake autopilot's attitude drifts (0.2 / 1 deg); the fixes
+    still reach it and stay near the truth (one-plate fixes follow the attitude error)."""
+    out = subprocess.run(
+        [sys.executable, "-m", "companion", "--log-level", "warning",
+         "--set", f"flightlog.dir={json.dumps(str(tmp_path))}",
+         "demo", "--seconds", "4", "--json", "--attitude-error"],
+        cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout)
+    assert summary["fixes_sent"] > 0
+    assert summary["fixes_accepted"] >= 0.9 * summary["fixes_sent"]
+    assert summary["position_rmse_m"] < 0.02 * summary["mean_landmark_distance_m"]

@@ -22,6 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--scenario", default="survey",
                         help="scenario name in config/scenarios/ or a TOML file (default survey)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    parser.add_argument("--attitude-error", action="store_true",
+                        help="the fake autopilot's attitude drifts as a real estimate does "
+                        "(0.2 deg roll/pitch, 1 deg yaw); default: the exact attitude")
     parser.set_defaults(handler=run)
 
 
@@ -34,7 +37,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         sys.stderr.flush()
 
     result = asyncio.run(run_demo(settings, args.scenario, args.seconds,
-                                  progress if live else None))
+                                  progress if live else None, args.attitude_error))
     if live:
         sys.stderr.write("\n")
     if args.json:
