@@ -1,156 +1,100 @@
-"""Detector accuracy and speed on a held-out set of procedural scenes.
+"""Detector accuracy and speed on a held-out set (the issue's mAP@0.5 and small-landmark recall).
 
-    PYTHONPATH=. /work/main/.venv/bin/python benchmarks/detector_eval.py \
-        [--model A.onnx --model B.onnx] [--frames 300] [--seed 1000]
+    PYTHONPATH=. .venv/bin/python benchmarks/detector_eval.py \
+        [--model A.onnx --model B.onnx] [--set sim|procedural] [--frames 400] [--check]
 
-Prints, per model: mAP@0.5 (VOC all-point AP, mean over categories), recall and precision at
-the configured score threshold, recall on small landmarks (larger box side <= 32 px) and on
-the others, and inference time per 416x416 frame on one thread (median; network only and the
-whole ``detect`` call).  The held-out frames use seeds the training pool never uses (the pool
-uses seed 1; held-out frames use ``--seed`` + frame index).
+``--set sim`` (default): 640x480 frames of random streets of the simulated world
+(:func:`training.sim_data.sim_scene`, seeds ``--seed`` + i; the training pool uses seeds
+1..N, the held-out set 1,000,000 and up), fed whole to ``Detector.detect`` (letterboxed to
+416). A landmark counts when at least 90 % of its face is in the image and at most 10 % is
+hidden behind a nearer one; detections on the others are ignored. Small means the larger
+side of its box is <= 32 px in the 640x480 frame. ``--set procedural``: the older
+procedural 416x416 scenes of :mod:`training.synth_data`.
+
+Prints, per model: mAP@0.5 (VOC all-point AP, mean over categories), AP per category,
+recall and precision at the configured score threshold, recall on small and on larger
+landmarks, and time per frame on one thread (median; network only and the whole
+``detect`` call). With two models, the landmarks found by one and not the other (small and
+larger apart, with a sign test). ``--check`` exits 1 when a model's mAP@0.5 or small recall
+falls more than 0.02 below ``benchmarks/detector_baseline.json`` (the committed model's).
 """
 
 from __future__ import annotations
 
 import argparse
-import statistics
+import json
+import math
 import sys
-import time
 from pathlib import Path
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tracker.detector import Detection, Detector, DetectorConfig
-from tracker.detector_decode import iou_one_to_many
-from training.synth_data import CATEGORIES, Scene, render_scene
+import numpy as np
 
-SMALL_PX = 32.0
+from tracker.detector import Detector, DetectorConfig
+from training.evaluation import SIM_SEED, evaluate, held_out, print_block, timing
 
-
-def held_out(frames: int, seed: int, size: int) -> list[Scene]:
-    """The held-out scenes: one generator per frame, seeded ``seed + i``."""
-    return [render_scene(np.random.default_rng(seed + i), size, size) for i in range(frames)]
+BASELINE = Path(__file__).with_name("detector_baseline.json")
+TOLERANCE = 0.02
 
 
-def _xyxy(box: tuple[float, float, float, float] | np.ndarray) -> np.ndarray:
-    x, y, w, h = box
-    return np.array([x, y, x + w, y + h], np.float64)
+def paired(a: np.ndarray, b: np.ndarray) -> None:
+    """Landmarks found by one of two models and not by the other (McNemar's discordant
+    pairs), small and larger apart: the difference that is the models', not the frames'."""
+    for name, sel in (("small", a[:, 0]), ("larger", ~a[:, 0])):
+        only_a = int(np.sum(a[sel, 1] & ~b[sel, 1]))
+        only_b = int(np.sum(b[sel, 1] & ~a[sel, 1]))
+        n = only_a + only_b
+        # two-sided exact binomial (sign) test of only_a vs only_b
+        k = min(only_a, only_b)
+        p = min(1.0, 2.0 * sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n) if n else 1.0
+        print(f"{name} landmarks found by the first model only: {only_a}, by the second only: "
+              f"{only_b} (sign test p = {p:.3f})")
 
 
-def match(dets: list[Detection], scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Greedy matching by score, same category, IoU >= 0.5 (VOC).
-
-    Returns per-detection true-positive flags and per-truth matched flags.
-    """
-    gt = np.array([_xyxy(b) for b in scene.boxes_xywh]).reshape(-1, 4)
-    gt_cls = [CATEGORIES[int(c)] for c in scene.classes]
-    used = np.zeros(len(gt), bool)
-    tp = np.zeros(len(dets), bool)
-    for k, d in enumerate(sorted(dets, key=lambda d: -d.score)):
-        if not len(gt):
-            break
-        iou = iou_one_to_many(_xyxy(d.box), gt)
-        iou[[c != d.category for c in gt_cls]] = 0.0
-        iou[used] = 0.0
-        j = int(np.argmax(iou))
-        if iou[j] >= 0.5:
-            used[j] = True
-            tp[k] = True
-    return tp, used
-
-
-def average_precision(scores: np.ndarray, tp: np.ndarray, n_truth: int) -> float:
-    """VOC all-point interpolated AP: area under the monotone precision-recall envelope."""
-    if n_truth == 0:
-        return float("nan")
-    order = np.argsort(-scores, kind="stable")
-    ctp = np.cumsum(tp[order])
-    recall = ctp / n_truth
-    precision = ctp / np.arange(1, len(order) + 1)
-    r = np.concatenate([[0.0], recall, [1.0]])
-    p = np.concatenate([[1.0], precision, [0.0]])
-    p = np.maximum.accumulate(p[::-1])[::-1]  # p_interp(r) = max_{r' >= r} p(r')
-    return float(np.sum((r[1:] - r[:-1]) * p[1:]))
-
-
-def evaluate(det: Detector, scenes: list[Scene], threshold: float) -> dict[str, float]:
-    """mAP@0.5 over all detections (det's threshold should be low) and recall at ``threshold``."""
-    per_cls: dict[str, list[tuple[float, bool]]] = {c: [] for c in CATEGORIES}
-    n_truth = dict.fromkeys(CATEGORIES, 0)
-    hits = {"small": [0, 0], "large": [0, 0]}
-    n_pos_dets = n_tp_dets = 0
-    for scene in scenes:
-        dets = sorted(det.detect(scene.image_bgr), key=lambda d: -d.score)
-        tp, _ = match(dets, scene)
-        for d, t in zip(dets, tp, strict=True):
-            per_cls[d.category].append((d.score, bool(t)))
-        for c in scene.classes:
-            n_truth[CATEGORIES[int(c)]] += 1
-        kept = [d for d in dets if d.score >= threshold]
-        tp_k, used_k = match(kept, scene)
-        n_pos_dets += len(kept)
-        n_tp_dets += int(tp_k.sum())
-        for b, u in zip(scene.boxes_xywh, used_k, strict=True):
-            key = "small" if max(b[2], b[3]) <= SMALL_PX else "large"
-            hits[key][0] += int(u)
-            hits[key][1] += 1
-    aps = {c: average_precision(np.array([s for s, _ in v]), np.array([t for _, t in v]),
-                                n_truth[c]) for c, v in per_cls.items()}
-    total = hits["small"][1] + hits["large"][1]
-    return {"mAP50": float(np.nanmean(list(aps.values()))),
-            **{f"AP50_{c}": a for c, a in aps.items()},
-            "recall": (hits["small"][0] + hits["large"][0]) / max(1, total),
-            "precision": n_tp_dets / max(1, n_pos_dets),
-            "recall_small": hits["small"][0] / max(1, hits["small"][1]),
-            "recall_large": hits["large"][0] / max(1, hits["large"][1]),
-            "n_small": hits["small"][1], "n_large": hits["large"][1]}
-
-
-def timing(det: Detector, image: np.ndarray, runs: int) -> tuple[float, float]:
-    """Median ms of the network alone and of a whole detect() call, one thread."""
-    det.detect(image)
-    net, full = [], []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        det.raw_outputs(image)
-        t1 = time.perf_counter()
-        det.detect(image)
-        t2 = time.perf_counter()
-        net.append((t1 - t0) * 1e3)
-        full.append((t2 - t1) * 1e3)
-    return statistics.median(net), statistics.median(full)
-
-
-def main() -> None:
-    """Evaluate each model on the same held-out scenes and print one block per model."""
-    ap = argparse.ArgumentParser(description=__doc__)
+def main() -> int:
+    """Evaluate each model on the same held-out frames and print one block per model."""
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--model", action="append", default=None)
-    ap.add_argument("--frames", type=int, default=300)
-    ap.add_argument("--seed", type=int, default=1000)
-    ap.add_argument("--size", type=int, default=416)
+    ap.add_argument("--set", choices=("sim", "procedural"), default="sim")
+    ap.add_argument("--frames", type=int, default=400)
+    ap.add_argument("--seed", type=int, default=None,
+                    help=f"first seed (default {SIM_SEED} for sim, 1000 for procedural)")
     ap.add_argument("--threshold", type=float, default=DetectorConfig().score_threshold)
-    ap.add_argument("--runs", type=int, default=50)
+    ap.add_argument("--runs", type=int, default=50, help="timed detect() calls")
+    ap.add_argument("--check", action="store_true", help="gate against the baseline file")
+    ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = ap.parse_args()
-    scenes = held_out(args.frames, args.seed, args.size)
-    n_small = sum(int(max(b[2], b[3]) <= SMALL_PX) for s in scenes for b in s.boxes_xywh)
-    print(f"held-out: {len(scenes)} frames {args.size}x{args.size}, "
-          f"{sum(len(s.classes) for s in scenes)} landmarks ({n_small} small <= {SMALL_PX:g} px),"
-          f" seeds {args.seed}..{args.seed + args.frames - 1}")
+    seed = args.seed if args.seed is not None else (SIM_SEED if args.set == "sim" else 1000)
+    frames = held_out(args.set, args.frames, seed)
+    n = sum(len(f.classes) for f in frames)
+    h, w = frames[0].image_bgr.shape[:2]
+    print(f"held-out {args.set}: {len(frames)} frames {w}x{h}, {n} landmarks counted, "
+          f"seeds {seed}..{seed + args.frames - 1}", flush=True)
+    results, failed, found = {}, False, []
+    base = json.loads(BASELINE.read_text())[args.set] if args.check else {}
     for model in args.model or [None]:
         det = Detector(model, DetectorConfig(score_threshold=0.01, max_detections=100,
                                              threads=1))
-        m = evaluate(det, scenes, args.threshold)
-        net_ms, full_ms = timing(det, scenes[0].image_bgr, args.runs)
-        print(f"model {det.model_path.name} ({det.model_path.stat().st_size / 1e6:.2f} MB, "
-              f"strides {list(det.info.strides)})")
-        for k, v in m.items():
-            print(f"  {k}: {v:.3f}" if isinstance(v, float) else f"  {k}: {v}")
-        print(f"  recall/precision at score >= {args.threshold}")
-        print(f"  inference ms/frame (1 thread, median of {args.runs}): network {net_ms:.1f}, "
-              f"detect() {full_ms:.1f}")
+        found.append([])
+        m = evaluate(det, frames, args.threshold, found[-1])
+        net_ms, full_ms = timing(det, frames[0].image_bgr, args.runs)
+        m |= {"network_ms": net_ms, "detect_ms": full_ms}
+        print_block(f"model {det.model_path.name} ({det.model_path.stat().st_size / 1e6:.2f} MB,"
+                    f" strides {list(det.info.strides)})", m, args.threshold)
+        results[str(det.model_path)] = m
+        for key in ("mAP50", "recall_small"):
+            if key in base and m[key] < base[key] - TOLERANCE:
+                print(f"  REGRESSION: {key} {m[key]:.3f} < baseline {base[key]:.3f} - "
+                      f"{TOLERANCE}")
+                failed = True
+    if len(found) == 2:
+        paired(np.array(found[0]), np.array(found[1]))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2))
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -208,10 +208,8 @@ class Perception:
             self._last_fix_us = fix.time_us
             starts += self._predict_acquire(image, fix, starts)
         elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
-            if self.detect is not None:
-                starts += self._detect_acquire(image)
-            else:
-                starts += self._search(image)
+            found = self._detect_acquire(image) if self.detect is not None else []
+            starts += found or self._search(image)  # the search when the detector finds none
         if starts:
             with self._lock:
                 self._pending += starts

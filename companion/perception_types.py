@@ -61,8 +61,9 @@ class PerceptionConfig:
     search_after_s: float = field(default=0.3, metadata={"ge": 0})
     search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
     search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
-    #: Acquire with the landmark detector ([detector]) instead of the template search.
-    use_detector: bool = False
+    #: Without a fix, acquire with the landmark detector ([detector]) first, the template
+    #: search when its detections start no track.
+    use_detector: bool = True
     #: Update the tracks of one frame on two threads (OpenCV and most of numpy release
     #: the GIL): lower latency with several landmarks in view, the same CPU time.
     parallel_tracks: bool = True

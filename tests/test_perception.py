@@ -14,6 +14,8 @@ from companion.perception import Perception, PerceptionConfig, SideSensors
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
+from tracker.boxes import box_iou
+from tracker.detector import Detector
 from tracker.pose.config import PoseConfig
 from tracker.pose.types import AttitudeSample, PoseFix
 
@@ -86,6 +88,20 @@ def test_a_detector_hit_restarts_a_track_when_the_reference_aligns_there() -> No
     events = [e for r, _, _ in out for e in r.events]
     assert {"event": "acquired", "landmark": box.landmark_id, "by": "detector"}.items() <= \
         next(e for e in events if e.get("by") == "detector").items()
+
+
+def test_the_committed_detector_starts_tracks_on_the_right_landmarks() -> None:
+    """With nothing tracked and no fix, the real detector (the committed model) finds the
+    street's landmarks; each is matched to the map by category and aligned reference, and
+    its track sits on the landmark's true box."""
+    _, perception, out = flight("street", range(300, 303), detect=Detector().detect)
+    started = {e["landmark"] for r, _, _ in out for e in r.events
+               if e.get("event") == "acquired" and e.get("by") == "detector"}
+    assert len(started) >= 2, started
+    truth = {b.landmark_id: b for b in out[-1][1].boxes}
+    for lid in started:
+        b = truth[lid]
+        assert box_iou(perception.tracks[lid].box, (b.x, b.y, b.w, b.h)) > 0.5, lid
 
 
 def test_a_frame_of_another_size_is_a_bad_frame_not_a_crash() -> None:

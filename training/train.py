@@ -1,13 +1,15 @@
-"""Train the landmark detector on procedural scenes and export it to ONNX.
+"""Train the landmark detector on a pool of scenes and export it to ONNX.
 
 Usage (in the training venv, torch 2.13.0 CPU; see docs/detector.md)::
 
-    nice -n 19 /work/venv-train/bin/python -m training.train --scales 3 \
-        --minutes 25 --out tracker/models/landmark_yolo_tiny3.onnx
+    PYTHONPATH=. .venv/bin/python -m training.sim_pool --out /tmp/det/sim_pool.npz
+    /work/venv-train/bin/python -m training.train --scales 3 --pool /tmp/det/sim_pool.npz \
+        --max-steps 3000 --minutes 60 --out tracker/models/landmark_yolo_tiny3.onnx
 
-Anchors are fitted by k-means (1 - IoU distance) to boxes from the generator; a pool of
-scenes is generated once (seeded) and shared by every variant so that a comparison between
-the 2-scale and 3-scale networks sees exactly the same data.
+Anchors are fitted by k-means (1 - IoU distance) to the pool's boxes; the pool (built once,
+seeded) is shared by every variant so that a comparison between the 2-scale and 3-scale
+networks sees exactly the same data. A run stops at ``--max-steps`` or after ``--minutes``,
+whichever comes first; the learning-rate schedule follows the larger of the two fractions.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import torch
 import torch.nn.functional as F  # noqa: N812
 
 from training.model import TinyYolo
-from training.synth_data import CATEGORIES, render_scene
+from training.synth_data import CATEGORIES
 
 STRIDES = {2: (16, 32), 3: (8, 16, 32)}
 OBJ_BALANCE = {8: 4.0, 16: 1.0, 32: 0.4}  # objectness weight per stride (YOLOv5)
@@ -45,17 +47,31 @@ def kmeans_anchors(wh: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarr
     return centres[np.argsort(centres.prod(1))].round(1)
 
 
-def build_pool(path: Path, count: int, size: int, seed: int) -> None:
-    """Generate ``count`` training scenes (size x size) and save images + targets to ``path``."""
-    rng = np.random.default_rng(seed)
-    images = np.empty((count, size, size, 3), np.uint8)
-    targets = []
-    for i in range(count):
-        s = render_scene(rng, size, size, max_size_px=size * 0.65)
-        images[i] = s.image_bgr
-        for b, c in zip(s.boxes_xywh, s.classes, strict=True):
-            targets.append([i, c, b[0] + b[2] / 2, b[1] + b[3] / 2, b[2], b[3]])
-    np.savez(path, images=images, targets=np.array(targets, np.float32).reshape(-1, 6))
+def initial_anchors(init: Path | None, wh: np.ndarray, heads: int) -> list[np.ndarray]:
+    """The anchors a fine-tune started from (metadata of the ONNX beside ``init``), else
+    fitted to the pool's box sizes."""
+    if init is not None and init.with_suffix(".onnx").is_file():
+        import onnx
+
+        meta = {p.key: p.value for p in onnx.load(str(init.with_suffix(".onnx"))).metadata_props}
+        return [np.array(a, np.float64) for a in json.loads(meta["anchors"])]
+    return list(kmeans_anchors(wh, 3 * heads, np.random.default_rng(7)).reshape(heads, 3, 2))
+
+
+def load_pools(paths: list[Path], size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Images and target rows (image, class, cx, cy, w, h) of one or more pools, joined."""
+    images, targets = [], []
+    for path in paths:
+        if not path.is_file():
+            raise SystemExit(f"{path}: no such pool (build it: python -m training.sim_pool)")
+        data = np.load(path)
+        if data["images"].shape[1:3] != (size, size):
+            raise SystemExit(f"{path}: images are {data['images'].shape[1:3]}, not {size}")
+        t = data["targets"].copy()
+        t[:, 0] += sum(len(i) for i in images)
+        images.append(data["images"])
+        targets.append(t)
+    return np.concatenate(images), np.concatenate(targets)
 
 
 def box_giou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -167,12 +183,11 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--lr", type=float, default=2e-3)
     ap.add_argument("--train-size", type=int, default=256)
     ap.add_argument("--input-size", type=int, default=416, help="exported input size")
-    ap.add_argument("--pool", type=Path, default=Path("/tmp/det/pool.npz"))
-    ap.add_argument("--pool-count", type=int, default=2500)
+    ap.add_argument("--pool", type=Path, action="append", required=True,
+                    help="images + targets .npz (python -m training.sim_pool); repeatable")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--pool-only", action="store_true")
     ap.add_argument("--init", type=Path, default=None,
                     help="start from these weights (.pt state dict of the same variant)")
     return ap.parse_args()
@@ -184,18 +199,9 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
-    if not args.pool.exists():
-        args.pool.parent.mkdir(parents=True, exist_ok=True)
-        build_pool(args.pool, args.pool_count, args.train_size, args.seed + 1)
-    if args.pool_only:
-        return
-    data = np.load(args.pool)
-    images, targets = data["images"], data["targets"]
-    wh_rng = np.random.default_rng(12345)
-    wh = np.concatenate([render_scene(wh_rng).boxes_xywh[:, 2:] for _ in range(600)])
+    images, targets = load_pools(args.pool, args.train_size)
     strides = STRIDES[args.scales]
-    k = 3 * len(strides)
-    anchors = list(kmeans_anchors(wh, k, np.random.default_rng(7)).reshape(len(strides), 3, 2))
+    anchors = initial_anchors(args.init, targets[:, 4:6], len(strides))
     print("anchors", [a.tolist() for a in anchors], flush=True)
     model = TinyYolo(len(CATEGORIES), 3, args.scales == 3)
     if args.init is not None:
@@ -207,8 +213,8 @@ def main() -> None:
     t0, step, budget = time.monotonic(), 0, args.minutes * 60.0
     model.train()
     while True:
-        frac = (time.monotonic() - t0) / budget
-        if frac >= 1.0 or step >= args.max_steps:
+        frac = max((time.monotonic() - t0) / budget, step / args.max_steps)
+        if frac >= 1.0:
             break
         for g in opt.param_groups:
             g["lr"] = lr_at(frac, args.lr)
@@ -235,7 +241,9 @@ def main() -> None:
                   f"loss={loss.item():.3f}", flush=True)
     info = {"scales": args.scales, "steps": step, "batch": args.batch,
             "minutes": round((time.monotonic() - t0) / 60, 1), "train_size": args.train_size,
-            "pool": args.pool_count, "seed": args.seed, "params": n_params,
+            "pool": f"{'+'.join(p.name for p in args.pool)} ({len(images)} images)",
+            "seed": args.seed,
+            "params": n_params,
             "init": args.init.name if args.init else None}
     print("done", info, flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)

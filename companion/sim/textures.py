@@ -93,6 +93,24 @@ def poster_texture(rng: np.random.Generator, width_m: float, height_m: float, na
     return img
 
 
+def logo_texture(rng: np.random.Generator, width_m: float, height_m: float, name: str) -> ImageU8:
+    """A facade logo: a round emblem (ring, disc, the name's initial) on a pale plate."""
+    w, h = texture_size(width_m, height_m)
+    hue = float(rng.uniform(0, 180))
+    img = np.empty((h, w, 3), np.uint8)
+    img[:] = _hsv_colour(hue + 90, 25, 235)
+    centre, r = (w // 2, h // 2), max(6, int(min(w, h) * 0.46))
+    cv2.circle(img, centre, r, _hsv_colour(hue, 220, 150), -1, cv2.LINE_AA)
+    cv2.circle(img, centre, int(r * 0.78), _hsv_colour(hue + 20, 200, 235), -1, cv2.LINE_AA)
+    letter = (name.strip()[:1] or "?").upper()
+    scale = r / 22.0
+    (tw, th), _ = cv2.getTextSize(letter, cv2.FONT_HERSHEY_DUPLEX, scale, max(1, r // 10))
+    org = (centre[0] - tw // 2, centre[1] + th // 2)
+    cv2.putText(img, letter, org, cv2.FONT_HERSHEY_DUPLEX, scale, _hsv_colour(hue, 230, 90),
+                max(1, r // 10), cv2.LINE_AA)
+    return img
+
+
 def distractor_texture(
     rng: np.random.Generator, like: ImageU8, size_px: tuple[int, int]
 ) -> ImageU8:

@@ -21,6 +21,9 @@ from tracker.geometry import FloatArray
 from tracker.pose.landmarks import corners_about
 
 DOWN = np.array([0.0, 0.0, 1.0])
+#: The generated face of a landmark without a reference image, by category (else a poster).
+FACADE_CATEGORIES = ("wall_image", "logo")  # hung on a facade (signposts stand on poles)
+TEXTURES = {"signpost": textures.signpost_texture, "logo": textures.logo_texture}
 
 
 @dataclass(frozen=True)
@@ -115,8 +118,7 @@ def sim_landmark(record: Landmark, origin: Origin, seed: int) -> SimLandmark:
         texture = texture_from_appearance(record.appearance, f"landmark {lid}")
     else:
         rng = seeded_rng(seed, lid)
-        make = textures.signpost_texture if record.category == "signpost" else (
-            textures.poster_texture)
+        make = TEXTURES.get(record.category, textures.poster_texture)
         texture = make(rng, record.width_m, record.height_m, record.name)
     corners = face_corners(centre, record.width_m, record.height_m, record.facing_deg)
     quad = Quad(corners, texture, landmark_id=lid)
@@ -162,11 +164,11 @@ class World:
         self.far_ground = Quad(_flat_square(20_000.0, g + 1e-3), None, cfg.far_ground_bgr, True)
 
     def _facades(self) -> list[Quad]:
-        """One wall per plane of wall images, from the ground to above the highest one."""
+        """One wall per plane of wall images and logos, from the ground to above the highest one."""
         cfg = self.config
         groups: dict[tuple[float, float], list[SimLandmark]] = {}
         for lm in self.landmarks:
-            if lm.category != "wall_image" or lm.facing_deg is None:
+            if lm.category not in FACADE_CATEGORIES or lm.facing_deg is None:
                 continue
             offset = float(lm.quad.normal_ned @ lm.centre_ned)
             groups.setdefault((round(lm.facing_deg % 360.0, 1), round(offset, 1)), []).append(lm)

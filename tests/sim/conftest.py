@@ -14,12 +14,12 @@ def flat_landmark(
     lid: str, centre: tuple[float, float, float], size_m: tuple[float, float],
     facing_deg: float | None, colour: tuple[int, int, int] = (20, 40, 230),
 ) -> SimLandmark:
-    """A 'logo' landmark (no pole, no facade) with a uniform texture."""
+    """A bare plate (category "other": no pole, no facade) with a uniform texture."""
     c = np.asarray(centre, dtype=np.float64)
     tex = np.empty((40, 60, 3), np.uint8)
     tex[:] = colour
     quad = Quad(face_corners(c, size_m[0], size_m[1], facing_deg), tex, landmark_id=lid)
-    return SimLandmark(lid, lid, "logo", c, size_m[0], size_m[1], facing_deg, quad)
+    return SimLandmark(lid, lid, "other", c, size_m[0], size_m[1], facing_deg, quad)
 
 
 @pytest.fixture
