@@ -26,7 +26,7 @@ from companion.app import CompanionApp
 from companion.autopilot import AttitudeHistory
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception, PerceptionWrapper
-from companion.runtime import PracticalMap, bridge_for, fly, perception_for
+from companion.runtime import PracticalMap, bridge_for, detector_for, fly, perception_for
 from companion.settings import Settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
@@ -95,6 +95,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin
     pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
+    detector_for(settings)  # load the detector now, not on the camera's clock (and fail early)
     # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
     drift = AttitudeErrorConfig() if attitude_error else None
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import signal
 import time
 from collections.abc import Callable
@@ -36,7 +37,7 @@ from companion.settings import Settings
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
 from tracker.camera import CameraModel
-from tracker.detector import Detector, DetectorError
+from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
 
 ImageU8 = npt.NDArray[np.uint8]
@@ -107,12 +108,21 @@ def reporter_for(settings: Settings, landmarks: tuple[MapLandmark, ...] | list[M
     return Reporter(flightlog, monitor)
 
 
+@functools.lru_cache(maxsize=4)
+def _detector(config: DetectorConfig) -> Detector:
+    """One loaded model per configuration (loading takes tens of ms; sessions are shared)."""
+    return Detector(config=config)
+
+
 def detector_for(settings: Settings) -> DetectFn | None:
-    """The landmark detector when ``perception.use_detector``; a bad model is one line."""
+    """The landmark detector when ``perception.use_detector``; a bad model is one line.
+
+    The model is loaded once per configuration, so calling this before a camera's clock
+    starts keeps the load out of the first frame's time."""
     if not settings.perception.use_detector:
         return None
     try:
-        return Detector(config=settings.detector).detect
+        return _detector(settings.detector).detect
     except DetectorError as err:
         raise InputError(str(err)) from None
 
