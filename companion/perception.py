@@ -450,13 +450,13 @@ class Perception:
                 (float(u), float(v)) for u, v in t.corners)
             centre = ((x + w / 2, y + h / 2) if corners is None
                       else tuple(float(c) for c in np.mean(corners, axis=0)))
-            scale = None if corners is None else \
-                self.config.corner_scale_sigma_px * self._stretch(corners)
+            stretch = 1.0 if corners is None else self._stretch(corners)  # once a plate
+            scale = None if corners is None else self.config.corner_scale_sigma_px * stretch
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
                                    frame_index=frame_index,
-                                   corner_sigma_px=self._corner_sigma(corners),
+                                   corner_sigma_px=self._corner_sigma(corners, stretch),
                                    corner_scale_sigma_px=scale))
         return out
 
@@ -467,19 +467,20 @@ class Perception:
         centre = np.asarray(corners, np.float64).mean(axis=0)
         return self._rectify.scale_at((float(centre[0]), float(centre[1])))
 
-    def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None) -> float | None:
+    def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None,
+                      s: float | None = None) -> float | None:
         """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``).
 
         In a rectified frame, the plate was imaged ``s`` times smaller than it is drawn
-        (``s``: rectified px per raw px at its centre, above 1 towards the edges of a
-        barrel-distorted frame), so its corners have the raw sigma of a plate ``width / s``
-        wide, stretched by ``s``."""
+        (``s``: rectified px per raw px at its centre, :meth:`_stretch`, above 1 towards the
+        edges of a barrel-distorted frame), so its corners have the raw sigma of a plate
+        ``width / s`` wide, stretched by ``s`` (computed when not given)."""
         if corners is None:
             return None
+        s = self._stretch(corners) if s is None else s
         cfg = self.config
         quad = np.asarray(corners, np.float64)
         width = max(float(np.ptp(quad[:, 0])), 1.0)
-        s = self._stretch(corners)
         return float(s * self.pose_config.pixel_sigma_px
                      * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
 
