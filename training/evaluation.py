@@ -17,10 +17,9 @@ import numpy as np
 
 from tracker.detector import Detection, Detector
 from tracker.detector_decode import iou_one_to_many
-from training.sim_data import sim_scene
+from training.sim_data import SMALL_PX, sim_scene
 from training.synth_data import CATEGORIES, render_scene
 
-SMALL_PX = 32.0  # a landmark is small when the larger side of its box is at most this
 IGNORE_IOU = 0.3
 SIM_SEED = 1_000_000  # held-out simulated frames use seeds from here (the pool: 1..N)
 COUNT_IN_VIEW, COUNT_HIDDEN = 0.9, 0.1  # a face counts when this much in view, unhidden

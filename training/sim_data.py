@@ -41,7 +41,7 @@ from companion.sources.stream_format import TruthBox
 from tracker.camera import CameraModel
 from training.synth_data import CATEGORIES
 
-SMALL_PX = 32.0
+SMALL_PX = 32.0  # a landmark is small when the larger side of its box is at most this
 MIN_SIZE_PX, MAX_SIZE_PX, SMALL_SHARE = 16.0, 320.0, 0.4  # the chosen landmark's size
 MIN_BOX_PX = 6.0  # faces smaller than this (larger side) never count
 SIZES_M = {"signpost": ((0.5, 1.6), (0.4, 1.2)), "wall_image": ((1.2, 4.0), (1.0, 3.5)),

@@ -21,6 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from training.args import positive
 from training.sim_data import sim_scene
 
 SCALE = 416 / 640  # the letterbox's scale for a 640x480 frame
@@ -68,10 +69,10 @@ def main() -> None:
     """Command line."""
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--count", type=int, default=8000)
-    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--count", type=positive, default=8000)
+    ap.add_argument("--size", type=positive, default=256)
     ap.add_argument("--seed", type=int, default=1, help="scene i uses seed + i")
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--workers", type=positive, default=2)
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args()
     build(args.out, args.count, args.size, args.seed, args.workers)

@@ -24,6 +24,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F  # noqa: N812
 
+from training.args import positive
 from training.model import TinyYolo
 from training.synth_data import CATEGORIES
 
@@ -178,14 +179,14 @@ def parse_args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--scales", type=int, choices=(2, 3), default=3)
     ap.add_argument("--minutes", type=float, default=25.0, help="wall-clock training budget")
-    ap.add_argument("--max-steps", type=int, default=100000)
-    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--max-steps", type=positive, default=100000)
+    ap.add_argument("--batch", type=positive, default=16)
     ap.add_argument("--lr", type=float, default=2e-3)
     ap.add_argument("--train-size", type=int, default=256)
     ap.add_argument("--input-size", type=int, default=416, help="exported input size")
     ap.add_argument("--pool", type=Path, action="append", required=True,
                     help="images + targets .npz (python -m training.sim_pool); repeatable")
-    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--threads", type=positive, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--init", type=Path, default=None,
