@@ -13,6 +13,8 @@ Conventions (fixed; every part uses them):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -50,10 +52,9 @@ def rotation_from_rpy(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Floa
 
 def rpy_from_rotation(r: FloatArray) -> tuple[float, float, float]:
     """Inverse of :func:`rotation_from_rpy` (pitch in [-pi/2, pi/2])."""
-    pitch = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
-    roll = float(np.arctan2(r[2, 1], r[2, 2]))
-    yaw = float(np.arctan2(r[1, 0], r[0, 0]))
-    return roll, pitch, yaw
+    m = r.tolist()
+    pitch = math.asin(min(1.0, max(-1.0, -m[2][0])))
+    return math.atan2(m[2][1], m[2][2]), pitch, math.atan2(m[1][0], m[0][0])
 
 
 def mount_rotation(mount_rpy_deg: tuple[float, float, float]) -> FloatArray:

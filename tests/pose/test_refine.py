@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from tracker.camera import CameraModel
 from tracker.geometry import rotation_from_rpy
-from tracker.pose.refine import PointSet, Priors, RangePrior, _residuals, wrap_angle
+from tracker.pose.refine import (
+    PointSet,
+    Priors,
+    RangePrior,
+    _residuals,
+    point_errors_px,
+    wrap_angle,
+)
 
 
 def _problem() -> tuple[np.ndarray, np.ndarray, PointSet, Priors, np.ndarray]:
@@ -44,6 +52,16 @@ def test_residual_rotation_is_the_shared_zyx_convention() -> None:
     np.testing.assert_allclose(z, xc[:, 2])
     u = k[0, 0] * xc[:, 0] / xc[:, 2] + k[0, 2]
     np.testing.assert_allclose(res[0::2], (u - ps.pixels[:, 0]) / ps.sigma_px)
+
+
+def test_point_errors_are_opencv_reprojection_distances() -> None:
+    k, r_bc, ps, _, x = _problem()
+    r_cam_ned = (rotation_from_rpy(*x[3:]) @ r_bc).T
+    rvec, _ = cv2.Rodrigues(r_cam_ned)
+    tvec = -r_cam_ned @ x[:3]
+    proj, _ = cv2.projectPoints(ps.points_ned, rvec, tvec, k, None)
+    expected = np.linalg.norm(proj.reshape(-1, 2) - ps.pixels, axis=1)
+    np.testing.assert_allclose(point_errors_px(k, r_bc, ps, x), expected, rtol=1e-9)
 
 
 def test_wrap_angle() -> None:

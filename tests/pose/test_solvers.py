@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tracker.pose.refine import RangePrior
 from tracker.pose.solvers import bearing_consensus, bearing_least_squares
 
 
@@ -23,6 +24,25 @@ def test_bearing_least_squares_recovers_the_position_exactly() -> None:
 def test_one_bearing_alone_does_not_fix_a_position() -> None:
     pts = np.array([[20.0, -5.0, -3.0]])
     assert bearing_least_squares(pts, _bearings(pts, np.zeros(3)), np.eye(3)) is None
+
+
+def test_one_bearing_with_the_altitude_fixes_the_position() -> None:
+    pts = np.array([[20.0, -5.0, -3.0]])
+    p = np.array([1.0, 2.0, -4.0])
+    est = bearing_least_squares(pts, _bearings(pts, p), np.eye(3), altitude_down_m=-4.0)
+    assert est is not None
+    np.testing.assert_allclose(est, p, atol=1e-9)
+
+
+def test_one_bearing_with_a_laser_on_the_landmark_plane_fixes_the_position() -> None:
+    pts = np.array([[20.0, -5.0, -3.0]])
+    p = np.array([1.0, 2.0, -4.0])
+    axis = np.array([1.0, 0.0, 0.0])  # body x = NED north at identity attitude
+    # plane x = 20 facing the camera: the beam from p travels 19 m to meet it
+    laser = RangePrior(19.0, 0.05, axis, pts[0], np.array([-1.0, 0.0, 0.0]))
+    est = bearing_least_squares(pts, _bearings(pts, p), np.eye(3), range_prior=laser)
+    assert est is not None
+    np.testing.assert_allclose(est, p, atol=1e-9)
 
 
 def test_consensus_singles_out_the_landmark_the_others_disagree_with() -> None:

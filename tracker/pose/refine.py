@@ -15,7 +15,7 @@ whitened normal matrix ``P = (J^T J)^-1`` (first order, Cramer-Rao for Gaussian 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -82,8 +82,8 @@ class Refined:
     cost: float = 0.0  # whitened residual sum of squares (chi-square) at the solution
 
 
-def _rotation_and_derivatives(rpy: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """``R = Rz(y) Ry(p) Rx(r)`` and the stacked ``dR/droll, dR/dpitch, dR/dyaw`` (3x3x3)."""
+def _rotation_and_derivatives(rpy: FloatArray) -> FloatArray:
+    """``R = Rz(y) Ry(p) Rx(r)``, ``dR/droll``, ``dR/dpitch`` and ``dR/dyaw`` stacked (4x3x3)."""
     sr, cr = math.sin(rpy[0]), math.cos(rpy[0])
     sp, cp = math.sin(rpy[1]), math.cos(rpy[1])
     sy, cy = math.sin(rpy[2]), math.cos(rpy[2])
@@ -111,7 +111,7 @@ def _rotation_and_derivatives(rpy: FloatArray) -> tuple[FloatArray, FloatArray]:
             ],
         ]
     )
-    return m[0], m[1:]
+    return m
 
 
 def wrap_angle(a: FloatArray) -> FloatArray:
@@ -123,9 +123,10 @@ def _residuals(
     x: FloatArray, k: FloatArray, r_body_cam: FloatArray, pts: PointSet, priors: Priors
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Whitened residuals (u0, v0, u1, v1, ..., priors), Jacobian (rows x 6), point depths."""
-    r_nb, dr_nb = _rotation_and_derivatives(x[3:])
+    rot = _rotation_and_derivatives(x[3:])
+    r_nb, dr_nb = rot[0], rot[1:]
     # one product gives X_c = R_cam_ned (L - p) and dX_c/dtheta_i = (dR_nb_i R_body_cam)^T (L - p)
-    mats = np.concatenate([r_nb[None], dr_nb]) @ r_body_cam  # 4 x 3 x 3
+    mats = rot @ r_body_cam  # 4 x 3 x 3
     rel = pts.points_ned - x[:3]
     prod = rel @ mats.transpose(1, 0, 2).reshape(3, 12)  # N x (4 x 3)
     xc = prod[:, :3]
@@ -178,7 +179,7 @@ def _prior_rows(
     if priors.attitude_rpy_rad is not None and priors.attitude_sigma_rad is not None:
         s = priors.attitude_sigma_rad
         rows_r.append(wrap_angle(x[3:] - priors.attitude_rpy_rad) / s)
-        rows_j.append(np.hstack([np.zeros((3, 3)), np.diag(1.0 / s)]))
+        rows_j.append(np.eye(3, 6, 3) / s[:, None])  # d/d(rpy) = diag(1 / s)
     if priors.altitude_down_m is not None:
         rows_r.append(np.array([(x[2] - priors.altitude_down_m) / priors.altitude_sigma_m]))
         rows_j.append(np.array([[0.0, 0.0, 1.0 / priors.altitude_sigma_m, 0.0, 0.0, 0.0]]))
@@ -207,11 +208,17 @@ def initial_cost(
 def point_errors_px(
     k: FloatArray, r_body_cam: FloatArray, pts: PointSet, x: FloatArray
 ) -> FloatArray:
-    """Reprojection error magnitude (px, ideal pixels) of every point at ``x``."""
-    plain = replace(pts, scale_dir=None, scale_beta=None)
-    r, _, _ = _residuals(np.asarray(x, dtype=np.float64), k, r_body_cam, plain, Priors())
-    n = pts.points_ned.shape[0]
-    return np.asarray(np.sqrt(np.sum(r.reshape(n, 2) ** 2, axis=1)) * pts.sigma_px)
+    """Reprojection error magnitude (px, ideal pixels) of every point at ``x``.
+
+    A point at or behind the camera is taken at :data:`_MIN_DEPTH_M`, as in the refinement.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    r_ned_cam = _rotation_and_derivatives(x[3:])[0] @ r_body_cam
+    xc = (pts.points_ned - x[:3]) @ r_ned_cam  # rows: R_cam_ned (L - p)
+    z = xc[:, 2]
+    zs = np.where(np.abs(z) < _MIN_DEPTH_M, _MIN_DEPTH_M, z)
+    uv = xc[:, :2] / zs[:, None] * (k[0, 0], k[1, 1]) + k[:2, 2]
+    return np.asarray(np.hypot(*(uv - pts.pixels).T))
 
 
 def refine_pose(
@@ -293,10 +300,11 @@ def arc_correction(cov: FloatArray, position: FloatArray, points_ned: FloatArray
     if d <= 0:
         return cov
     u = rel / d
-    proj = np.eye(3) - np.outer(u, u)
-    lam = np.linalg.eigvalsh(proj @ cov[:3, :3] @ proj)[1:]  # the two across the sight line
+    uu = np.outer(u, u)
+    proj = np.eye(3) - uu
+    across = proj @ cov[:3, :3] @ proj  # eigenvalues lambda_1, lambda_2 and 0 (along u)
     out = cov.copy()
-    out[:3, :3] += 0.75 * float(np.sum(lam**2)) / d**2 * np.outer(u, u)
+    out[:3, :3] += 0.75 * float(np.sum(across * across)) / d**2 * uu  # sum lambda^2 = |.|_F^2
     return out
 
 

@@ -13,9 +13,10 @@ one landmark centre + altitude            present                 ``altitude_bea
 ========================================  =====================  ==================
 
 Every initial estimate is refined by the same MAP Gauss-Newton (:mod:`tracker.pose.refine`)
-that also yields the 6x6 covariance.  The all-landmarks-right hypothesis is tried first; when
-a landmark does not fit, RANSAC (PnP, or over landmark pairs when the attitude is known)
-names it, it is dropped and the rest is solved again.
+that also yields the 6x6 covariance.  Without attitude, PnP RANSAC runs first and names a
+landmark that does not fit; with it, the all-landmarks-right hypothesis is tried first and a
+RANSAC over landmark pairs names one.  The named landmark is dropped and the rest solved again
+(without attitude from RANSAC's pose, when every point left fits it).
 """
 
 from __future__ import annotations
@@ -119,6 +120,8 @@ class _Solved:
 class _Failure:
     reason: str
     bad_group: int = -1
+    #: a pose every other landmark's points fit (RANSAC's): the start once ``bad_group`` is gone
+    hint: FloatArray | None = None
 
 
 def solve_pose(
@@ -150,7 +153,7 @@ def solve_pose(
     notes += list(assoc.notes)
     notes += [f"observation {a.observation_index} ambiguous: {a.reason}" for a in assoc.ambiguities]
     k, dist, r_body_cam = _camera_arrays(camera)
-    ctx = _Context(camera, k, dist, r_body_cam, cfg, attitude, altitude, laser, bool(np.any(dist)))
+    ctx = _Context(camera, k, dist, r_body_cam, cfg, attitude, altitude, laser, dist.size > 0)
     by_id = {lm.landmark_id: lm for lm in landmarks}
     groups = _make_groups(
         ctx,
@@ -170,8 +173,12 @@ def solve_pose(
 
 @lru_cache(maxsize=16)
 def _camera_arrays(camera: CameraModel) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """K, distortion and R_body_cam of a camera (computed once per camera model)."""
-    arrays = (camera.matrix, camera.dist_coeffs, camera.r_body_cam)
+    """K, distortion and R_body_cam of a camera (computed once per camera model).
+
+    No distortion at all gives an empty array: OpenCV then skips undistorting.
+    """
+    dist = camera.dist_coeffs
+    arrays = (camera.matrix, dist if np.any(dist) else np.empty(0), camera.r_body_cam)
     for a in arrays:
         a.setflags(write=False)
     return arrays
@@ -251,12 +258,14 @@ def _solve_robust(
     """
     active = list(groups)
     dropped = 0
+    hint: FloatArray | None = None
     while True:
-        out = _solve_once(ctx, active)
+        out = _solve_once(ctx, active, hint)
+        hint = None
         if isinstance(out, _Failure):
             if out.bad_group < 0 or len(active) == 1:
                 return NoFix(time_us, out.reason, tuple(notes))
-            bad, why = out.bad_group, out.reason
+            bad, why, hint = out.bad_group, out.reason, out.hint
         else:
             bad, why = (-1, "") if out.all_fit else _worst_group(ctx, active, out.refined)
             if bad < 0:
@@ -380,8 +389,13 @@ def _as_outcome(
     return _Failure(f"landmark {lid!r}: {ref.reason}", bad)
 
 
-def _solve_once(ctx: _Context, groups: list[_Group]) -> _Solved | _Failure:
-    """One solve over ``groups`` with the solver their geometry and priors call for."""
+def _solve_once(
+    ctx: _Context, groups: list[_Group], hint: FloatArray | None = None
+) -> _Solved | _Failure:
+    """One solve over ``groups`` with the solver their geometry and priors call for.
+
+    ``hint``: a pose the landmarks were found to agree on before one was dropped.
+    """
     pts = _point_set(groups)
     spread = float(np.max(np.ptp(pts.pixels, axis=0)))
     if pts.pixels.shape[0] > 1 and spread < ctx.config.min_point_spread_px:
@@ -390,7 +404,7 @@ def _solve_once(ctx: _Context, groups: list[_Group]) -> _Solved | _Failure:
         return _solve_ippe(ctx, groups[0], pts)
     if ctx.attitude is not None:
         return _solve_with_attitude(ctx, groups, pts)
-    return _solve_without_attitude(ctx, groups, pts)
+    return _solve_without_attitude(ctx, groups, pts, hint)
 
 
 def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> _Solved | _Failure:
@@ -463,53 +477,56 @@ def _outlier_failure(groups: list[_Group], gi: int) -> _Failure:
 
 
 def _solve_without_attitude(
-    ctx: _Context, groups: list[_Group], pts: PointSet
+    ctx: _Context, groups: list[_Group], pts: PointSet, hint: FloatArray | None
 ) -> _Solved | _Failure:
-    """SQPnP on every point, refined; if a landmark does not fit, RANSAC PnP instead."""
+    """PnP in RANSAC over every point, refined; a landmark RANSAC rejects is named to drop.
+
+    ``hint``: RANSAC's pose before a drop, which every point left fits (checked there).
+    """
     n = pts.points_ned.shape[0]
     if len(groups) == 1:
         return _Failure("one landmark without corners and no attitude: pose unobservable")
     if n < 4:
         return _Failure(f"{n} points and no attitude: need four or more (P3P is ambiguous)")
-    sv = np.linalg.svd(pts.points_ned - pts.points_ned.mean(axis=0), compute_uv=False)
-    if sv[1] < 1e-3 * sv[0]:
+    centred = pts.points_ned - pts.points_ned.mean(axis=0)
+    lam = np.linalg.eigvalsh(centred.T @ centred)  # squared singular values, ascending
+    if lam[1] < 1e-6 * lam[2]:
         return _Failure("degenerate geometry: the landmark points are collinear")
     cfg = ctx.config
+    thr = cfg.ransac_threshold_px
+    if hint is not None:
+        return _refine_pnp(ctx, groups, pts, "pnp_ransac", hint)
     dist_px = np.vstack([g.pixels_distorted for g in groups])
-    direct = pnp_all_points(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam)
-    if direct is not None and _fits_within(ctx, pts, direct.x0, cfg.ransac_threshold_px):
-        # the all-inlier hypothesis first; RANSAC only when it fails
-        priors = _priors(ctx, _laser_for(ctx, groups, direct.x0))
-        ref = _refine(ctx, pts, priors, direct.x0)
-        if not ref.reason and _worst_group(ctx, groups, ref)[0] < 0:
-            return _Solved("pnp", ref, pts, all_fit=True)
-    res = pnp_ransac(
-        pts.points_ned,
-        dist_px,
-        ctx.k,
-        ctx.dist,
-        ctx.r_body_cam,
-        cfg.ransac_threshold_px,
-        cfg.ransac_iterations,
-        cfg.ransac_confidence,
-    )
+    res = pnp_ransac(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam, thr,
+                     cfg.ransac_iterations, cfg.ransac_confidence)
     if res is None:
         return _Failure("PnP RANSAC found no consistent pose")
     cand, inlier = res
+    # OpenCV's mask is its best minimal sample's; its pose is refitted on those inliers
+    fit = point_errors_px(ctx.k, ctx.r_body_cam, pts, cand.x0) <= thr
+    fits = bool(np.all(fit))
     outliers = np.bincount(pts.landmark_index[~inlier], minlength=len(groups))
-    if int(np.sum(outliers == 0)) < 3:  # one landmark's own corners always agree
-        return _Failure("PnP RANSAC: no three landmarks agree on a pose")
-    if outliers.max() > 0:
+    if outliers.max() > 0 and not fits:
+        if int(np.sum(outliers == 0)) < 3:  # one landmark's own corners always agree
+            return _Failure("PnP RANSAC: no three landmarks agree on a pose")
         gi = int(np.argmax(outliers))
-        return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: RANSAC outlier", gi)
-    priors = _priors(ctx, _laser_for(ctx, groups, cand.x0))
-    return _as_outcome("pnp_ransac", _refine(ctx, pts, priors, cand.x0), pts, groups)
+        lid = groups[gi].landmark.landmark_id
+        others_fit = bool(np.all(fit[pts.landmark_index != gi]))
+        return _Failure(f"landmark {lid!r}: RANSAC outlier", gi, cand.x0 if others_fit else None)
+    if fits:
+        return _refine_pnp(ctx, groups, pts, "pnp", cand.x0)
+    # every point agrees, but the refit (EPnP) is poor: on (nearly) coplanar points
+    direct = pnp_all_points(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam)
+    if direct is None:
+        return _Failure("PnP found no pose through every point")
+    return _refine_pnp(ctx, groups, pts, "pnp", direct.x0)
 
 
-def _fits_within(ctx: _Context, pts: PointSet, x: FloatArray, threshold_px: float) -> bool:
-    """Do all points reproject within ``threshold_px`` at pose ``x``?"""
-    err = point_errors_px(ctx.k, ctx.r_body_cam, pts, x)
-    return bool(np.all(err <= threshold_px))
+def _refine_pnp(
+    ctx: _Context, groups: list[_Group], pts: PointSet, solver: str, x0: FloatArray
+) -> _Solved | _Failure:
+    priors = _priors(ctx, _laser_for(ctx, groups, x0))
+    return _as_outcome(solver, _refine(ctx, pts, priors, x0), pts, groups)
 
 
 def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:

@@ -2,7 +2,8 @@
 
 * :func:`ippe_candidates` - one planar landmark with four corners (OpenCV IPPE / IPPE_SQUARE);
   returns both planar solutions (the flip ambiguity).
-* :func:`pnp_ransac` - three or more landmarks' points without attitude (SQPnP in RANSAC).
+* :func:`pnp_ransac` - two or more landmarks' points without attitude (AP3P in RANSAC, EPnP
+  refit); :func:`pnp_all_points` - SQPnP on every point (the refit's fallback on coplanar points).
 * :func:`bearing_least_squares` - known camera rotation: every bearing ``b_i`` gives
   ``[b_i]x (L_i - p) = 0``; altitude and laser add linear rows; solved by least squares.
 """
@@ -10,6 +11,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -86,7 +88,11 @@ def pnp_ransac(
     iterations: int,
     confidence: float,
 ) -> tuple[Candidate, BoolArray] | None:
-    """RANSAC PnP on NED points (centred for conditioning); returns the pose and inlier mask."""
+    """RANSAC PnP on NED points (centred for conditioning); returns the pose and inlier mask.
+
+    AP3P on minimal samples: 79 against 188 us for SQPnP on 32 points, the same inliers
+    (2026-11-25).  The mask is the best sample's; the pose is OpenCV's EPnP refit on it.
+    """
     origin = points_ned.mean(axis=0)
     obj = (points_ned - origin).reshape(-1, 1, 3)
     try:
@@ -98,7 +104,7 @@ def pnp_ransac(
             iterationsCount=iterations,
             reprojectionError=threshold_px,
             confidence=confidence,
-            flags=cv2.SOLVEPNP_SQPNP,
+            flags=cv2.SOLVEPNP_AP3P,
         )
     except cv2.error:
         return None
@@ -145,14 +151,6 @@ def bearings_ned(pixels_ideal: FloatArray, k: FloatArray, r_ned_cam: FloatArray)
     return np.asarray(b / np.linalg.norm(b, axis=1, keepdims=True))
 
 
-def _skews(v: FloatArray) -> FloatArray:
-    """Nx3x3 cross-product matrices ``[v_i]x``."""
-    s = np.zeros((v.shape[0], 3, 3))
-    s[:, 0, 1], s[:, 0, 2], s[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    s[:, 1, 0], s[:, 2, 0], s[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return s
-
-
 def bearing_least_squares(
     points_ned: FloatArray,
     bearings: FloatArray,
@@ -164,26 +162,36 @@ def bearing_least_squares(
     """Camera position from bearings with known rotation (linear least squares).
 
     Rows: ``[b_i]x p = [b_i]x L_i`` per point; ``p_d = d_0`` for a known altitude;
-    ``n.p = n.c - d n.(R_nb a_b)`` for a laser meeting the plane (n, c).  Returns ``None``
-    when the rows do not fix all three coordinates.
+    ``n.p = n.c - d n.(R_nb a_b)`` for a laser meeting the plane (n, c); the altitude and
+    laser rows carry weight 10.  Solved by the normal equations: with unit ``b_i``,
+    ``[b_i]x^T [b_i]x = I - b_i b_i^T``.  Returns ``None`` when the rows do not fix all
+    three coordinates (smallest singular value below ``min_singular`` of the largest).
     """
-    sk = _skews(bearings)
-    a_rows = [sk.reshape(-1, 3)]
-    b_rows = [np.einsum("nij,nj->ni", sk, points_ned).reshape(-1)]
+    n = bearings.shape[0]
+    ata = n * np.eye(3) - bearings.T @ bearings
+    along = np.einsum("ij,ij->i", bearings, points_ned)
+    atb = points_ned.sum(axis=0) - bearings.T @ along
     if altitude_down_m is not None:
-        a_rows.append(np.array([[0.0, 0.0, 1.0]]) * 10.0)
-        b_rows.append(np.array([altitude_down_m * 10.0]))
+        ata[2, 2] += 100.0
+        atb[2] += 100.0 * altitude_down_m
     if range_prior is not None:
-        n = range_prior.plane_normal
-        na = float(n @ (r_ned_body @ range_prior.axis_body))
-        a_rows.append(n[None, :] * 10.0)
-        b_rows.append(np.array([(n @ range_prior.plane_point - range_prior.distance_m * na) * 10]))
-    a = np.vstack(a_rows)
-    b = np.concatenate(b_rows)
-    sol, _res, rank, sv = np.linalg.lstsq(a, b, rcond=None)
-    if rank < 3 or sv[-1] < min_singular * sv[0]:
+        nrm = range_prior.plane_normal
+        na = float(nrm @ (r_ned_body @ range_prior.axis_body))
+        ata += 100.0 * np.outer(nrm, nrm)
+        atb += 100.0 * (nrm @ range_prior.plane_point - range_prior.distance_m * na) * nrm
+    lam = np.linalg.eigvalsh(ata)  # squared singular values of the stacked rows
+    if lam[0] <= 0.0 or lam[0] < min_singular**2 * lam[-1]:
         return None
-    return np.asarray(sol, dtype=np.float64)
+    return np.asarray(np.linalg.solve(ata, atb), dtype=np.float64)
+
+
+@lru_cache(maxsize=32)
+def _pairs(n: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Indices ``(i, j)``, ``i < j``, of every pair among ``n`` (read-only, cached)."""
+    i, j = np.triu_indices(n, 1)
+    i.setflags(write=False)
+    j.setflags(write=False)
+    return i, j
 
 
 def bearing_consensus(
@@ -203,12 +211,11 @@ def bearing_consensus(
     n_groups = int(landmark_index.max()) + 1
     if n_groups < 3:
         return None
-    counts = np.bincount(landmark_index, minlength=n_groups).astype(np.float64)[:, None]
-    sums = [np.bincount(landmark_index, v, n_groups) for v in (*points_ned.T, *bearings.T)]
-    c = np.stack(sums[:3], axis=1) / counts  # mean point per landmark
-    u = np.stack(sums[3:], axis=1)
+    i, j = _pairs(n_groups)
+    member = (landmark_index == np.arange(n_groups)[:, None]).astype(np.float64)  # G x N
+    c = (member @ points_ned) / member.sum(axis=1, keepdims=True)  # mean point per landmark
+    u = member @ bearings
     u = u / np.linalg.norm(u, axis=1, keepdims=True)  # mean bearing per landmark
-    i, j = np.triu_indices(n_groups, 1)
     # closest points of X = C_i - s u_i and X = C_j - t u_j (unit directions, b = u_i.u_j)
     w0 = c[i] - c[j]
     b = np.einsum("pk,pk->p", u[i], u[j])
