@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
@@ -62,6 +64,15 @@ def test_point_errors_are_opencv_reprojection_distances() -> None:
     proj, _ = cv2.projectPoints(ps.points_ned, rvec, tvec, k, None)
     expected = np.linalg.norm(proj.reshape(-1, 2) - ps.pixels, axis=1)
     np.testing.assert_allclose(point_errors_px(k, r_bc, ps, x), expected, rtol=1e-9)
+
+
+def test_a_point_behind_the_camera_has_an_infinite_error() -> None:
+    k, r_bc, ps, _, x = _problem()
+    r_ned_cam = rotation_from_rpy(*x[3:]) @ r_bc
+    behind = x[:3] - 10.0 * r_ned_cam[:, 2]  # 10 m straight behind the optical axis
+    pts = replace(ps, points_ned=np.vstack([ps.points_ned[:-1], behind]))
+    err = point_errors_px(k, r_bc, pts, x)
+    assert np.isinf(err[-1]) and np.all(np.isfinite(err[:-1]))
 
 
 def test_wrap_angle() -> None:

@@ -19,6 +19,7 @@ from tracker.pose import (
     RangeSample,
     solve_pose,
 )
+from tracker.pose import solve as solve_module
 from tracker.pose.simulate import SensorNoise, cast_laser
 
 from .conftest import TRUE_P, TRUE_RPY, assert_exact, see, wall
@@ -135,6 +136,40 @@ def test_a_wrongly_labelled_landmark_is_dropped_as_an_outlier(camera: CameraMode
     assert any("dropped landmark 'E': RANSAC outlier" in n for n in fix.notes)
     assert fix.solver == "pnp_ransac"
     assert np.linalg.norm(np.asarray(fix.position_ned_m) - TRUE_P) < 0.1
+
+
+def test_when_ransac_finds_no_pose_sqpnp_through_every_point_decides(
+    camera: CameraModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # AP3P RANSAC can miss a clean view of few, coplanar points (4 ground centres, 1 in 20)
+    monkeypatch.setattr(solve_module, "pnp_ransac", lambda *a, **k: None)
+    lms = wall()
+    fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US))
+    assert fix.solver == "pnp" and set(fix.landmark_ids) == {"A", "B", "C", "D"}
+    _assert_pose(fix)
+
+
+def test_a_poor_ransac_refit_does_not_drop_a_landmark_sqpnp_fits(
+    camera: CameraModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # OpenCV refits RANSAC's pose with EPnP, poor on coplanar points: a noisy point outside
+    # its mask and a refit off by metres must not name a landmark when every point fits SQPnP
+    real = solve_module.pnp_ransac
+
+    def poor_refit(*args: Any, **kwargs: Any) -> Any:
+        out = real(*args, **kwargs)
+        assert out is not None
+        cand, mask = out
+        mask = mask.copy()
+        mask[0] = False
+        return replace(cand, x0=cand.x0 + np.array([0.0, 3.0, 0.0, 0.0, 0.0, 0.0])), mask
+
+    monkeypatch.setattr(solve_module, "pnp_ransac", poor_refit)
+    lms = wall()
+    fix = _fix(solve_pose(see(lms, camera), lms, camera, T_US))
+    assert fix.solver == "pnp" and set(fix.landmark_ids) == {"A", "B", "C", "D"}
+    assert not any("dropped" in n for n in fix.notes)
+    _assert_pose(fix)
 
 
 def test_with_one_of_two_landmarks_mislabelled_the_attitude_solver_drops_it(

@@ -208,17 +208,15 @@ def initial_cost(
 def point_errors_px(
     k: FloatArray, r_body_cam: FloatArray, pts: PointSet, x: FloatArray
 ) -> FloatArray:
-    """Reprojection error magnitude (px, ideal pixels) of every point at ``x``.
-
-    A point at or behind the camera is taken at :data:`_MIN_DEPTH_M`, as in the refinement.
-    """
+    """Reprojection error magnitude (px, ideal pixels) of every point at ``x``; infinite for
+    a point less than :data:`_MIN_DEPTH_M` in front of the camera (it cannot be seen)."""
     x = np.asarray(x, dtype=np.float64)
     r_ned_cam = _rotation_and_derivatives(x[3:])[0] @ r_body_cam
     xc = (pts.points_ned - x[:3]) @ r_ned_cam  # rows: R_cam_ned (L - p)
     z = xc[:, 2]
-    zs = np.where(np.abs(z) < _MIN_DEPTH_M, _MIN_DEPTH_M, z)
-    uv = xc[:, :2] / zs[:, None] * (k[0, 0], k[1, 1]) + k[:2, 2]
-    return np.asarray(np.hypot(*(uv - pts.pixels).T))
+    seen = z >= _MIN_DEPTH_M
+    uv = xc[:, :2] / np.where(seen, z, 1.0)[:, None] * (k[0, 0], k[1, 1]) + k[:2, 2]
+    return np.where(seen, np.hypot(*(uv - pts.pixels).T), np.inf)
 
 
 def refine_pose(

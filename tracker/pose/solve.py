@@ -75,6 +75,8 @@ _FLIP_CHI2 = 4.0
 _MIN_TO_DROP = 4
 #: A second IPPE solution starting this much (chi-square) worse is not refined.
 _SKIP_CHI2 = 25.0
+#: Why the pair consensus (attitude known) drops a landmark.
+_CONSENSUS = "disagrees with the other landmarks' consensus"
 
 
 @dataclass(frozen=True)
@@ -431,7 +433,7 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
     if not single and worst_angle > _consensus_threshold(ctx):  # cheap all-inlier test
         suspect = _consensus_outlier(ctx, pts, b)
         if suspect >= 0:
-            return _outlier_failure(groups, suspect)
+            return _outlier(groups, suspect, _CONSENSUS)
     if np.any(ahead <= 0):
         gi = int(pts.landmark_index[int(np.argmin(ahead))])
         lid = groups[gi].landmark.landmark_id
@@ -450,7 +452,7 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
     if isinstance(out, _Solved) and _worst_group(ctx, groups, out.refined)[0] < 0:
         return replace(out, all_fit=True)
     suspect = _consensus_outlier(ctx, pts, b)  # the all-inlier hypothesis failed
-    return _outlier_failure(groups, suspect) if suspect >= 0 else out
+    return _outlier(groups, suspect, _CONSENSUS) if suspect >= 0 else out
 
 
 def _consensus_threshold(ctx: _Context) -> float:
@@ -471,9 +473,11 @@ def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray) -> int:
     return worst if per_group[worst] >= thr else -1
 
 
-def _outlier_failure(groups: list[_Group], gi: int) -> _Failure:
-    lid = groups[gi].landmark.landmark_id
-    return _Failure(f"landmark {lid!r}: disagrees with the other landmarks' consensus", gi)
+def _outlier(
+    groups: list[_Group], gi: int, why: str, hint: FloatArray | None = None
+) -> _Failure:
+    """Drop landmark ``gi`` for ``why`` (``hint``: a pose every other landmark fits)."""
+    return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: {why}", gi, hint)
 
 
 def _solve_without_attitude(
@@ -499,27 +503,34 @@ def _solve_without_attitude(
     dist_px = np.vstack([g.pixels_distorted for g in groups])
     res = pnp_ransac(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam, thr,
                      cfg.ransac_iterations, cfg.ransac_confidence)
+    named = agreeing = -1
+    if res is not None:
+        cand, inlier = res
+        # OpenCV's mask is its best minimal sample's; its pose is refitted on those inliers
+        fit = point_errors_px(ctx.k, ctx.r_body_cam, pts, cand.x0) <= thr
+        if np.all(fit):
+            return _refine_pnp(ctx, groups, pts, "pnp", cand.x0)
+        outliers = np.bincount(pts.landmark_index[~inlier], minlength=len(groups))
+        named = int(np.argmax(outliers)) if outliers.max() > 0 else -1
+        agreeing = int(np.sum(outliers == 0))  # one landmark's own corners always agree
+        if named >= 0 and agreeing >= 3 and np.all(fit[pts.landmark_index != named]):
+            return _outlier(groups, named, "RANSAC outlier", cand.x0)  # clear-cut
+    # not clear-cut: no pose, too few landmarks agree, or the EPnP refit fits neither every
+    # point nor all but the named landmark's (it is poor on (nearly) coplanar points, e.g. a
+    # wall head-on): SQPnP through every point decides
+    direct = pnp_all_points(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam)
+    if direct is not None and (
+        (res is not None and named < 0)  # RANSAC: every point an inlier
+        or bool(np.all(point_errors_px(ctx.k, ctx.r_body_cam, pts, direct.x0) <= thr))
+    ):
+        return _refine_pnp(ctx, groups, pts, "pnp", direct.x0)
     if res is None:
         return _Failure("PnP RANSAC found no consistent pose")
-    cand, inlier = res
-    # OpenCV's mask is its best minimal sample's; its pose is refitted on those inliers
-    fit = point_errors_px(ctx.k, ctx.r_body_cam, pts, cand.x0) <= thr
-    fits = bool(np.all(fit))
-    outliers = np.bincount(pts.landmark_index[~inlier], minlength=len(groups))
-    if outliers.max() > 0 and not fits:
-        if int(np.sum(outliers == 0)) < 3:  # one landmark's own corners always agree
-            return _Failure("PnP RANSAC: no three landmarks agree on a pose")
-        gi = int(np.argmax(outliers))
-        lid = groups[gi].landmark.landmark_id
-        others_fit = bool(np.all(fit[pts.landmark_index != gi]))
-        return _Failure(f"landmark {lid!r}: RANSAC outlier", gi, cand.x0 if others_fit else None)
-    if fits:
-        return _refine_pnp(ctx, groups, pts, "pnp", cand.x0)
-    # every point agrees, but the refit (EPnP) is poor: on (nearly) coplanar points
-    direct = pnp_all_points(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam)
-    if direct is None:
+    if named < 0:
         return _Failure("PnP found no pose through every point")
-    return _refine_pnp(ctx, groups, pts, "pnp", direct.x0)
+    if agreeing < 3:
+        return _Failure("PnP RANSAC: no three landmarks agree on a pose")
+    return _outlier(groups, named, "RANSAC outlier")
 
 
 def _refine_pnp(

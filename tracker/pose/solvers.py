@@ -168,21 +168,23 @@ def bearing_least_squares(
     three coordinates (smallest singular value below ``min_singular`` of the largest).
     """
     n = bearings.shape[0]
+    origin = points_ned.mean(axis=0)  # solve for p - origin: no cancellation far from home
+    rel = points_ned - origin
     ata = n * np.eye(3) - bearings.T @ bearings
-    along = np.einsum("ij,ij->i", bearings, points_ned)
-    atb = points_ned.sum(axis=0) - bearings.T @ along
+    atb = rel.sum(axis=0) - bearings.T @ np.einsum("ij,ij->i", bearings, rel)
     if altitude_down_m is not None:
         ata[2, 2] += 100.0
-        atb[2] += 100.0 * altitude_down_m
+        atb[2] += 100.0 * (altitude_down_m - origin[2])
     if range_prior is not None:
         nrm = range_prior.plane_normal
         na = float(nrm @ (r_ned_body @ range_prior.axis_body))
         ata += 100.0 * np.outer(nrm, nrm)
-        atb += 100.0 * (nrm @ range_prior.plane_point - range_prior.distance_m * na) * nrm
-    lam = np.linalg.eigvalsh(ata)  # squared singular values of the stacked rows
+        atb += 100.0 * (nrm @ (range_prior.plane_point - origin)
+                        - range_prior.distance_m * na) * nrm
+    lam, vec = np.linalg.eigh(ata)  # lam: squared singular values of the stacked rows
     if lam[0] <= 0.0 or lam[0] < min_singular**2 * lam[-1]:
         return None
-    return np.asarray(np.linalg.solve(ata, atb), dtype=np.float64)
+    return np.asarray(origin + vec @ ((vec.T @ atb) / lam), dtype=np.float64)
 
 
 @lru_cache(maxsize=32)
@@ -217,16 +219,17 @@ def bearing_consensus(
     u = member @ bearings
     u = u / np.linalg.norm(u, axis=1, keepdims=True)  # mean bearing per landmark
     # closest points of X = C_i - s u_i and X = C_j - t u_j (unit directions, b = u_i.u_j)
-    w0 = c[i] - c[j]
-    b = np.einsum("pk,pk->p", u[i], u[j])
-    d = -np.einsum("pk,pk->p", u[i], w0)
-    e = -np.einsum("pk,pk->p", u[j], w0)
+    ci, cj, ui, uj = c[i], c[j], u[i], u[j]
+    w0 = ci - cj
+    b = np.einsum("pk,pk->p", ui, uj)
+    d = -np.einsum("pk,pk->p", ui, w0)
+    e = -np.einsum("pk,pk->p", uj, w0)
     denom = 1.0 - b * b
     ok = denom > 1e-9
     denom = np.where(ok, denom, 1.0)
     s = (b * e - d) / denom
     t = (e - b * d) / denom
-    pos = 0.5 * ((c[i] - s[:, None] * u[i]) + (c[j] - t[:, None] * u[j]))  # pairs x 3
+    pos = 0.5 * ((ci - s[:, None] * ui) + (cj - t[:, None] * uj))  # pairs x 3
     rel = c[None, :, :] - pos[:, None, :]  # pairs x groups x 3
     cos = np.einsum("pgk,gk->pg", rel, u) / np.maximum(np.linalg.norm(rel, axis=2), 1e-12)
     err = np.arccos(np.clip(cos, -1.0, 1.0))
