@@ -28,7 +28,7 @@ from companion.demo import map_landmarks, run_demo
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
-from companion.settings import Settings, load_settings
+from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.follow import FollowCameraSource, command_sender
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
@@ -93,7 +93,8 @@ async def main() -> None:
     parser.add_argument("--fps", type=float, default=15.0)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        settings = load_settings(sets=["monitor.enabled=false", f'flightlog.dir="{tmp}"'])
+        settings = load_settings(shipped=SIM_LAYERS,
+                                 sets=["monitor.enabled=false", f'flightlog.dir="{tmp}"'])
         scenario = scenario_at(args.fps, Path(tmp))
         scripted = await run_demo(settings, scenario, args.seconds)
         follow = await follow_flight(settings, scenario, args.seconds)

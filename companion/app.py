@@ -20,7 +20,7 @@ import asyncio
 import concurrent.futures
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -143,7 +143,8 @@ class CompanionApp:
                  reporter: Reporter, vehicle_id: str, status_period_s: float = 1.0,
                  policy: HealthPolicy | None = None,
                  clock_s: Callable[[], float] = time.monotonic,
-                 preview: PreviewFn | None = None) -> None:
+                 preview: PreviewFn | None = None,
+                 status_extra: Mapping[str, Any] | None = None) -> None:
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -153,6 +154,8 @@ class CompanionApp:
         self.policy = policy or HealthPolicy()
         self.clock_s = clock_s
         self.preview = preview
+        #: fixed entries of every status, e.g. ``{"noise": "uncalibrated"}`` (runtime.fly)
+        self.status_extra = dict(status_extra or {})
         self.counters = Counters()
         self.stats = AppStats()
         self.state: State = "starting"
@@ -333,6 +336,7 @@ class CompanionApp:
             "counters": self.counters.as_dict(),
             "dropped_frames": self.dropped_frames + int(source.get("skipped", 0)),
             "source": source,
+            **self.status_extra,
         }
 
     async def _shutdown(self) -> None:

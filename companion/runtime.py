@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import logging
 import signal
 import time
 from collections.abc import Callable
@@ -41,6 +42,8 @@ from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
 
 ImageU8 = npt.NDArray[np.uint8]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -147,7 +150,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     Everything that can fail on bad input (the processor: a detector model, references)
     is built before anything is started, so such a failure leaves nothing running.
     OpenCV runs single-threaded: the pipeline's own threads use the cores
-    (``companion.LIBRARY_THREAD_VARS`` says why).
+    (``companion.launch`` says why).
     """
     cv2.setNumThreads(1)
     attitude = AttitudeHistory(bridge)
@@ -171,7 +174,8 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         await bridge.start()
         attitude.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
-                           settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
+                           settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview,
+                           status_extra={"noise": noise_status(settings)})
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.add_signal_handler(sig, app.request_stop)
@@ -190,6 +194,17 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         reporter.close()
         processor.close()
     return app
+
+
+def noise_status(settings: Settings) -> str:
+    """``"measured"``, or ``"uncalibrated"`` (logged as a warning) while the pixel noise is
+    the deployment's conservative default: the covariance sent is then a guess."""
+    if settings.noise_measured:
+        return "measured"
+    log.warning("uncalibrated noise: pose.pixel_sigma_px = %g is the conservative default, "
+                "not measured on this camera (docs/deploy.md: companion calibrate noise)",
+                settings.pose.pixel_sigma_px)
+    return "uncalibrated"
 
 
 def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:

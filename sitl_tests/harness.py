@@ -42,7 +42,7 @@ from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
-from companion.settings import Settings, load_settings
+from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.effects import EffectSpec
 from companion.sim.scenario import ScenarioConfig, load_scenario
 from companion.sim.simulator import Simulator
@@ -230,7 +230,7 @@ def sitl_settings(tmp: Path, *, profile: str = "ardupilot", monitor: bool = Fals
                   **sections: dict[str, Any]) -> Settings:
     """The default configuration, flight logs in ``tmp``, monitoring off unless asked, and
     ``section={key: value}`` overrides."""
-    s = load_settings(sets=[f"vehicle.profile={profile}"])
+    s = load_settings(sets=[f"vehicle.profile={profile}"], shipped=SIM_LAYERS)
     s = dataclasses.replace(s, flightlog=dataclasses.replace(s.flightlog, dir=str(tmp)),
                             monitor=dataclasses.replace(s.monitor, enabled=monitor))
     for name, values in sections.items():

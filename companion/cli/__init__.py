@@ -1,7 +1,8 @@
 """The ``companion`` command line: global options, then one subcommand.
 
 A subcommand is a module ``companion/cli/<name>_cmd.py`` with
-``register(sub)`` (adds its parser and ``set_defaults(handler=run)``) and
+``register(sub)`` (adds its parser and ``set_defaults(handler=run)``; a command that flies
+the simulator adds ``shipped=("sim",)``: the simulator's layer of defaults) and
 ``run(args, settings) -> int``.  It is listed in :data:`COMMAND_MODULES` only once it does
 its job: ``--help`` shows exactly what exists.
 """
@@ -85,7 +86,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     setup_logging(args.log_format or "text", args.log_level or "info")
     try:
-        settings = load_settings(args.config, args.sets)
+        settings = load_settings(args.config, args.sets, getattr(args, "shipped", ()))
         setup_logging(args.log_format or settings.logging.format,
                       args.log_level or settings.logging.level)
         return int(args.handler(args, settings))

@@ -8,7 +8,7 @@ import json
 import sys
 
 from companion.demo import print_summary, run_demo
-from companion.settings import Settings
+from companion.settings import SIM_LAYERS, Settings
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--attitude-error", action="store_true",
                         help="the fake autopilot's attitude drifts as a real estimate does "
                         "(0.2 deg roll/pitch, 1 deg yaw); default: the exact attitude")
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, shipped=SIM_LAYERS)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:

@@ -8,7 +8,7 @@ import logging
 from pathlib import Path
 
 from companion.errors import ConfigError
-from companion.settings import Settings
+from companion.settings import SIM_LAYERS, Settings
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.synth import synth_stream
@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "FFV1 video (ffv1)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace a stream already in --out")
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, shipped=SIM_LAYERS)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
