@@ -37,6 +37,7 @@ from companion.reporting import Reporter
 from companion.settings import Settings
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
+from mavlink_bridge.errors import BackendError
 from tracker.camera import CameraModel
 from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
@@ -212,4 +213,7 @@ def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
     import dataclasses
 
     cfg = dataclasses.replace(settings.mavlink, profile=settings.vehicle.profile, **overrides)
-    return create_bridge(cfg)
+    try:
+        return create_bridge(cfg)
+    except BackendError as err:  # e.g. the mavsdk extra is not installed: one line
+        raise ConfigError(str(err)) from None

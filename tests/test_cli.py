@@ -125,3 +125,41 @@ def test_config_json_names_the_layer_that_set_each_key() -> None:
     assert sim["origins"]["camera.fx"] == "config/cameras/sim-640x480.toml"
     assert sim["settings"]["pose"]["pixel_sigma_px"] == 0.15
     assert sim["noise"] == "measured"
+
+
+BLOCK_IMPORTS = (
+    "import sys\n"
+    "class Block:\n"
+    "    def find_spec(self, name, path=None, target=None):\n"
+    "        if name.split('.')[0] in {blocked!r}:\n"
+    "            raise ImportError(name=name)\n"
+    "sys.meta_path.insert(0, Block())\n"
+    "from companion.launch import main\n"
+    "sys.exit(main(sys.argv[1:]))\n"
+)
+
+
+def without(blocked: set[str], *args: str) -> subprocess.CompletedProcess[str]:
+    """``companion ARGS`` in a Python where the ``blocked`` packages cannot be imported."""
+    return subprocess.run([sys.executable, "-c", BLOCK_IMPORTS.format(blocked=blocked), *args],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+
+
+def test_a_missing_extra_is_one_line_naming_it(tmp_path: Path) -> None:
+    """postgis, dashboard and mavsdk are extras: the rest works without them, and a feature
+    that needs one names the extra to install."""
+    extras = {"uvicorn", "starlette", "psycopg", "mavsdk"}
+    assert without(extras, "--help").returncode == 0
+    out = without(extras, "dashboard")
+    assert out.returncode == 2
+    assert out.stderr == ("companion dashboard needs the optional package uvicorn, which is "
+                          "not installed: pip install 'landmark-companion[dashboard]'\n")
+    out = without(extras, "landmarks", "--db", "postgresql://db/x", "list")
+    assert "pip install 'landmark-companion[postgis]'" in out.stderr, out.stderr
+    assert out.stderr.count("\n") == 1 and out.returncode == 2
+    out = without(extras, "run", "--seconds", "1", "--set", "mavlink.backend=mavsdk",
+                  "--set", "source.kind=sim", "--set", "source.spec=survey",
+                  "--set", "monitor.enabled=false", "--set", "mavlink.origin_lat_deg=47.3769",
+                  "--set", "mavlink.origin_lon_deg=8.5417", "--set", f'flightlog.dir="{tmp_path}"')
+    assert out.stderr.endswith("pip install 'landmark-companion[mavsdk]'\n"), out.stderr
+    assert out.returncode == 2 and "Traceback" not in out.stderr

@@ -8,10 +8,8 @@ import ipaddress
 import logging
 import os
 
-import uvicorn
-
-from companion.dashboard.server import create_app
 from companion.errors import ConfigError
+from companion.extras import require
 from companion.monitoring import MonitorWatcher
 from companion.settings import Settings
 
@@ -50,6 +48,10 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     if not is_loopback(args.host) and not token:
         raise ConfigError(f"dashboard: binding to {args.host} needs --token (or "
                           "LMC_DASHBOARD_TOKEN): the page must not be open to the network")
+    uvicorn = require("uvicorn", "dashboard", "companion dashboard")
+    require("starlette", "dashboard", "companion dashboard")
+    from companion.dashboard.server import create_app  # the extra is there: load it now
+
     connect = tuple(args.connect or settings.monitor.connect)
     # peer mode keeps retrying an endpoint that is down (client mode gives up at once)
     cfg = dataclasses.replace(settings.monitor, mode="peer", connect=connect)

@@ -7,6 +7,7 @@ import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
+from companion.extras import require
 from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.geojson_io import import_map
 from companion.landmarks.record import Area
@@ -21,6 +22,7 @@ def open_repository(location: str | Path) -> LandmarkRepository:
     """A PostGIS repository for a ``postgresql://`` URL, else a SQLite file."""
     text = str(location)
     if text.startswith(POSTGRES_SCHEMES):
+        require("psycopg", "postgis", "a PostGIS landmark repository")
         from companion.landmarks.postgis_repo import PostgisLandmarkRepository
 
         return PostgisLandmarkRepository(text)
