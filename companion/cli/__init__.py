@@ -31,6 +31,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "router_cmd",
     "log_cmd",
     "config_cmd",
+    "calibrate_cmd",
     "synth_cmd",
     "record_cmd",
     "fake_autopilot_cmd",
