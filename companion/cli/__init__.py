@@ -32,6 +32,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "log_cmd",
     "config_cmd",
     "calibrate_cmd",
+    "check_cmd",
     "synth_cmd",
     "record_cmd",
     "fake_autopilot_cmd",

@@ -33,9 +33,16 @@ class StillScene:
     jitter_px: float
 
 
-def map_with_appearances(folder: Path, sim: Simulator) -> Path:
-    """config/landmarks.geojson with each landmark's rendered texture as its appearance."""
+def map_with_appearances(folder: Path, sim: Simulator, plain_signs: bool = False) -> Path:
+    """config/landmarks.geojson with each landmark's rendered texture as its appearance.
+
+    The simulated signposts are plain plates with 2-6 ORB features, fewer than the matcher
+    needs (found by prediction from a fix, never by matching): left out unless
+    ``plain_signs`` (then ``companion check`` must fail on them)."""
     doc = json.loads((config_dir() / "landmarks.geojson").read_text(encoding="utf-8"))
+    if not plain_signs:
+        doc["features"] = [f for f in doc["features"]
+                           if f["properties"]["category"] != "signpost"]
     folder.mkdir(parents=True, exist_ok=True)
     for feature in doc["features"]:
         texture = sim.world.landmark(feature["id"]).quad.texture
@@ -47,7 +54,8 @@ def map_with_appearances(folder: Path, sim: Simulator) -> Path:
     return path
 
 
-def still_scene(folder: Path, jitter_px: float, frames: int = 90, seed: int = 0) -> StillScene:
+def still_scene(folder: Path, jitter_px: float, frames: int = 90, seed: int = 0,
+                plain_signs: bool = False) -> StillScene:
     """``frames`` of the hover scene at one instant, each shifted by a random sub-pixel
     offset (1-sigma ``jitter_px`` in x and in y: every corner moves with it) and with
     2 grey levels of pixel noise."""
@@ -65,7 +73,7 @@ def still_scene(folder: Path, jitter_px: float, frames: int = 90, seed: int = 0)
         writer.write(Frame(i, round(i * 1e6 / 30), np.clip(noisy, 0, 255).astype(np.uint8)))
     writer.close()
     drawn = float(np.sqrt(((offsets - offsets.mean(axis=0)) ** 2).mean()))
-    return StillScene(folder / "stream", map_with_appearances(folder / "map", sim),
+    return StillScene(folder / "stream", map_with_appearances(folder / "map", sim, plain_signs),
                       sim.scenario.camera, drawn)
 
 
@@ -77,11 +85,13 @@ def camera_toml(camera: CameraModel) -> str:
             f"mount_rpy_deg = {list(camera.mount_rpy_deg)}\n")
 
 
-def vehicle_toml(scene: StillScene, camera_file: str, extra: str = "") -> str:
+def vehicle_toml(scene: StillScene, camera_file: str, extra: str = "",
+                 endpoint: str = "udpout:127.0.0.1:14550") -> str:
     """A vehicle configuration flying the still scene's stream with its map."""
     lat, lon, alt = ORIGIN
     return (f'include = ["{camera_file}"]\n{extra}\n'
             f'[source]\nkind = "stream"\nspec = "{scene.stream}"\n\n'
             f'[landmarks]\nmap_path = "{scene.map_path}"\ndb_path = "landmarks.sqlite"\n\n'
-            f"[mavlink]\norigin_lat_deg = {lat}\norigin_lon_deg = {lon}\n"
-            f"origin_alt_m = {alt}\n\n[monitor]\nenabled = false\n")
+            f'[mavlink]\nendpoint = "{endpoint}"\n'
+            f"origin_lat_deg = {lat}\norigin_lon_deg = {lon}\norigin_alt_m = {alt}\n\n"
+            "[monitor]\nenabled = false\n")
