@@ -76,7 +76,7 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
             return result
 
     try:
-        app = await fly(settings, source, bridge, Recorder, landmarks, seconds=seconds,
+        app = await fly(settings, source, bridge, Recorder, pmap, seconds=seconds,
                         prefix="follow")
     finally:
         await fake.stop()

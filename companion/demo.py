@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp
-from companion.autopilot import AttitudeHistory
 from companion.landmarks.geodesy import LocalFrame
+from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, detector_for, fly, perception_for
 from companion.settings import Settings
@@ -110,7 +110,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
                         set_origin=True)
     recorders: list[TruthRecorder] = []
 
-    def processor(attitude: AttitudeHistory) -> TruthRecorder:
+    def processor(attitude: AttitudeSource) -> TruthRecorder:
         perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
         recorders.append(TruthRecorder(perception, source,
                                        {lm.landmark_id: lm for lm in landmarks}))
@@ -119,7 +119,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     tickers: list[asyncio.Task[None]] = []
     cpu0, wall0 = os.times(), time.monotonic()
     try:
-        app = await fly(settings, source, bridge, processor, landmarks, seconds=seconds + 5.0,
+        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds + 5.0,
                         prefix="demo", on_start=lambda a: tickers.append(asyncio.create_task(
                             _progress(a, fake, seconds, progress))))
     finally:

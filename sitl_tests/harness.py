@@ -296,7 +296,7 @@ class Flight:
                 tasks.append(asyncio.create_task(self._script(script, app), name="sitl-script"))
 
         try:
-            await fly(self.settings, self.camera, self.bridge, processor, landmarks,
+            await fly(self.settings, self.camera, self.bridge, processor, pmap,
                       seconds=self.seconds + 5.0, prefix="sitl", on_start=on_start)
         finally:
             for t in tasks:

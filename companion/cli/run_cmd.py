@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import logging
 import math
 import sys
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.autopilot import AttitudeHistory
+from companion.flightmap import PracticalMap, load_practical_map
+from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
-from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
+from companion.runtime import bridge_for, fly, perception_for
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
@@ -28,8 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "run", help="fly: camera -> trackers -> pose -> MAVLink to the autopilot",
         description="Run the companion with the configured source ([source]), landmark map "
-        "([landmarks] map_path), autopilot link ([mavlink]) and monitoring ([monitor]) until "
-        "SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md has a systemd unit.",
+        "(the practical map of [landmarks] db_path about the EKF origin, or the file "
+        "[landmarks] map_path when set), autopilot link ([mavlink]) and monitoring "
+        "([monitor]) until SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md "
+        "has a systemd unit.",
     )
     parser.add_argument("--seconds", type=float, help="stop after this many seconds")
     parser.add_argument("--fly", action="store_true",
@@ -53,7 +57,8 @@ def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
                 if lm.quad.texture is not None}
     refs = {**{k: v for k, v in textures.items() if k not in pmap.references},
             **pmap.references}
-    return PracticalMap(pmap.landmarks, refs, pmap.origin)
+    unusable = {k: v for k, v in pmap.unusable.items() if k not in refs}
+    return dataclasses.replace(pmap, references=refs, unusable=unusable)
 
 
 class TruthTagger(PerceptionWrapper):
@@ -97,11 +102,9 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
     pmap = with_sim_references(pmap, source)
     sim = simulator_of(source)
     camera = sim.scenario.camera if sim is not None else settings.camera
-    log.info("flying with %d landmarks (%d with a reference image), source %s:%s",
-             len(pmap.landmarks), len(pmap.references), settings.source.kind,
-             settings.source.spec)
+    log.info("source %s:%s", settings.source.kind, settings.source.spec)
 
-    def processor(attitude: AttitudeHistory) -> Perception | PerceptionWrapper:
+    def processor(attitude: AttitudeSource) -> Perception | PerceptionWrapper:
         perception = perception_for(settings, camera, pmap, attitude)
         if isinstance(source, FollowCameraSource):
             return TruthTagger(perception, source)
@@ -119,7 +122,7 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
         flights[0].add_done_callback(_report_flight)
 
     try:
-        app = await fly(settings, source, bridge, processor, pmap.landmarks, seconds=seconds,
+        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds,
                         prefix="run", on_start=start_flying if fly_square else None)
     finally:
         for task in flights:

@@ -1,0 +1,58 @@
+"""Shared by the tests that start ``companion run``: a recorded stream written by
+``companion synth`` (with its landmark map and appearance images), a map of a few of its
+landmarks, and the flight log's records."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+from typing import Any
+
+from companion.cli import main
+from companion.landmarks.geojson_io import read_map, write_map
+
+#: The survey world's origin (config/landmarks.geojson), the EKF origin of these runs.
+ORIGIN = ("47.3769", "8.5417", "408.0")
+
+
+def synth(out: Path, seconds: float = 3.0, scenario: str = "survey") -> Path:
+    """A recorded stream of ``scenario`` in ``out`` (and its ``landmarks.geojson``)."""
+    assert main(["synth", "--scenario", scenario, "--seconds", str(seconds),
+                 "--out", str(out)]) == 0
+    return out
+
+
+def free_udp_port() -> int:
+    """A loopback UDP port nobody listens on (bound, then released)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def write_subset(stream: Path, out: Path, keep: dict[str, dict[str, Any]]) -> Path:
+    """A map of the stream's landmarks named in ``keep`` (id -> fields to change, e.g.
+    ``{"appearance": None}`` or ``{"status": "candidate"}``)."""
+    import dataclasses
+
+    records = [dataclasses.replace(lm, **keep[lm.id])
+               for lm in read_map(stream / "landmarks.geojson") if lm.id in keep]
+    write_map(out, records)
+    return out
+
+
+def run_args(tmp_path: Path, stream: Path, port: int, *extra: str) -> list[str]:
+    """``companion run`` on ``stream`` with the survey origin, monitoring off, the flight
+    log in ``tmp_path``, the link to ``udpout:127.0.0.1:port``."""
+    lat, lon, alt = ORIGIN
+    return ["run", "--set", f'source.spec="stream:{stream}"',
+            "--set", f"mavlink.origin_lat_deg={lat}", "--set", f"mavlink.origin_lon_deg={lon}",
+            "--set", f"mavlink.origin_alt_m={alt}", "--set", "monitor.enabled=false",
+            "--set", f'flightlog.dir="{tmp_path / "logs"}"',
+            "--set", f'mavlink.endpoint="udpout:127.0.0.1:{port}"', *extra]
+
+
+def flight_records(tmp_path: Path) -> list[dict[str, Any]]:
+    """Every record of the run's flight logs, in order."""
+    return [json.loads(line) for log in sorted((tmp_path / "logs").glob("run-*.jsonl"))
+            for line in log.read_text().splitlines()]
