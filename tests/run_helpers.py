@@ -4,13 +4,20 @@ landmarks, and the flight log's records."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import socket
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from companion.cli import main
 from companion.landmarks.geojson_io import read_map, write_map
+from companion.sim.scenario import load_scenario
+from companion.sim.simulator import Simulator
+from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 
 #: The survey world's origin (config/landmarks.geojson), the EKF origin of these runs.
 ORIGIN = ("47.3769", "8.5417", "408.0")
@@ -56,3 +63,39 @@ def flight_records(tmp_path: Path) -> list[dict[str, Any]]:
     """Every record of the run's flight logs, in order."""
     return [json.loads(line) for log in sorted((tmp_path / "logs").glob("run-*.jsonl"))
             for line in log.read_text().splitlines()]
+
+
+@contextmanager
+def fake_flying(scenario: str, config: FakeAutopilotConfig | None = None
+                ) -> Iterator[FakeAutopilot]:
+    """The fake autopilot, on its own event loop in a thread (``companion run`` owns the
+    main one), flying the scenario's trajectory from its start, on a free loopback port."""
+    sim = Simulator(load_scenario(scenario))
+    loop = asyncio.new_event_loop()
+    started = threading.Event()
+    box: list[FakeAutopilot] = []
+
+    async def serve() -> None:
+        fake = FakeAutopilot(config or FakeAutopilotConfig(endpoint="udpin:127.0.0.1:0"),
+                             truth=sim.truth_fn)
+        await fake.start()
+        box.append(fake)
+        started.set()
+        try:
+            await asyncio.Event().wait()
+        except asyncio.CancelledError:
+            pass
+        finally:
+            await fake.stop()
+
+    thread = threading.Thread(target=loop.run_until_complete, args=(serve(),), daemon=True)
+    thread.start()
+    assert started.wait(5.0), "fake autopilot did not start"
+    try:
+        yield box[0]
+    finally:
+        def cancel_all() -> None:
+            for t in asyncio.all_tasks(loop):
+                t.cancel()
+        loop.call_soon_threadsafe(cancel_all)
+        thread.join(5.0)

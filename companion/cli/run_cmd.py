@@ -10,9 +10,16 @@ import math
 import sys
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
+from companion.errors import ConfigError
 from companion.flightmap import PracticalMap, load_practical_map
 from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
+from companion.recorded import (
+    RECORDED_KINDS,
+    OnCompanionClock,
+    TruthAttitude,
+    recording_camera,
+)
 from companion.runtime import bridge_for, fly, perception_for
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
@@ -20,7 +27,9 @@ from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.square import SquareFlight
 from companion.sources.factory import open_source, resolve
+from companion.sources.files import RecordedStreamSource
 from mavlink_bridge.bridge import VisionBridge
+from tracker.camera import CameraModel
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +45,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "has a systemd unit.",
     )
     parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--truth-attitude", action="store_true",
+                        help="a recorded stream with truth_pose.csv: take the attitude from "
+                        "it (with an autopilot's typical error) instead of the autopilot's "
+                        "ATTITUDE, to check a recording offline (docs/formats.md)")
     parser.add_argument("--fly", action="store_true",
                         help="SITL only: arm (GUIDED / OFFBOARD) and fly a small square with "
                         "position targets so the loop runs while moving (docs/sitl.md)")
@@ -90,19 +103,38 @@ def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
                               request=command_sender(bridge))
 
 
-async def _run(settings: Settings, seconds: float | None, fly_square: bool = False
-               ) -> CompanionApp:
+async def open_run_source(settings: Settings, bridge: VisionBridge, pmap: PracticalMap,
+                          truth_attitude: bool = False
+                          ) -> tuple[FrameSource, CameraModel, AttitudeSource | None]:
+    """The source, the camera its frames were taken with, and the attitude source when it
+    is not the autopilot: a recording is put on the companion's clock and solved with its
+    own camera (:mod:`companion.recorded`)."""
+    c = resolve(settings.source)
+    log.info("source %s:%s", c.kind, c.spec)
+    if truth_attitude and c.kind != "stream":
+        raise ConfigError(f"--truth-attitude: source {c.spec!r} is a {c.kind}, not a recorded "
+                          "stream with truth_pose.csv")
+    if c.kind == "follow":
+        follow = open_follow(settings, bridge, pmap)
+        return follow, follow.sim.scenario.camera, None
+    source = await open_source(settings.source)
+    sim = simulator_of(source)
+    if c.kind not in RECORDED_KINDS:
+        return source, sim.scenario.camera if sim is not None else settings.camera, None
+    clocked = OnCompanionClock(source)
+    camera = recording_camera(settings.camera, source, c.spec)
+    if truth_attitude and isinstance(source, RecordedStreamSource):
+        return clocked, camera, TruthAttitude(clocked, source.folder)
+    return clocked, camera, None
+
+
+async def _run(settings: Settings, seconds: float | None, fly_square: bool = False,
+               truth_attitude: bool = False) -> CompanionApp:
     pmap = load_practical_map(settings)
     bridge = bridge_for(settings)
-    source: FrameSource
-    if resolve(settings.source).kind == "follow":
-        source = open_follow(settings, bridge, pmap)
-    else:
-        source = await open_source(settings.source)
+    source, camera, attitude_source = await open_run_source(settings, bridge, pmap,
+                                                            truth_attitude)
     pmap = with_sim_references(pmap, source)
-    sim = simulator_of(source)
-    camera = sim.scenario.camera if sim is not None else settings.camera
-    log.info("source %s:%s", settings.source.kind, settings.source.spec)
 
     def processor(attitude: AttitudeSource) -> Perception | PerceptionWrapper:
         perception = perception_for(settings, camera, pmap, attitude)
@@ -123,7 +155,8 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
 
     try:
         app = await fly(settings, source, bridge, processor, pmap, seconds=seconds,
-                        prefix="run", on_start=start_flying if fly_square else None)
+                        prefix="run", on_start=start_flying if fly_square else None,
+                        attitude=attitude_source)
     finally:
         for task in flights:
             task.cancel()
@@ -141,7 +174,8 @@ def _report_flight(task: asyncio.Task[None]) -> None:
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Fly until stopped; exit status 0 on a clean stop."""
-    app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False)))
+    app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False),
+                           getattr(args, "truth_attitude", False)))
     c = app.counters
     log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
              app.dropped_frames)
