@@ -24,6 +24,7 @@ import numpy as np
 
 from companion.app import CompanionApp
 from companion.landmarks.geodesy import LocalFrame
+from companion.monitoring.config import local_meeting
 from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, detector_for, fly, perception_for
@@ -91,6 +92,12 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     pose solver assumes (0.2 deg roll/pitch, 1 deg yaw), as a real one's estimate does;
     off, it reports the simulator's exact attitude (docs/decisions.md).
     """
+    settings = dataclasses.replace(settings, monitor=local_meeting(settings.monitor))
+    if settings.monitor.enabled:
+        m = settings.monitor
+        log.info("monitoring on Zenoh: %s (companion monitor or dashboard in another terminal "
+                 "shows this flight)", ", ".join(f"listening on {e}" for e in m.listen)
+                 or ", ".join(f"connected to {e}" for e in m.connect))
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin
