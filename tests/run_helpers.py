@@ -59,9 +59,9 @@ def run_args(tmp_path: Path, stream: Path, port: int, *extra: str) -> list[str]:
             "--set", f'mavlink.endpoint="udpout:127.0.0.1:{port}"', *extra]
 
 
-def flight_records(tmp_path: Path) -> list[dict[str, Any]]:
-    """Every record of the run's flight logs, in order."""
-    return [json.loads(line) for log in sorted((tmp_path / "logs").glob("run-*.jsonl"))
+def flight_records(logs: Path) -> list[dict[str, Any]]:
+    """Every record of the run flight logs in ``logs``, in order."""
+    return [json.loads(line) for log in sorted(logs.glob("run-*.jsonl"))
             for line in log.read_text().splitlines()]
 
 

@@ -39,7 +39,7 @@ def test_run_flies_the_databases_practical_map_and_says_why_others_cannot_be_acq
     assert f"flying with 2 landmarks from the practical map of {db}" in err, err
     assert "landmark sign-01 cannot be acquired: no appearance image" in err, err
     assert "landmark wall-02 not in the practical map: status candidate" in err, err
-    records = flight_records(tmp_path)
+    records = flight_records(tmp_path / "logs")
     event = next(r for r in records if r.get("event") == "map")
     assert sorted(event["loaded"]) == ["sign-01", "wall-01"]
     assert event["with_reference"] == ["wall-01"]
@@ -62,7 +62,7 @@ def test_an_explicit_map_path_is_flown_instead_of_the_database(
 
 def blocked_causes(tmp_path: Path) -> list[tuple[int, str]]:
     """(t_us, cause) of every status that says ``blocked``."""
-    return [(r["t_us"], r["no_fix_cause"]["cause"]) for r in flight_records(tmp_path)
+    return [(r["t_us"], r["no_fix_cause"]["cause"]) for r in flight_records(tmp_path / "logs")
             if r["kind"] == "status" and r["state"] == "blocked"]
 
 
@@ -77,7 +77,7 @@ def test_no_references_is_named_in_the_status_log_and_events_at_once(
     err = capsys.readouterr().err
     assert status == 0, err
     assert "no fix can come: no-references: none of the 2 landmarks" in err, err
-    records = flight_records(tmp_path)
+    records = flight_records(tmp_path / "logs")
     start = records[0]["t_us"] if "t_us" in records[0] else records[1]["t_us"]
     causes = blocked_causes(tmp_path)
     assert causes and all(c == "no-references" for _, c in causes)

@@ -68,7 +68,7 @@ def test_run_on_a_recording_sends_fixes_the_autopilot_accepts(
     assert "the stream was recorded with another camera than [camera]: solving with the " \
            "stream's (mount_rpy_deg (0.0, -30.0, 0.0) -> (0.0, -10.0, 0.0))" in err, err
     assert f"attitude from {hover / 'truth_pose.csv'} with a simulated autopilot error" in err
-    records = flight_records(tmp_path)
+    records = flight_records(tmp_path / "logs")
     last = [r for r in records if r["kind"] == "status"][-1]
     sent = last["counters"]["fixes_sent"]
     assert sent > 30, last
