@@ -4,12 +4,15 @@ when no fix can come (issue 24)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
 from companion.cli import main
 from tests.run_helpers import flight_records, free_udp_port, run_args, synth, write_subset
+from tests.test_monitor_cli import spawn
+from tests.test_monitoring import free_port
 
 
 @pytest.fixture(scope="module")
@@ -135,3 +138,30 @@ def test_a_missing_database_is_one_line(tmp_path: Path, stream: Path,
                             "`companion landmarks import`, or set landmarks.map_path to a "
                             "GeoJSON map)"), err
     assert not (tmp_path / "typo.sqlite").exists()
+
+
+def test_the_cause_is_on_zenoh_for_a_monitor_in_another_process(
+        tmp_path: Path, stream: Path) -> None:
+    """The status and the events a monitor receives name the cause (issue 24)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    subset = write_subset(stream, tmp_path / "plain.geojson", {"wall-01": {"appearance": None}})
+    monitor = spawn("monitor", "--connect", endpoint, "--seconds", "8", "--json",
+                    "--vehicle", "d1blocked")
+    run = spawn(*run_args(tmp_path, stream, free_udp_port(), "--seconds", "6",
+                          "--set", f'landmarks.map_path="{subset}"',
+                          "--set", "monitor.enabled=true", "--set", "vehicle.id=d1blocked",
+                          "--set", f'monitor.listen=["{endpoint}"]', "--set", "source.loop=true"))
+    try:
+        out, err = monitor.communicate(timeout=60)
+        run.communicate(timeout=60)
+    finally:
+        for proc in (run, monitor):
+            proc.kill()
+            proc.wait(timeout=10)
+    assert monitor.returncode == 0, err
+    seen = json.loads(out)["vehicles"]["d1blocked"]
+    status = seen["latest"]["status"]
+    assert status["state"] == "blocked", status
+    assert status["no_fix_cause"]["cause"] == "no-references"
+    assert status["map"]["cannot_acquire"] == {"wall-01": "no appearance image: nothing to "
+                                               "look for (add one to the map)"}

@@ -179,6 +179,8 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     c = app.counters
     log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
              app.dropped_frames)
+    if app.blocker is not None:
+        log.warning("no fix could come: %s: %s", app.blocker.cause, app.blocker.detail)
     if c.worker_errors:  # a bug, logged with its traceback: not a clean stop
         print("companion: frame processing failed (see the log above)", file=sys.stderr)
         return 1
