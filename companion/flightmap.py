@@ -42,6 +42,7 @@ from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 from companion.landmarks.sync import select_area
 from companion.pipeline.health import Blocker
 from companion.settings import Settings
+from tracker.acquire import MIN_REFERENCE_SIDE_PX
 from tracker.pose.types import MapLandmark
 
 log = logging.getLogger(__name__)
@@ -194,8 +195,7 @@ def acquisition_report(pmap: PracticalMap, perception: Any) -> dict[str, Any]:
     prepared references; ``unmatchable`` the images it refused, e.g. blank ones)."""
     refs = perception.matcher.references
     cannot = {**pmap.unusable, **perception.unmatchable}
-    weak = {lid: f"few features ({len(r.keypoints_px)}): found by colour search or from a "
-                 "fix only" for lid, r in refs.items() if not r.matchable and lid not in cannot}
+    weak = {lid: _weak(r) for lid, r in refs.items() if not r.matchable and lid not in cannot}
     return {
         "from": pmap.described,
         "loaded": [lm.landmark_id for lm in pmap.landmarks],
@@ -206,6 +206,14 @@ def acquisition_report(pmap: PracticalMap, perception: Any) -> dict[str, Any]:
         "left_out_count": len(pmap.left_out),
         "nearest_landmark_m": None if pmap.nearest_m is None else round(pmap.nearest_m, 1),
     }
+
+
+def _weak(ref: Any) -> str:
+    """Why a usable reference is found only by colour search or from a fix."""
+    w, h = ref.size_px
+    why = f"too small ({w}x{h} px, under {MIN_REFERENCE_SIDE_PX} px a side)" \
+        if min(w, h) < MIN_REFERENCE_SIDE_PX else f"few features ({len(ref.keypoints_px)})"
+    return f"{why}: found by colour search or from a fix only, not by feature matching"
 
 
 def log_report(report: Mapping[str, Any]) -> None:
