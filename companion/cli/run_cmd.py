@@ -98,6 +98,10 @@ def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
     """``source.kind = "follow"``: the scenario's world with the flight's landmark map about
     the EKF origin, seen from the pose the autopilot simulator reports (docs/sitl.md)."""
     c = resolve(settings.source)
+    if not settings.landmarks.map_path:
+        raise ConfigError("source.kind = \"follow\": the simulated camera renders the landmarks "
+                          "of landmarks.map_path: set it to the map the autopilot simulator's "
+                          "world uses (docs/sitl.md)")
     sim = follow_simulator(load_scenario(c.spec), settings.landmarks.map_path, pmap.origin)
     return FollowCameraSource(sim, bridge, pmap.origin, settings.vehicle.profile, c.follow,
                               request=command_sender(bridge))
