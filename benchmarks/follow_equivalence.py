@@ -23,9 +23,9 @@ from typing import Any
 import numpy as np
 
 from companion.app import Frame, FrameResult
-from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks, run_demo
 from companion.landmarks.geodesy import LocalFrame
+from companion.nofix import AttitudeSource
 from companion.perception import PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import SIM_LAYERS, Settings, load_settings
@@ -65,7 +65,7 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
     errors: list[float] = []
 
     class Recorder(PerceptionWrapper):
-        def __init__(self, attitude: AttitudeHistory) -> None:
+        def __init__(self, attitude: AttitudeSource) -> None:
             super().__init__(perception_for(settings, sim.scenario.camera, pmap, attitude))
 
         def process(self, frame: Frame) -> FrameResult:
@@ -76,7 +76,7 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
             return result
 
     try:
-        app = await fly(settings, source, bridge, Recorder, landmarks, seconds=seconds,
+        app = await fly(settings, source, bridge, Recorder, pmap, seconds=seconds,
                         prefix="follow")
     finally:
         await fake.stop()

@@ -20,7 +20,7 @@ import asyncio
 import concurrent.futures
 import logging
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.pipeline.background import BackgroundLane
-from companion.pipeline.health import HealthInputs, HealthPolicy, State, health_state
+from companion.pipeline.health import Blocker, HealthInputs, HealthPolicy, State, health_state
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
 
@@ -144,7 +144,10 @@ class CompanionApp:
                  policy: HealthPolicy | None = None,
                  clock_s: Callable[[], float] = time.monotonic,
                  preview: PreviewFn | None = None,
-                 status_extra: Mapping[str, Any] | None = None) -> None:
+                 diagnose: Callable[[], Blocker | None] | None = None,
+                 facts: dict[str, Any] | None = None) -> None:
+        """``diagnose`` names why no fix can come (:class:`companion.nofix.NoFixWatch`);
+        ``facts`` are fixed for the flight and shown in every status (e.g. the map)."""
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -154,8 +157,9 @@ class CompanionApp:
         self.policy = policy or HealthPolicy()
         self.clock_s = clock_s
         self.preview = preview
-        #: fixed entries of every status, e.g. ``{"noise": "uncalibrated"}`` (runtime.fly)
-        self.status_extra = dict(status_extra or {})
+        self.diagnose = diagnose
+        self.facts = facts or {}
+        self.blocker: Blocker | None = None
         self.counters = Counters()
         self.stats = AppStats()
         self.state: State = "starting"
@@ -307,17 +311,36 @@ class CompanionApp:
 
     def _update_health(self) -> None:
         bad_ratio = sum(self._recent_bad) / len(self._recent_bad) if self._recent_bad else 0.0
+        blocker = self.diagnose() if self.diagnose is not None else None
         state = health_state(
             HealthInputs(self.clock_s(), self.counters.frames, self._last_frame_s,
-                         self._last_fix_s, self._ever_tracked, self.sink.link_up, bad_ratio),
+                         self._last_fix_s, self._ever_tracked, self.sink.link_up, bad_ratio,
+                         blocker),
             self.policy,
         )
+        self._note_blocker(blocker if state == "blocked" else None)
         self.sink.set_health(state)  # every time: the heartbeat shows the app is alive
         if state != self.state:
             old, self.state = self.state, state
             log.info("health %s -> %s", old, state)
             self._event("health", old=old, new=state)
             self.reporter.report("status", now_us(), self.status())
+
+    def report_event(self, name: str, fields: dict[str, Any]) -> None:
+        """Publish an event (monitoring and the flight log) stamped now."""
+        self._event(name, **fields)
+
+    def _note_blocker(self, blocker: Blocker | None) -> None:
+        """Log and publish a change of the reason no fix can come."""
+        if blocker == self.blocker:
+            return
+        if blocker is not None:
+            log.warning("no fix can come: %s: %s", blocker.cause, blocker.detail)
+            self._event("no-fix", **blocker.as_dict())
+        elif self.blocker is not None:
+            log.info("no longer blocked (%s)", self.blocker.cause)
+            self._event("no-fix-cleared", cause=self.blocker.cause)
+        self.blocker = blocker
 
     def _event(self, name: str, **fields: Any) -> None:
         self.reporter.report("events", now_us(), {"event": name, **fields})
@@ -330,13 +353,14 @@ class CompanionApp:
         return {
             "vehicle": self.vehicle_id,
             "state": self.state,
+            "no_fix_cause": None if self.blocker is None else self.blocker.as_dict(),
             "fps": round(self.stats.fps.rate(self.clock_s()), 2),
             "latency_ms": self.stats.capture_to_wire_ms.summary(),
             "link": "up" if self.sink.link_up else "down",
             "counters": self.counters.as_dict(),
             "dropped_frames": self.dropped_frames + int(source.get("skipped", 0)),
             "source": source,
-            **self.status_extra,
+            **self.facts,
         }
 
     async def _shutdown(self) -> None:

@@ -31,7 +31,7 @@ RESET_SIGMAS = 5.0
 #: The pipeline's state as the heartbeat's health (MAV_STATE via the link).
 HEARTBEAT_HEALTH: dict[State, HealthState] = {
     "starting": "starting", "searching": "ok", "tracking": "ok", "lost": "degraded",
-    "degraded": "degraded", "link-down": "ok",
+    "degraded": "degraded", "link-down": "ok", "blocked": "degraded",
 }
 
 
@@ -87,7 +87,7 @@ class BridgeSink:
         self.bridge.report_health(HEARTBEAT_HEALTH[state])
         if state != self._last_state:
             self._last_state = state
-            if state in ("tracking", "lost", "degraded"):
+            if state in ("tracking", "lost", "degraded", "blocked"):
                 self.bridge.statustext(state)
 
     async def send_fix(self, fix: Any) -> bool:
@@ -134,6 +134,10 @@ class AttitudeHistory:
             v = item.value
             self._samples.append((item.received_ns // 1000, float(v.roll_rad),
                                   float(v.pitch_rad), float(v.yaw_rad)))
+
+    def last_us(self) -> int | None:
+        """Arrival time (companion clock, us) of the newest ATTITUDE, None before the first."""
+        return self._samples[-1][0] if self._samples else None
 
     def at(self, t_us: int, max_gap_us: int = 100_000) -> AttitudeSample | None:
         """The attitude at ``t_us`` (interpolated; yaw the short way round), or None."""

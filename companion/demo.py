@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp
-from companion.autopilot import AttitudeHistory
 from companion.landmarks.geodesy import LocalFrame
+from companion.monitoring.config import local_meeting
+from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, detector_for, fly, perception_for
 from companion.settings import Settings
@@ -91,6 +92,12 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     pose solver assumes (0.2 deg roll/pitch, 1 deg yaw), as a real one's estimate does;
     off, it reports the simulator's exact attitude (docs/decisions.md).
     """
+    settings = dataclasses.replace(settings, monitor=local_meeting(settings.monitor))
+    if settings.monitor.enabled:
+        m = settings.monitor
+        log.info("monitoring on Zenoh: %s (companion monitor or dashboard in another terminal "
+                 "shows this flight)", ", ".join(f"listening on {e}" for e in m.listen)
+                 or ", ".join(f"connected to {e}" for e in m.connect))
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin
@@ -110,7 +117,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
                         set_origin=True)
     recorders: list[TruthRecorder] = []
 
-    def processor(attitude: AttitudeHistory) -> TruthRecorder:
+    def processor(attitude: AttitudeSource) -> TruthRecorder:
         perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
         recorders.append(TruthRecorder(perception, source,
                                        {lm.landmark_id: lm for lm in landmarks}))
@@ -119,7 +126,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     tickers: list[asyncio.Task[None]] = []
     cpu0, wall0 = os.times(), time.monotonic()
     try:
-        app = await fly(settings, source, bridge, processor, landmarks, seconds=seconds + 5.0,
+        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds + 5.0,
                         prefix="demo", on_start=lambda a: tickers.append(asyncio.create_task(
                             _progress(a, fake, seconds, progress))))
     finally:

@@ -1,9 +1,8 @@
 """Assembling a flight: the parts ``companion run`` and ``companion demo`` share.
 
-:func:`load_practical_map` turns the configured landmark map into the pose solver's map
-(local NED about the EKF origin) and the appearance references the acquisition looks for;
-:func:`fly` wires a source, a perception and a bridge into a :class:`CompanionApp`, runs
-it until the source ends, a signal or a time limit, and tears everything down in order.
+The flight's landmark map comes from :mod:`companion.flightmap`; :func:`fly` wires a
+source, a perception and a bridge into a :class:`CompanionApp`, runs it until the source
+ends, a signal or a time limit, and tears everything down in order.
 """
 
 from __future__ import annotations
@@ -15,22 +14,18 @@ import logging
 import signal
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import cv2
-import numpy as np
-import numpy.typing as npt
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory, BridgeSink
 from companion.errors import ConfigError, InputError
 from companion.flightlog import FlightLogWriter
-from companion.landmarks.geodesy import LocalFrame
-from companion.landmarks.geojson_io import read_map
-from companion.landmarks.record import Landmark
+from companion.flightmap import PracticalMap, acquisition_report, log_report, static_blocker
 from companion.monitoring.publisher import MonitorPublisher
+from companion.nofix import AttitudeSource, NoFixWatch
 from companion.perception import DetectFn, Perception, PerceptionWrapper, SideSensors
 from companion.preview import render_preview
 from companion.reporting import Reporter
@@ -42,56 +37,10 @@ from tracker.camera import CameraModel
 from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
 
-ImageU8 = npt.NDArray[np.uint8]
+__all__ = ["PracticalMap", "bridge_for", "detector_for", "fly", "noise_status", "perception_for"]
+
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class PracticalMap:
-    """The landmarks of this flight in local NED, and the images to look for."""
-
-    landmarks: tuple[MapLandmark, ...]
-    references: dict[str, ImageU8]
-    origin: LocalFrame
-
-
-def reference_image(lm: Landmark) -> ImageU8 | None:
-    """The landmark's appearance reference, cropped to its box, or None."""
-    if lm.appearance is None:
-        return None
-    image = cv2.imdecode(np.frombuffer(lm.appearance.data, np.uint8), cv2.IMREAD_COLOR)
-    if image is None:
-        raise InputError(f"landmark {lm.id}: appearance: cannot decode the image")
-    if lm.appearance.box_px is not None:
-        x, y, w, h = lm.appearance.box_px
-        image = image[y:y + h, x:x + w]
-    return np.asarray(image, np.uint8)
-
-
-def load_practical_map(settings: Settings) -> PracticalMap:
-    """Read ``landmarks.map_path`` and place it about the configured EKF origin."""
-    mav = settings.mavlink
-    if mav.origin_lat_deg == 0.0 and mav.origin_lon_deg == 0.0:
-        raise ConfigError("mavlink.origin_lat_deg, mavlink.origin_lon_deg: expected the EKF "
-                          "origin (WGS84) that the landmark map is placed about, got 0, 0")
-    path = settings.landmarks.map_path
-    if not path or not Path(path).is_file():
-        raise InputError(f"{path or 'landmarks.map_path'}: no landmark map (set "
-                         "landmarks.map_path to a GeoJSON file: companion landmarks export "
-                         "writes one)")
-    frame = LocalFrame(mav.origin_lat_deg, mav.origin_lon_deg, mav.origin_alt_m)
-    records = [lm for lm in read_map(path) if lm.status != "rejected"]
-    landmarks, references = [], {}
-    for lm in records:
-        n, e, d = (float(v) for v in frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m))
-        landmarks.append(MapLandmark(lm.id, (n, e, d), lm.width_m, lm.height_m,
-                                     lm.facing_deg, lm.category))
-        image = reference_image(lm)
-        if image is not None:
-            references[lm.id] = image
-    return PracticalMap(tuple(landmarks), references, frame)
-
 
 def reporter_for(settings: Settings, landmarks: tuple[MapLandmark, ...] | list[MapLandmark],
                  prefix: str) -> Reporter:
@@ -132,7 +81,7 @@ def detector_for(settings: Settings) -> DetectFn | None:
 
 
 def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
-                   attitude: AttitudeHistory) -> Perception:
+                   attitude: AttitudeSource) -> Perception:
     """The per-frame work with the configured tracker, acquisition, pose and gate."""
     return Perception(camera, pmap.landmarks, pmap.references, detect=detector_for(settings),
                       sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
@@ -142,20 +91,33 @@ def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
 
 
 async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
-              make_processor: Callable[[AttitudeHistory], Perception | PerceptionWrapper],
-              landmarks: tuple[MapLandmark, ...] | list[MapLandmark], *,
-              seconds: float | None = None, prefix: str = "flight",
-              on_start: Callable[[CompanionApp], None] | None = None) -> CompanionApp:
+              make_processor: Callable[[AttitudeSource], Perception | PerceptionWrapper],
+              pmap: PracticalMap, *, seconds: float | None = None, prefix: str = "flight",
+              on_start: Callable[[CompanionApp], None] | None = None,
+              attitude: AttitudeSource | None = None) -> CompanionApp:
     """Run one flight to its end; SIGINT/SIGTERM stop it cleanly.  Returns the app.
 
-    Everything that can fail on bad input (the processor: a detector model, references)
-    is built before anything is started, so such a failure leaves nothing running.
+    ``attitude``: where frames' attitude comes from (default: the autopilot's ATTITUDE
+    through the bridge).  Everything that can fail on bad input (the processor: a
+    detector model, references) is built before anything is started, so such a failure
+    leaves nothing running.  The map's acquisition report is logged, published (an
+    ``map`` event and the status' ``map``) and, with the bridge and the attitude, feeds
+    the diagnosis of why no fix can come (:class:`companion.nofix.NoFixWatch`).
     OpenCV runs single-threaded: the pipeline's own threads use the cores
     (``companion.launch`` says why).
     """
     cv2.setNumThreads(1)
-    attitude = AttitudeHistory(bridge)
+    history = AttitudeHistory(bridge) if attitude is None else None
+    attitude = history if history is not None else attitude
+    assert attitude is not None
     processor = make_processor(attitude)
+    perception = processor.perception if isinstance(processor, PerceptionWrapper) \
+        else processor
+    report = acquisition_report(pmap, perception)
+    log_report(report)
+    watch = NoFixWatch(static_blocker(pmap, report, settings.landmarks.max_origin_distance_m),
+                       bridge, attitude, perception.camera, pmap.landmarks,
+                       settings.mavlink.endpoint)
     mon = settings.monitor
 
     def preview(frame: Frame, result: FrameResult) -> bytes:
@@ -166,17 +128,20 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
                               mon.preview_jpeg_quality, caption)
 
     try:
-        reporter = reporter_for(settings, landmarks, prefix)
+        reporter = reporter_for(settings, pmap.landmarks, prefix)
     except BaseException:
         processor.close()
         raise
     loop = asyncio.get_running_loop()
     try:
         await bridge.start()
-        attitude.start()
+        if history is not None:
+            history.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
                            settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview,
-                           status_extra={"noise": noise_status(settings)})
+                           diagnose=watch, facts={"map": _map_summary(report),
+                                                     "noise": noise_status(settings)})
+        app.report_event("map", report)
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.add_signal_handler(sig, app.request_stop)
@@ -190,11 +155,20 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         close = getattr(source, "close", None)
         if callable(close):
             close()
-        await attitude.stop()
+        if history is not None:
+            await history.stop()
         await bridge.stop()
         reporter.close()
         processor.close()
     return app
+
+
+def _map_summary(report: dict[str, Any]) -> dict[str, Any]:
+    """The status' ``map``: counts and the reasons, not the full lists of ids."""
+    return {"from": report["from"], "loaded": len(report["loaded"]),
+            "with_reference": len(report["with_reference"]),
+            "cannot_acquire": report["cannot_acquire"]}
+
 
 
 def noise_status(settings: Settings) -> str:
@@ -206,7 +180,6 @@ def noise_status(settings: Settings) -> str:
                 "not measured on this camera (docs/deploy.md: companion calibrate noise)",
                 settings.pose.pixel_sigma_px)
     return "uncalibrated"
-
 
 def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
     """The configured MAVLink backend, its profile following ``vehicle.profile``."""

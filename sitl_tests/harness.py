@@ -36,10 +36,10 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp, FrameResult
-from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks
 from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
+from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.settings import SIM_LAYERS, Settings, load_settings
@@ -284,7 +284,7 @@ class Flight:
                                  origin_lat_deg=o.lat, origin_lon_deg=o.lon,
                                  origin_alt_m=o.alt_m, set_origin=True, **self.bridge_overrides)
 
-        def processor(attitude: AttitudeHistory) -> RecordingPerception:
+        def processor(attitude: AttitudeSource) -> RecordingPerception:
             perception = perception_for(self.settings, self.sim.scenario.camera, pmap, attitude)
             return RecordingPerception(perception, self.camera, self.frames)
 
@@ -296,7 +296,7 @@ class Flight:
                 tasks.append(asyncio.create_task(self._script(script, app), name="sitl-script"))
 
         try:
-            await fly(self.settings, self.camera, self.bridge, processor, landmarks,
+            await fly(self.settings, self.camera, self.bridge, processor, pmap,
                       seconds=self.seconds + 5.0, prefix="sitl", on_start=on_start)
         finally:
             for t in tasks:

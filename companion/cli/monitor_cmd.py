@@ -14,6 +14,7 @@ import numpy as np
 
 from companion.errors import InputError
 from companion.monitoring import FleetView, MonitorWatcher
+from companion.monitoring.config import LOCAL_ENDPOINT, watcher_endpoints
 from companion.monitoring.render import render_fleet
 from companion.settings import Settings
 
@@ -27,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--vehicle", default="*", metavar="ID", help="only this vehicle")
     parser.add_argument("--connect", action="append", metavar="ENDPOINT",
                         help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 "
-                        "(repeatable; default: monitor.connect)")
+                        f"(repeatable; default: monitor.connect, else {LOCAL_ENDPOINT} where "
+                        "companion demo listens)")
     parser.add_argument("--seconds", type=float, help="stop after this many seconds")
     parser.add_argument("--snapshot", type=Path, metavar="FILE.png",
                         help="save the latest preview as PNG and exit")
@@ -41,7 +43,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     # peer mode: it keeps retrying an endpoint that is down, so the view shows stale
     # data with its age instead of failing (client mode gives up at once)
     cfg = dataclasses.replace(settings.monitor, mode="peer",
-                              connect=tuple(args.connect or settings.monitor.connect))
+                              connect=watcher_endpoints(args.connect, settings.monitor))
     watcher = MonitorWatcher(cfg, args.vehicle)
     try:
         if args.snapshot:

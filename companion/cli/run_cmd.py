@@ -4,21 +4,32 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import logging
 import math
 import sys
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.autopilot import AttitudeHistory
+from companion.errors import ConfigError
+from companion.flightmap import PracticalMap, load_practical_map
+from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
-from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
+from companion.recorded import (
+    RECORDED_KINDS,
+    OnCompanionClock,
+    TruthAttitude,
+    recording_camera,
+)
+from companion.runtime import bridge_for, fly, perception_for
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.square import SquareFlight
 from companion.sources.factory import open_source, resolve
+from companion.sources.files import RecordedStreamSource
 from mavlink_bridge.bridge import VisionBridge
+from tracker.camera import CameraModel
 
 log = logging.getLogger(__name__)
 
@@ -28,10 +39,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "run", help="fly: camera -> trackers -> pose -> MAVLink to the autopilot",
         description="Run the companion with the configured source ([source]), landmark map "
-        "([landmarks] map_path), autopilot link ([mavlink]) and monitoring ([monitor]) until "
-        "SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md has a systemd unit.",
+        "(the practical map of [landmarks] db_path about the EKF origin, or the file "
+        "[landmarks] map_path when set), autopilot link ([mavlink]) and monitoring "
+        "([monitor]) until SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md "
+        "has a systemd unit.",
     )
     parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--truth-attitude", action="store_true",
+                        help="a recorded stream with truth_pose.csv: take the attitude from "
+                        "it (with an autopilot's typical error) instead of the autopilot's "
+                        "ATTITUDE, to check a recording offline (docs/formats.md)")
     parser.add_argument("--fly", action="store_true",
                         help="SITL only: arm (GUIDED / OFFBOARD) and fly a small square with "
                         "position targets so the loop runs while moving (docs/sitl.md)")
@@ -53,7 +70,8 @@ def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
                 if lm.quad.texture is not None}
     refs = {**{k: v for k, v in textures.items() if k not in pmap.references},
             **pmap.references}
-    return PracticalMap(pmap.landmarks, refs, pmap.origin)
+    unusable = {k: v for k, v in pmap.unusable.items() if k not in refs}
+    return dataclasses.replace(pmap, references=refs, unusable=unusable)
 
 
 class TruthTagger(PerceptionWrapper):
@@ -80,28 +98,49 @@ def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
     """``source.kind = "follow"``: the scenario's world with the flight's landmark map about
     the EKF origin, seen from the pose the autopilot simulator reports (docs/sitl.md)."""
     c = resolve(settings.source)
+    if not settings.landmarks.map_path:
+        raise ConfigError("source.kind = \"follow\": the simulated camera renders the landmarks "
+                          "of landmarks.map_path: set it to the map the autopilot simulator's "
+                          "world uses (docs/sitl.md)")
     sim = follow_simulator(load_scenario(c.spec), settings.landmarks.map_path, pmap.origin)
     return FollowCameraSource(sim, bridge, pmap.origin, settings.vehicle.profile, c.follow,
                               request=command_sender(bridge))
 
 
-async def _run(settings: Settings, seconds: float | None, fly_square: bool = False
-               ) -> CompanionApp:
+async def open_run_source(settings: Settings, bridge: VisionBridge, pmap: PracticalMap,
+                          truth_attitude: bool = False
+                          ) -> tuple[FrameSource, CameraModel, AttitudeSource | None]:
+    """The source, the camera its frames were taken with, and the attitude source when it
+    is not the autopilot: a recording is put on the companion's clock and solved with its
+    own camera (:mod:`companion.recorded`)."""
+    c = resolve(settings.source)
+    log.info("source %s:%s", c.kind, c.spec)
+    if truth_attitude and c.kind != "stream":
+        raise ConfigError(f"--truth-attitude: source {c.spec!r} is a {c.kind}, not a recorded "
+                          "stream with truth_pose.csv")
+    if c.kind == "follow":
+        follow = open_follow(settings, bridge, pmap)
+        return follow, follow.sim.scenario.camera, None
+    source = await open_source(settings.source)
+    sim = simulator_of(source)
+    if c.kind not in RECORDED_KINDS:
+        return source, sim.scenario.camera if sim is not None else settings.camera, None
+    clocked = OnCompanionClock(source)
+    camera = recording_camera(settings.camera, source, c.spec)
+    if truth_attitude and isinstance(source, RecordedStreamSource):
+        return clocked, camera, TruthAttitude(clocked, source.folder)
+    return clocked, camera, None
+
+
+async def _run(settings: Settings, seconds: float | None, fly_square: bool = False,
+               truth_attitude: bool = False) -> CompanionApp:
     pmap = load_practical_map(settings)
     bridge = bridge_for(settings)
-    source: FrameSource
-    if resolve(settings.source).kind == "follow":
-        source = open_follow(settings, bridge, pmap)
-    else:
-        source = await open_source(settings.source)
+    source, camera, attitude_source = await open_run_source(settings, bridge, pmap,
+                                                            truth_attitude)
     pmap = with_sim_references(pmap, source)
-    sim = simulator_of(source)
-    camera = sim.scenario.camera if sim is not None else settings.camera
-    log.info("flying with %d landmarks (%d with a reference image), source %s:%s",
-             len(pmap.landmarks), len(pmap.references), settings.source.kind,
-             settings.source.spec)
 
-    def processor(attitude: AttitudeHistory) -> Perception | PerceptionWrapper:
+    def processor(attitude: AttitudeSource) -> Perception | PerceptionWrapper:
         perception = perception_for(settings, camera, pmap, attitude)
         if isinstance(source, FollowCameraSource):
             return TruthTagger(perception, source)
@@ -119,8 +158,9 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
         flights[0].add_done_callback(_report_flight)
 
     try:
-        app = await fly(settings, source, bridge, processor, pmap.landmarks, seconds=seconds,
-                        prefix="run", on_start=start_flying if fly_square else None)
+        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds,
+                        prefix="run", on_start=start_flying if fly_square else None,
+                        attitude=attitude_source)
     finally:
         for task in flights:
             task.cancel()
@@ -138,10 +178,13 @@ def _report_flight(task: asyncio.Task[None]) -> None:
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Fly until stopped; exit status 0 on a clean stop."""
-    app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False)))
+    app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False),
+                           getattr(args, "truth_attitude", False)))
     c = app.counters
     log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
              app.dropped_frames)
+    if app.blocker is not None:
+        log.warning("no fix could come: %s: %s", app.blocker.cause, app.blocker.detail)
     if c.worker_errors:  # a bug, logged with its traceback: not a clean stop
         print("companion: frame processing failed (see the log above)", file=sys.stderr)
         return 1
