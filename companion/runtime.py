@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory, BridgeSink
-from companion.errors import ConfigError, InputError
+from companion.errors import ConfigError, InputError, note_stop_signal
 from companion.flightlog import FlightLogWriter
 from companion.landmarks.geodesy import LocalFrame
 from companion.landmarks.geojson_io import read_map
@@ -92,9 +92,10 @@ def load_practical_map(settings: Settings) -> PracticalMap:
 def reporter_for(settings: Settings, landmarks: tuple[MapLandmark, ...] | list[MapLandmark],
                  prefix: str) -> Reporter:
     """Flight log in ``flightlog.dir`` and, when enabled, Zenoh monitoring."""
-    name = time.strftime(f"{prefix}-%Y%m%d-%H%M%S.jsonl")
-    flightlog = FlightLogWriter(Path(settings.flightlog.dir) / name, settings.vehicle.id,
-                                settings.flightlog.fsync_interval_s)
+    name = time.strftime(f"{prefix}-%Y%m%d-%H%M%S.jsonl")  # the writer makes it unique
+    fl = settings.flightlog
+    flightlog = FlightLogWriter(Path(fl.dir) / name, settings.vehicle.id, fl.fsync_interval_s,
+                                max_file_bytes=round(fl.max_file_mb * 1e6))
     monitor = None
     if settings.monitor.enabled:
         providers: dict[str, Callable[[], Any]] = {
@@ -174,7 +175,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
                            settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
-                loop.add_signal_handler(sig, app.request_stop)
+                loop.add_signal_handler(sig, _stop_by_signal, app, sig)
         if on_start is not None:
             on_start(app)
         await app.run(seconds)
@@ -190,6 +191,11 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         reporter.close()
         processor.close()
     return app
+
+
+def _stop_by_signal(app: CompanionApp, signum: int) -> None:
+    note_stop_signal(signum)  # the CLI exits 128 + signum once the flight is wound down
+    app.request_stop()
 
 
 def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:

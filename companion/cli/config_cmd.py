@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from companion.preflight import preflight
 from companion.settings import Settings
 from companion.validate import to_plain
 
@@ -37,7 +38,9 @@ def _print_table(name: str, values: dict[str, object]) -> None:
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
-    """Print the settings; the loader has already validated them."""
+    """Print the settings; the loader has validated their values, :func:`preflight` what
+    they name (connection string, serial device, signing key, flight log directory)."""
+    preflight(settings)
     plain = to_plain(settings)
     files = plain.pop("config_files")
     if args.json:

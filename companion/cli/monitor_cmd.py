@@ -12,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from companion.cli import positive_seconds
 from companion.errors import InputError
 from companion.monitoring import FleetView, MonitorWatcher
 from companion.monitoring.render import render_fleet
@@ -28,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--connect", action="append", metavar="ENDPOINT",
                         help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 "
                         "(repeatable; default: monitor.connect)")
-    parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--seconds", type=positive_seconds, help="stop after this many seconds")
     parser.add_argument("--snapshot", type=Path, metavar="FILE.png",
                         help="save the latest preview as PNG and exit")
     parser.add_argument("--json", action="store_true",

@@ -10,7 +10,10 @@ import sys
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory
+from companion.cli import positive_seconds
+from companion.errors import EXIT_FAILURE, EXIT_OK, SourceError
 from companion.perception import Perception, PerceptionWrapper
+from companion.preflight import preflight
 from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
@@ -31,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "([landmarks] map_path), autopilot link ([mavlink]) and monitoring ([monitor]) until "
         "SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md has a systemd unit.",
     )
-    parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--seconds", type=positive_seconds, help="stop after this many seconds")
     parser.add_argument("--fly", action="store_true",
                         help="SITL only: arm (GUIDED / OFFBOARD) and fly a small square with "
                         "position targets so the loop runs while moving (docs/sitl.md)")
@@ -137,12 +140,17 @@ def _report_flight(task: asyncio.Task[None]) -> None:
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
-    """Fly until stopped; exit status 0 on a clean stop."""
+    """Fly until stopped: 0 at the end of a finite source or ``--seconds``, 128 + N when
+    signal N stopped it (the CLI's root), 1 when the frame source failed for good (so
+    systemd's ``Restart=on-failure`` restarts it), 2 for what :func:`preflight` refuses."""
+    preflight(settings)
     app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False)))
     c = app.counters
     log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
              app.dropped_frames)
     if c.worker_errors:  # a bug, logged with its traceback: not a clean stop
         print("companion: frame processing failed (see the log above)", file=sys.stderr)
-        return 1
-    return 0
+        return EXIT_FAILURE
+    if app.source_failure is not None:
+        raise SourceError(f"frame source failed: {app.source_failure}")
+    return EXIT_OK
