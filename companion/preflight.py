@@ -68,7 +68,7 @@ def check_writable_dir(key: str, path: Path) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise ConfigError(f"{key}: {path}: {existing} is not a directory")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise ConfigError(f"{key}: {path}: {existing} is not writable by this user")
     if os.statvfs(existing).f_flag & os.ST_RDONLY:
         raise ConfigError(f"{key}: {path}: {existing} is on a read-only file system")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ConfigError(f"{key}: {path}: {existing} is not writable by this user")
