@@ -142,7 +142,9 @@ class FlightLogWriter:
 
     def close(self) -> None:
         """Stop the fsync thread, fsync and close; never raises (the file stays valid for
-        readers: at worst its last line is torn, which a reader skips)."""
+        readers: at worst its last line is torn, which a reader skips).  Idempotent."""
+        if self._closing.is_set():
+            return
         self._closing.set()
         self._syncer.join()
         with self._lock:
