@@ -91,7 +91,7 @@ def parse_endpoint(spec: str) -> Endpoint:
         return _serial(spec, rest) if kind == "serial" else _socket(spec, kind, rest)
     if text.startswith("/") or re.fullmatch(r"COM\d+([,:]\d+)?", text):
         return _serial(spec, text)  # mavutil/MAVProxy DEVICE[,BAUD], MAVROS DEVICE[:BAUD]
-    if sep and re.fullmatch(r"\d+", text.rpartition(":")[2]):
+    if re.fullmatch(r"([A-Za-z0-9.-]*|\[[0-9A-Fa-f:.]+\]):\d+", text):
         return _socket(spec, "udpin", text)  # mavutil: a bare HOST:PORT listens on UDP
     raise EndpointError(f"endpoint {spec!r}: expected {_SHAPES}")
 

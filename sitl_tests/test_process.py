@@ -39,8 +39,9 @@ async def companion(*args: str, cwd: Path) -> asyncio.subprocess.Process:
 
 
 async def test_sigterm_mid_flight(tmp_path: Path) -> None:
-    """SIGTERM while fixes are flowing: exit 143 (128 + SIGTERM) within 10 s, and the flight log holds every
-    fix the autopilot received, ends with the ``stopped`` event and has no torn line."""
+    """SIGTERM while fixes are flowing: exit 143 (128 + SIGTERM) within 10 s, and the flight
+    log holds every fix the autopilot received, ends with the ``stopped`` event and has no
+    torn line."""
     sim = Simulator(load_scenario("hover"))
     async with SitlAutopilot(FakeAutopilotConfig(), truth=sim.truth_fn) as fake:
         proc = await companion("--config", str(run_config(tmp_path, fake.local_port)), "run",
