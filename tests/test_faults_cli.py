@@ -191,3 +191,59 @@ def test_sigterm_during_a_plain_command_unwinds_and_exits_143(tmp_path: Path) ->
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 143, err
     assert "Traceback" not in err
+
+
+# ---------------------------------------------------------------- the autopilot link
+
+@pytest.mark.parametrize(("setting", "says"), [
+    ("mavlink.endpoint=garbage", "mavlink.endpoint: endpoint 'garbage': expected"),
+    ("mavlink.endpoint=/dev/ttyNO-SUCH-DEVICE:57600",
+     "mavlink.endpoint: serial device /dev/ttyNO-SUCH-DEVICE: No such file or directory"),
+    ("mavlink.endpoint=/etc/hostname,57600",
+     "mavlink.endpoint: /etc/hostname is not a serial device"),
+    ('mavlink.signing_key_file="/no/such.key"',
+     "mavlink.signing_key_file: signing key file /no/such.key: No such file or directory"),
+])
+@pytest.mark.parametrize("command", [["config"], ["run", "--seconds", "1"]])
+def test_what_the_link_names_is_checked_before_anything_opens(
+        setting: str, says: str, command: list[str], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    line = one_line_failure(capsys, [*ORIGIN, "--set", f'flightlog.dir="{tmp_path}"',
+                                     "--set", setting, *command], 2)
+    assert line.startswith(says), line
+    assert list(tmp_path.iterdir()) == []  # no flight log: nothing was opened
+
+
+def test_a_port_in_use_is_one_line_and_status_1(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        line = one_line_failure(capsys, [*ORIGIN, "--set", f'flightlog.dir="{tmp_path}"',
+                                         "--set", f"mavlink.endpoint=udpin:127.0.0.1:{port}",
+                                         "run", "--seconds", "5"], 1)
+    assert line == f"mavlink: udpin:127.0.0.1:{port}: Address already in use"
+
+
+def test_a_frame_source_that_fails_for_good_exits_1(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Every frame unreadable, looping: the run stops with status 1 (systemd's
+    Restart=on-failure restarts it), not 0."""
+    stream = tmp_path / "stream"
+    assert main(["synth", "--scenario", "survey", "--seconds", "0.3", "--out",
+                 str(stream)]) == 0
+    frames = sorted(stream.rglob("*.png"))
+    assert frames
+    for frame in frames:
+        frame.write_bytes(b"not a png")
+    capsys.readouterr()
+    status = main(["--log-level", "error", *ORIGIN, "--set", f'flightlog.dir="{tmp_path}/l"',
+                   "--set", "source.kind=stream", "--set", f'source.spec="{stream}"',
+                   "--set", "source.loop=true", "--set", "source.realtime=false",
+                   "run", "--seconds", "30"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 1, err
+    assert err[-1].startswith("frame source failed: no readable frame in a whole pass"), err
+    assert not any("Traceback" in line for line in err)
