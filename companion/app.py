@@ -172,6 +172,10 @@ class CompanionApp:
         self._last_fix_s: float | None = None
         self._ever_tracked = False
         self._recent_bad: list[bool] = []
+        #: How long :meth:`run` ran until it was asked to stop (the flight's own time).
+        self.run_s = 0.0
+        #: Why the source failed for good (None: it ended or was stopped).
+        self.source_failure: Exception | None = None
 
     # -- public -----------------------------------------------------------------------
 
@@ -191,6 +195,7 @@ class CompanionApp:
             asyncio.create_task(self._worker(), name="worker"),
             asyncio.create_task(self._status_loop(), name="status"),
         ]
+        started_s = self.clock_s()
         try:
             if seconds is None:
                 await self._stop.wait()
@@ -199,6 +204,7 @@ class CompanionApp:
         except TimeoutError:
             pass
         finally:
+            self.run_s = self.clock_s() - started_s
             await self._shutdown()
 
     # -- tasks ------------------------------------------------------------------------
@@ -218,6 +224,7 @@ class CompanionApp:
             pass
         except Exception as err:  # a source failure stops the flight cleanly, with a reason
             log.error("frame source failed: %s", err)
+            self.source_failure = err
             self.counters.source_errors += 1
             self._event("source-failed", reason=str(err))
         finally:

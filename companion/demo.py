@@ -171,9 +171,12 @@ def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result
     lat = app.stats.capture_to_wire_ms
     sent = app.counters.fixes_sent
     accepted = len(fake.accepted())
+    flown_s = min(source.seconds, app.run_s) if app.run_s > 0 else source.seconds
     return {
         "frames": app.counters.frames,
-        "fps": round(app.counters.frames / max(source.seconds, 1e-9), 2),
+        # frames over the time actually flown: a flight stopped early (Ctrl-C) is shorter
+        "fps": round(app.counters.frames / max(flown_s, 1e-9), 2),
+        "flown_s": round(flown_s, 2),
         "fixes_sent": sent,
         "fixes_accepted": accepted,
         "fixes_accepted_ratio": round(accepted / sent, 4) if sent else None,
@@ -200,7 +203,8 @@ def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
         return "-" if v is None else f"{v}{unit}"
 
     lines = [
-        f"frames            {s['frames']}  ({f(s['fps'])} fps, {s['dropped_frames']} dropped)",
+        f"frames            {s['frames']} in {f(s.get('flown_s'), ' s')}  ({f(s['fps'])} fps, "
+        f"{s['dropped_frames']} dropped)",
         f"fixes sent        {s['fixes_sent']}",
         f"fixes accepted    {s['fixes_accepted']} by the fake autopilot "
         f"({f(s['fixes_accepted_ratio'] and round(100 * s['fixes_accepted_ratio'], 1), ' %')})",

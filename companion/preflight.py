@@ -17,7 +17,8 @@ from dataclasses import dataclass
 from typing import Literal
 
 from companion.errors import CompanionError
-from companion.runtime import bridge_for, load_practical_map
+from companion.flightmap import load_practical_map
+from companion.runtime import bridge_for
 from companion.settings import BUILT_IN, Settings
 from companion.sources.base import EndOfStream
 from companion.sources.factory import open_source, resolve

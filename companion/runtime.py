@@ -21,7 +21,7 @@ import cv2
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.autopilot import AttitudeHistory, BridgeSink
-from companion.errors import ConfigError, InputError
+from companion.errors import ConfigError, InputError, note_stop_signal
 from companion.flightlog import FlightLogWriter
 from companion.flightmap import PracticalMap, acquisition_report, log_report, static_blocker
 from companion.monitoring.publisher import MonitorPublisher
@@ -45,9 +45,10 @@ log = logging.getLogger(__name__)
 def reporter_for(settings: Settings, landmarks: tuple[MapLandmark, ...] | list[MapLandmark],
                  prefix: str) -> Reporter:
     """Flight log in ``flightlog.dir`` and, when enabled, Zenoh monitoring."""
-    name = time.strftime(f"{prefix}-%Y%m%d-%H%M%S.jsonl")
-    flightlog = FlightLogWriter(Path(settings.flightlog.dir) / name, settings.vehicle.id,
-                                settings.flightlog.fsync_interval_s)
+    name = time.strftime(f"{prefix}-%Y%m%d-%H%M%S.jsonl")  # the writer makes it unique
+    fl = settings.flightlog
+    flightlog = FlightLogWriter(Path(fl.dir) / name, settings.vehicle.id, fl.fsync_interval_s,
+                                max_file_bytes=round(fl.max_file_mb * 1e6))
     monitor = None
     if settings.monitor.enabled:
         providers: dict[str, Callable[[], Any]] = {
@@ -144,7 +145,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         app.report_event("map", report)
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
-                loop.add_signal_handler(sig, app.request_stop)
+                loop.add_signal_handler(sig, _stop_by_signal, app, sig)
         if on_start is not None:
             on_start(app)
         await app.run(seconds)
@@ -170,7 +171,6 @@ def _map_summary(report: dict[str, Any]) -> dict[str, Any]:
             "cannot_acquire": report["cannot_acquire"]}
 
 
-
 def noise_status(settings: Settings) -> str:
     """``"measured"``, or ``"uncalibrated"`` (logged as a warning) while the pixel noise is
     the deployment's conservative default: the covariance sent is then a guess."""
@@ -180,6 +180,12 @@ def noise_status(settings: Settings) -> str:
                 "not measured on this camera (docs/deploy.md: companion calibrate noise)",
                 settings.pose.pixel_sigma_px)
     return "uncalibrated"
+
+
+def _stop_by_signal(app: CompanionApp, signum: int) -> None:
+    note_stop_signal(signum)  # the CLI exits 128 + signum once the flight is wound down
+    app.request_stop()
+
 
 def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
     """The configured MAVLink backend, its profile following ``vehicle.profile``."""

@@ -68,10 +68,12 @@ class LoggingConfig:
 
 @dataclass(frozen=True)
 class FlightLogConfig:
-    """Where the flight log goes (relative to the working directory) and how often it syncs."""
+    """Where the flight log goes (relative to the working directory), how often it syncs and
+    the size at which it rotates to a new part (0: never)."""
 
     dir: str = field(default="flightlogs", metadata={"min_len": 1})
     fsync_interval_s: float = field(default=1.0, metadata={"gt": 0, "le": 10})
+    max_file_mb: float = field(default=100.0, metadata={"ge": 0})
 
 
 @dataclass(frozen=True)
@@ -162,6 +164,9 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{shown}: cannot read: {err.strerror}") from None
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{shown}: invalid TOML: {err}") from None
+    except UnicodeDecodeError as err:  # TOML is UTF-8 (a Latin-1 or UTF-16 file lands here)
+        raise ConfigError(f"{shown}: not UTF-8 text (byte {err.start}: {err.reason}); "
+                          "save the file as UTF-8") from None
 
 
 def _load_file(layers: _Layers, path: Path, seen: tuple[Path, ...] = ()) -> None:

@@ -14,9 +14,10 @@ from pathlib import Path
 from companion.app import Frame
 from companion.calibration_io import write_atomically
 from companion.errors import InputError
+from companion.flightmap import load_practical_map
 from companion.noise import measure_noise, noise_toml
 from companion.perception import Perception
-from companion.runtime import detector_for, load_practical_map
+from companion.runtime import detector_for
 from companion.settings import Settings
 from companion.sources.base import EndOfStream
 from companion.sources.config import SourceConfig

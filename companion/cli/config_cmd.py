@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from companion.config_checks import preflight
 from companion.settings import BUILT_IN, SIM_LAYERS, Settings
 from companion.validate import to_plain
 
@@ -54,7 +55,9 @@ def leaf_origins(plain: dict[str, object], settings: Settings, prefix: str = ""
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
-    """Print the settings; the loader has already validated them."""
+    """Print the settings; the loader has validated their values, :func:`preflight` what
+    they name (connection string, serial device, signing key, flight log directory)."""
+    preflight(settings)
     plain = to_plain(settings)
     files = plain.pop("config_files")
     for internal in ("origins", "default_file"):

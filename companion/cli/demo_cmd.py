@@ -7,6 +7,8 @@ import asyncio
 import json
 import sys
 
+from companion.cli import positive_seconds
+from companion.config_checks import check_flightlog_dir
 from companion.demo import print_summary, run_demo
 from companion.settings import SIM_LAYERS, Settings
 
@@ -18,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Fly a simulated scenario over config/landmarks.geojson with the fake "
         "autopilot on UDP loopback and monitoring on Zenoh; print a summary against truth.",
     )
-    parser.add_argument("--seconds", type=float, default=20.0, help="flight time (default 20)")
+    parser.add_argument("--seconds", type=positive_seconds,
+                        default=20.0, help="flight time (default 20)")
     parser.add_argument("--scenario", default="survey",
                         help="scenario name in config/scenarios/ or a TOML file (default survey)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
@@ -30,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Run the demo with a live progress line on a terminal."""
+    check_flightlog_dir(settings)
     live = sys.stderr.isatty() and not args.json
 
     def progress(line: str) -> None:

@@ -12,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from companion.cli import positive_seconds
 from companion.errors import InputError
 from companion.monitoring import FleetView, MonitorWatcher
 from companion.monitoring.config import LOCAL_ENDPOINT, watcher_endpoints
@@ -30,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 "
                         f"(repeatable; default: monitor.connect, else {LOCAL_ENDPOINT} where "
                         "companion demo listens)")
-    parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--seconds", type=positive_seconds, help="stop after this many seconds")
     parser.add_argument("--snapshot", type=Path, metavar="FILE.png",
                         help="save the latest preview as PNG and exit")
     parser.add_argument("--json", action="store_true",

@@ -10,7 +10,9 @@ import math
 import sys
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.errors import ConfigError
+from companion.cli import positive_seconds
+from companion.config_checks import preflight
+from companion.errors import EXIT_FAILURE, EXIT_OK, ConfigError, SourceError
 from companion.flightmap import PracticalMap, load_practical_map
 from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
@@ -44,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "([monitor]) until SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md "
         "has a systemd unit.",
     )
-    parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--seconds", type=positive_seconds, help="stop after this many seconds")
     parser.add_argument("--truth-attitude", action="store_true",
                         help="a recorded stream with truth_pose.csv: take the attitude from "
                         "it (with an autopilot's typical error) instead of the autopilot's "
@@ -177,7 +179,10 @@ def _report_flight(task: asyncio.Task[None]) -> None:
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
-    """Fly until stopped; exit status 0 on a clean stop."""
+    """Fly until stopped: 0 at the end of a finite source or ``--seconds``, 128 + N when
+    signal N stopped it (the CLI's root), 1 when the frame source failed for good (so
+    systemd's ``Restart=on-failure`` restarts it), 2 for what :func:`preflight` refuses."""
+    preflight(settings)
     app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False),
                            getattr(args, "truth_attitude", False)))
     c = app.counters
@@ -187,5 +192,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         log.warning("no fix could come: %s: %s", app.blocker.cause, app.blocker.detail)
     if c.worker_errors:  # a bug, logged with its traceback: not a clean stop
         print("companion: frame processing failed (see the log above)", file=sys.stderr)
-        return 1
-    return 0
+        return EXIT_FAILURE
+    if app.source_failure is not None:
+        raise SourceError(f"frame source failed: {app.source_failure}")
+    return EXIT_OK
