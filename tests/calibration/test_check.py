@@ -109,3 +109,16 @@ def test_a_flight_with_the_shipped_noise_says_uncalibrated(
     noise = {r.get("noise") for r in records if r["kind"] == "status"}
     assert noise == {"uncalibrated"}
     assert "uncalibrated noise: pose.pixel_sigma_px = 1 is the conservative default" in err
+
+
+def test_the_shipped_defaults_fail_every_line_without_a_traceback(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """No camera file, no camera 0 here, no EKF origin, nobody on the link: each is a line."""
+    status = main(["--set", "source.spec=/dev/no-such-camera", "check", "--link-timeout", "0.5"])
+    out, err = capsys.readouterr()
+    assert status == 1 and "Traceback" not in err
+    names = [line.split(":", 1)[0] for line in out.splitlines()[:-1]]
+    assert names == ["warn  noise", "FAIL  camera file", "FAIL  camera", "FAIL  landmarks",
+                     "FAIL  link"]
+    assert out.splitlines()[-1] == ("1 of 5 checks passed; failed: camera file, camera, "
+                                    "landmarks, link")
