@@ -58,11 +58,17 @@ def capture_frames(spec: str, every_s: float, seconds: float | None,
         cap.release()
 
 
+def refuse_existing(path: Path, overwrite: bool) -> None:
+    """One line when ``path`` exists and may not be replaced (checked before a session
+    and again when writing)."""
+    if path.exists() and not overwrite:
+        raise InputError(f"{path}: exists (use --overwrite to replace it)")
+
+
 def write_atomically(path: Path, text: str, overwrite: bool) -> None:
     """Write ``text`` to ``path`` through a temporary file; refuse to replace a file
     unless ``overwrite``."""
-    if path.exists() and not overwrite:
-        raise InputError(f"{path}: exists (use --overwrite to replace it)")
+    refuse_existing(path, overwrite)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text, encoding="utf-8")

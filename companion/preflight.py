@@ -203,6 +203,7 @@ async def run_checks(settings: Settings, link_timeout_s: float = 5.0) -> Sequenc
         out.append(guarded("landmarks", err))
     try:
         out.append(await check_link(settings, link_timeout_s))
-    except (CompanionError, MavlinkBridgeError) as err:  # e.g. a serial port that is absent
+    except (CompanionError, MavlinkBridgeError, ValueError) as err:  # an absent serial port,
+        # a configuration the bridge refuses (mavlink_bridge raises ValueError for those)
         out.append(Check("link", "fail", str(err)))
     return out

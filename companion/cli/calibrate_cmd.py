@@ -22,7 +22,12 @@ from companion.calibration import (
     camera_toml,
     collect,
 )
-from companion.calibration_io import capture_frames, folder_frames, write_atomically
+from companion.calibration_io import (
+    capture_frames,
+    folder_frames,
+    refuse_existing,
+    write_atomically,
+)
 from companion.cli import calibrate_noise
 from companion.settings import Settings
 
@@ -94,6 +99,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     def progress(line: str) -> None:
         print(f"calibrate: {line}", file=sys.stderr, flush=True)
 
+    refuse_existing(args.out, args.overwrite)  # before the session, not after it
     picker, size = collect(_frames(args), spec, limits, progress)
     result = calibrate(picker, size, spec, limits)
     c = result.camera

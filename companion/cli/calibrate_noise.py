@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from companion.app import Frame
-from companion.calibration_io import write_atomically
+from companion.calibration_io import refuse_existing, write_atomically
 from companion.errors import InputError
 from companion.flightmap import load_practical_map
 from companion.noise import measure_noise, noise_toml
@@ -60,6 +60,7 @@ def source_frames(config: SourceConfig, count: int) -> Iterator[Frame]:
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Measure and write."""
+    refuse_existing(args.out, args.overwrite)
     pmap = load_practical_map(settings)
     if args.landmark not in {lm.landmark_id for lm in pmap.landmarks}:
         raise InputError(f"calibrate noise: no landmark {args.landmark!r} in "

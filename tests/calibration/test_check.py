@@ -3,6 +3,7 @@ exit status 1 on any failure, and each failure on its own line."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -88,3 +89,36 @@ def test_landmarks_the_matcher_cannot_find_fail(
     assert status == 1
     assert lines["landmarks"].startswith("FAIL  landmarks: sign-01's image has ")
     assert "sign-02's image has" in lines["landmarks"]
+
+
+def test_a_flight_with_the_shipped_noise_says_uncalibrated(
+        tmp_path: Path, scene: StillScene, capsys: pytest.CaptureFixture[str]) -> None:
+    """companion run on the recorded stream: every status record of the flight log carries
+    the noise's state, and the log warns while the shipped conservative value is in force."""
+    (tmp_path / "cam.toml").write_text(camera_toml(scene.camera))
+    vehicle = tmp_path / "vehicle.toml"
+    with fake_in_thread(FakeAutopilotConfig(profile="ardupilot")) as fake:
+        vehicle.write_text(vehicle_toml(scene, "cam.toml",
+                                        endpoint=f"udpout:127.0.0.1:{fake.local_port}"))
+        status = main(["--config", str(vehicle), "--set", f'flightlog.dir="{tmp_path}"',
+                       "run", "--seconds", "2"])
+    err = capsys.readouterr().err
+    assert status == 0, err
+    records = [json.loads(line) for log in tmp_path.glob("run-*.jsonl")
+               for line in log.read_text().splitlines()]
+    noise = {r.get("noise") for r in records if r["kind"] == "status"}
+    assert noise == {"uncalibrated"}
+    assert "uncalibrated noise: pose.pixel_sigma_px = 1 is the conservative default" in err
+
+
+def test_the_shipped_defaults_fail_every_line_without_a_traceback(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """No camera file, no camera 0 here, no EKF origin, nobody on the link: each is a line."""
+    status = main(["--set", "source.spec=/dev/no-such-camera", "check", "--link-timeout", "0.5"])
+    out, err = capsys.readouterr()
+    assert status == 1 and "Traceback" not in err
+    names = [line.split(":", 1)[0] for line in out.splitlines()[:-1]]
+    assert names == ["warn  noise", "FAIL  camera file", "FAIL  camera", "FAIL  landmarks",
+                     "FAIL  link"]
+    assert out.splitlines()[-1] == ("1 of 5 checks passed; failed: camera file, camera, "
+                                    "landmarks, link")
