@@ -98,6 +98,7 @@ def test_a_link_that_never_comes_up_is_named_within_seconds(
     err = capsys.readouterr().err
     assert status == 0, err
     assert "no fix can come: link-never-up: no HEARTBEAT from the autopilot on udpout:" in err
+    assert err.count("no fix can come:") == 1, err  # once per cause, not per evaluation
     assert "link-never-up" in {c for _, c in blocked_causes(tmp_path)}
 
 
