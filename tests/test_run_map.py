@@ -166,3 +166,4 @@ def test_the_cause_is_on_zenoh_for_a_monitor_in_another_process(
     assert status["no_fix_cause"]["cause"] == "no-references"
     assert status["map"]["cannot_acquire"] == {"wall-01": "no appearance image: nothing to "
                                                "look for (add one to the map)"}
+    assert "no fix can come: no-references: none of the 1 landmarks" in err  # the text view
