@@ -84,7 +84,7 @@ def test_no_references_is_named_in_the_status_log_and_events_at_once(
     start = records[0]["t_us"] if "t_us" in records[0] else records[1]["t_us"]
     causes = blocked_causes(tmp_path)
     assert causes and all(c == "no-references" for _, c in causes)
-    assert causes[0][0] - start < 1_000_000
+    assert causes[0][0] - start < 2_000_000  # named at once, not after a timeout
     assert any(r.get("event") == "no-fix" and r["cause"] == "no-references" for r in records)
 
 
