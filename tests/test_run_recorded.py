@@ -63,7 +63,8 @@ def test_run_on_a_recording_sends_fixes_the_autopilot_accepts(
     default camera (pitched -30 deg instead of the recording's -10) was used."""
     with fake_flying("hover") as fake:
         status = main(run_args(tmp_path, hover, fake.local_port, "--truth-attitude",
-                               "--set", f'landmarks.map_path="{hover / "landmarks.geojson"}"'))
+                               "--set", f'landmarks.map_path="{hover / "landmarks.geojson"}"',
+                               "--set", "camera.mount_rpy_deg=[0.0, -30.0, 0.0]"))
         accepted = len(fake.accepted())
     err = capsys.readouterr().err
     assert status == 0, err
