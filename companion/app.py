@@ -338,16 +338,17 @@ class CompanionApp:
         self._event(name, **fields)
 
     def _note_blocker(self, blocker: Blocker | None) -> None:
-        """Log and publish a change of the reason no fix can come."""
-        if blocker == self.blocker:
+        """Log and publish a change of the reason no fix can come (its detail, e.g. how
+        long the link has been silent, is refreshed in the status without a new event)."""
+        previous, self.blocker = self.blocker, blocker
+        if (previous and previous.cause) == (blocker and blocker.cause):
             return
         if blocker is not None:
             log.warning("no fix can come: %s: %s", blocker.cause, blocker.detail)
             self._event("no-fix", **blocker.as_dict())
-        elif self.blocker is not None:
-            log.info("no longer blocked (%s)", self.blocker.cause)
-            self._event("no-fix-cleared", cause=self.blocker.cause)
-        self.blocker = blocker
+        elif previous is not None:
+            log.info("no longer blocked (%s)", previous.cause)
+            self._event("no-fix-cleared", cause=previous.cause)
 
     def _event(self, name: str, **fields: Any) -> None:
         self.reporter.report("events", now_us(), {"event": name, **fields})

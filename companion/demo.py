@@ -101,7 +101,8 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin
-    pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
+    pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m),
+                        described=f"the simulated world of scenario {scenario!r}")
     detector_for(settings)  # load the detector now, not on the camera's clock (and fail early)
     # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
     drift = AttitudeErrorConfig() if attitude_error else None

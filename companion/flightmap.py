@@ -69,7 +69,7 @@ class PracticalMap:
     origin: LocalFrame
     unusable: Mapping[str, str] = field(default_factory=dict)
     left_out: tuple[tuple[str, str], ...] = ()
-    described: str = ""
+    described: str = "the given landmarks"
     nearest_m: float | None = None
     nearest_id: str | None = None
 

@@ -19,6 +19,7 @@ from collections import OrderedDict
 from pathlib import Path
 
 from companion.errors import InputError
+from companion.landmarks.geodesy import LocalFrame
 from companion.sources.base import Frame, FrameSource, monotonic_us
 from companion.sources.files import RecordedStreamSource
 from companion.sources.stream_format import TruthPose
@@ -85,39 +86,71 @@ def recording_camera(configured: CameraModel, source: FrameSource, spec: str) ->
     return recorded
 
 
+class RecordedTruth:
+    """The recorded vehicle pose (``truth_pose.csv``) of a frame delivered through
+    :class:`OnCompanionClock`, its position placed in the flight's NED frame (the
+    stream's ``[origin]`` may differ from the EKF origin)."""
+
+    def __init__(self, clock: OnCompanionClock, source: RecordedStreamSource,
+                 flight_origin: LocalFrame) -> None:
+        self.clock = clock
+        self.folder = source.folder
+        self.poses: dict[int, tuple[int, TruthPose]] = read_truth_pose(source.folder)
+        self._span = max(self.poses, default=0) + 1
+        o = source.meta.origin
+        self._stream = None if o is None else LocalFrame(o.lat, o.lon, o.alt_m)
+        self._flight = flight_origin
+
+    def __bool__(self) -> bool:
+        return bool(self.poses)
+
+    def pose_at(self, t_us: int) -> tuple[int, TruthPose] | None:
+        """(recorded time, pose) of the frame stamped ``t_us``, None when unknown."""
+        seen = self.clock.recorded(t_us)
+        entry = None if seen is None else self.poses.get(seen[0] % self._span)
+        return None if seen is None or entry is None else (seen[1], entry[1])
+
+    def position(self, t_us: int) -> tuple[float, float, float] | None:
+        """The frame's true position in the flight's NED frame."""
+        found = self.pose_at(t_us)
+        if found is None:
+            return None
+        p = found[1]
+        if self._stream is None or self._stream == self._flight:
+            return (p.north_m, p.east_m, p.down_m)
+        lat, lon, alt = self._stream.to_wgs84(p.north_m, p.east_m, p.down_m)
+        n, e, d = (float(v) for v in self._flight.to_ned(lat, lon, alt))
+        return (n, e, d)
+
+
 class TruthAttitude:
     """Frames' attitude from a recorded stream's ``truth_pose.csv``, plus the error an
     autopilot's estimate has (``AttitudeErrorConfig`` defaults: 0.2 deg roll/pitch, 1 deg
     yaw, a Gauss-Markov process with a 20 s correlation time, the pose solver's stated
     attitude noise), for checking a recording offline without an autopilot."""
 
-    def __init__(self, clock: OnCompanionClock, folder: Path,
-                 error: AttitudeErrorConfig | None = None, seed: int = 0) -> None:
-        self.clock = clock
-        self.poses: dict[int, tuple[int, TruthPose]] = read_truth_pose(folder)
-        if not self.poses:
-            raise InputError(f"{folder}: --truth-attitude: the stream has no truth_pose.csv")
+    def __init__(self, truth: RecordedTruth, error: AttitudeErrorConfig | None = None,
+                 seed: int = 0) -> None:
+        if not truth:
+            raise InputError(f"{truth.folder}: --truth-attitude: the stream has no "
+                             "truth_pose.csv")
+        self.truth = truth
         self.config = error or AttitudeErrorConfig()
         self.drift = AttitudeDrift(self.config, seed)
-        self._span = max(self.poses) + 1
         log.warning("attitude from %s with a simulated autopilot error (1-sigma %g deg "
                     "roll/pitch, %g deg yaw, correlation %g s), not from the autopilot",
-                    Path(folder) / "truth_pose.csv", self.config.roll_pitch_sigma_deg,
+                    Path(truth.folder) / "truth_pose.csv", self.config.roll_pitch_sigma_deg,
                     self.config.yaw_sigma_deg, self.config.correlation_s)
 
     def last_us(self) -> int | None:
-        return self.clock.last_us
+        return self.truth.clock.last_us
 
     def at(self, t_us: int, max_gap_us: int = 100_000) -> AttitudeSample | None:
         """The recorded frame's true attitude plus the error at its recorded time."""
-        seen = self.clock.recorded(t_us)
-        if seen is None:
+        found = self.truth.pose_at(t_us)
+        if found is None:
             return None
-        index, recorded_us = seen
-        entry = self.poses.get(index % self._span)
-        if entry is None:
-            return None
-        pose = entry[1]
+        recorded_us, pose = found
         er, ep, ey = self.drift.error(recorded_us / 1e6)
         return AttitudeSample(t_us, pose.roll_rad + er, pose.pitch_rad + ep,
                               math.remainder(pose.yaw_rad + ey, math.tau))

@@ -24,6 +24,7 @@ from companion.autopilot import AttitudeHistory, BridgeSink
 from companion.errors import ConfigError, InputError, note_stop_signal
 from companion.flightlog import FlightLogWriter
 from companion.flightmap import PracticalMap, acquisition_report, log_report, static_blocker
+from companion.monitoring.config import MonitorConfig
 from companion.monitoring.publisher import MonitorPublisher
 from companion.nofix import AttitudeSource, NoFixWatch
 from companion.perception import DetectFn, Perception, PerceptionWrapper, SideSensors
@@ -108,40 +109,26 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     (``companion.launch`` says why).
     """
     cv2.setNumThreads(1)
-    history = AttitudeHistory(bridge) if attitude is None else None
-    attitude = history if history is not None else attitude
-    assert attitude is not None
+    history: AttitudeHistory | None = None
+    if attitude is None:
+        attitude = history = AttitudeHistory(bridge)
     processor = make_processor(attitude)
-    perception = processor.perception if isinstance(processor, PerceptionWrapper) \
-        else processor
-    report = acquisition_report(pmap, perception)
-    log_report(report)
-    watch = NoFixWatch(static_blocker(pmap, report, settings.landmarks.max_origin_distance_m),
-                       bridge, attitude, perception.camera, pmap.landmarks,
-                       settings.mavlink.endpoint)
-    mon = settings.monitor
-
-    def preview(frame: Frame, result: FrameResult) -> bytes:
-        caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
-        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
-                  for t in result.tracks]
-        return render_preview(frame.image, tracks, mon.preview_width_px,
-                              mon.preview_jpeg_quality, caption)
-
     try:
+        report, watch = _diagnosis(settings, pmap, processor, bridge, attitude)
         reporter = reporter_for(settings, pmap.landmarks, prefix)
     except BaseException:
         processor.close()
         raise
+    mon = settings.monitor
     loop = asyncio.get_running_loop()
     try:
         await bridge.start()
         if history is not None:
             history.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
-                           settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview,
-                           diagnose=watch, facts={"map": _map_summary(report),
-                                                     "noise": noise_status(settings)})
+                           settings.vehicle.id, 1.0 / mon.status_rate_hz,
+                           preview=preview_for(mon), diagnose=watch,
+                           facts={"map": _map_summary(report), "noise": noise_status(settings)})
         app.report_event("map", report)
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
@@ -162,6 +149,30 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         reporter.close()
         processor.close()
     return app
+
+
+def preview_for(mon: MonitorConfig) -> Callable[[Frame, FrameResult], bytes]:
+    """Draws a frame's preview (boxes, particles, the fix or why there is none)."""
+    def preview(frame: Frame, result: FrameResult) -> bytes:
+        caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
+        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
+                  for t in result.tracks]
+        return render_preview(frame.image, tracks, mon.preview_width_px,
+                              mon.preview_jpeg_quality, caption)
+    return preview
+
+
+def _diagnosis(settings: Settings, pmap: PracticalMap,
+               processor: Perception | PerceptionWrapper, bridge: VisionBridge,
+               attitude: AttitudeSource) -> tuple[dict[str, Any], NoFixWatch]:
+    """The map's acquisition report (logged) and the watch that names why no fix comes."""
+    perception = processor.perception if isinstance(processor, PerceptionWrapper) \
+        else processor
+    report = acquisition_report(pmap, perception)
+    log_report(report)
+    static = static_blocker(pmap, report, settings.landmarks.max_origin_distance_m)
+    return report, NoFixWatch(static, bridge, attitude, perception.camera, pmap.landmarks,
+                              settings.mavlink.endpoint)
 
 
 def _map_summary(report: dict[str, Any]) -> dict[str, Any]:

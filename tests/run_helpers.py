@@ -50,13 +50,15 @@ def write_subset(stream: Path, out: Path, keep: dict[str, dict[str, Any]]) -> Pa
 
 def run_args(tmp_path: Path, stream: Path, port: int, *extra: str) -> list[str]:
     """``companion run`` on ``stream`` with the survey origin, monitoring off, the flight
-    log in ``tmp_path``, the link to ``udpout:127.0.0.1:port``."""
+    log in ``tmp_path``, the link to ``udpout:127.0.0.1:port`` and the database's map
+    (``extra`` comes last, so it may set ``landmarks.map_path``)."""
     lat, lon, alt = ORIGIN
     return ["run", "--set", f'source.spec="stream:{stream}"',
             "--set", f"mavlink.origin_lat_deg={lat}", "--set", f"mavlink.origin_lon_deg={lon}",
             "--set", f"mavlink.origin_alt_m={alt}", "--set", "monitor.enabled=false",
             "--set", f'flightlog.dir="{tmp_path / "logs"}"',
-            "--set", f'mavlink.endpoint="udpout:127.0.0.1:{port}"', *extra]
+            "--set", f'mavlink.endpoint="udpout:127.0.0.1:{port}"',
+            "--set", 'landmarks.map_path=""', *extra]
 
 
 def flight_records(logs: Path) -> list[dict[str, Any]]:

@@ -84,7 +84,7 @@ def test_no_references_is_named_in_the_status_log_and_events_at_once(
     start = records[0]["t_us"] if "t_us" in records[0] else records[1]["t_us"]
     causes = blocked_causes(tmp_path)
     assert causes and all(c == "no-references" for _, c in causes)
-    assert causes[0][0] - start < 1_000_000
+    assert causes[0][0] - start < 2_000_000  # named at once, not after a timeout
     assert any(r.get("event") == "no-fix" and r["cause"] == "no-references" for r in records)
 
 
@@ -98,6 +98,7 @@ def test_a_link_that_never_comes_up_is_named_within_seconds(
     err = capsys.readouterr().err
     assert status == 0, err
     assert "no fix can come: link-never-up: no HEARTBEAT from the autopilot on udpout:" in err
+    assert err.count("no fix can come:") == 1, err  # once per cause, not per evaluation
     assert "link-never-up" in {c for _, c in blocked_causes(tmp_path)}
 
 
@@ -165,3 +166,4 @@ def test_the_cause_is_on_zenoh_for_a_monitor_in_another_process(
     assert status["no_fix_cause"]["cause"] == "no-references"
     assert status["map"]["cannot_acquire"] == {"wall-01": "no appearance image: nothing to "
                                                "look for (add one to the map)"}
+    assert "no fix can come: no-references: none of the 1 landmarks" in err  # the text view

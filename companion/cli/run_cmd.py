@@ -8,6 +8,8 @@ import dataclasses
 import logging
 import math
 import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.cli import positive_seconds
@@ -19,6 +21,7 @@ from companion.perception import Perception, PerceptionWrapper
 from companion.recorded import (
     RECORDED_KINDS,
     OnCompanionClock,
+    RecordedTruth,
     TruthAttitude,
     recording_camera,
 )
@@ -76,19 +79,23 @@ def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
     return dataclasses.replace(pmap, references=refs, unusable=unusable)
 
 
-class TruthTagger(PerceptionWrapper):
-    """Follow mode: each pose message also carries the true position the frame showed
-    (``truth_position_ned_m``) and the fix's distance from it (``truth_error_m``)."""
+#: The true position (flight NED, m) of the vehicle when a frame was taken, or None.
+TruthOf = Callable[[Frame], Sequence[float] | None]
 
-    def __init__(self, perception: Perception, source: FollowCameraSource) -> None:
+
+class TruthTagger(PerceptionWrapper):
+    """Follow mode and recordings with truth: each pose message also carries the true
+    position the frame showed (``truth_position_ned_m``) and the fix's distance from it
+    (``truth_error_m``)."""
+
+    def __init__(self, perception: Perception, truth_of: TruthOf) -> None:
         super().__init__(perception)
-        self.source = source
+        self.truth_of = truth_of
 
     def process(self, frame: Frame) -> FrameResult:
         result = self.perception.process(frame)
-        state = self.source.rendered_state(frame.index)
-        if result.fix is not None and result.pose_json is not None and state is not None:
-            truth = state.position_ned_m
+        truth = self.truth_of(frame) if result.fix is not None else None
+        if result.fix is not None and result.pose_json is not None and truth is not None:
             result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
             result.pose_json["truth_error_m"] = round(
                 math.dist(result.fix.position_ned_m, truth), 4)
@@ -109,12 +116,21 @@ def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
                               request=command_sender(bridge))
 
 
+@dataclass(frozen=True)
+class RunSource:
+    """The frames of a run, the camera that took them, where their attitude comes from
+    (None: the autopilot's ATTITUDE) and their true position when known."""
+
+    source: FrameSource
+    camera: CameraModel
+    attitude: AttitudeSource | None = None
+    truth_of: TruthOf | None = None
+
+
 async def open_run_source(settings: Settings, bridge: VisionBridge, pmap: PracticalMap,
-                          truth_attitude: bool = False
-                          ) -> tuple[FrameSource, CameraModel, AttitudeSource | None]:
-    """The source, the camera its frames were taken with, and the attitude source when it
-    is not the autopilot: a recording is put on the companion's clock and solved with its
-    own camera (:mod:`companion.recorded`)."""
+                          truth_attitude: bool = False) -> RunSource:
+    """The configured source; a recording is put on the companion's clock, solved with its
+    own camera and, with truth, scored against it (:mod:`companion.recorded`)."""
     c = resolve(settings.source)
     log.info("source %s:%s", c.kind, c.spec)
     if truth_attitude and c.kind != "stream":
@@ -122,30 +138,34 @@ async def open_run_source(settings: Settings, bridge: VisionBridge, pmap: Practi
                           "stream with truth_pose.csv")
     if c.kind == "follow":
         follow = open_follow(settings, bridge, pmap)
-        return follow, follow.sim.scenario.camera, None
+        state = follow.rendered_state
+        return RunSource(follow, follow.sim.scenario.camera,
+                         truth_of=lambda f: getattr(state(f.index), "position_ned_m", None))
     source = await open_source(settings.source)
     sim = simulator_of(source)
     if c.kind not in RECORDED_KINDS:
-        return source, sim.scenario.camera if sim is not None else settings.camera, None
+        return RunSource(source, sim.scenario.camera if sim is not None else settings.camera)
     clocked = OnCompanionClock(source)
     camera = recording_camera(settings.camera, source, c.spec)
-    if truth_attitude and isinstance(source, RecordedStreamSource):
-        return clocked, camera, TruthAttitude(clocked, source.folder)
-    return clocked, camera, None
+    if not isinstance(source, RecordedStreamSource):
+        return RunSource(clocked, camera)
+    truth = RecordedTruth(clocked, source, pmap.origin)
+    return RunSource(clocked, camera, TruthAttitude(truth) if truth_attitude else None,
+                     (lambda f: truth.position(f.t_us)) if truth else None)
 
 
 async def _run(settings: Settings, seconds: float | None, fly_square: bool = False,
                truth_attitude: bool = False) -> CompanionApp:
     pmap = load_practical_map(settings)
     bridge = bridge_for(settings)
-    source, camera, attitude_source = await open_run_source(settings, bridge, pmap,
-                                                            truth_attitude)
+    run_source = await open_run_source(settings, bridge, pmap, truth_attitude)
+    source = run_source.source
     pmap = with_sim_references(pmap, source)
 
     def processor(attitude: AttitudeSource) -> Perception | PerceptionWrapper:
-        perception = perception_for(settings, camera, pmap, attitude)
-        if isinstance(source, FollowCameraSource):
-            return TruthTagger(perception, source)
+        perception = perception_for(settings, run_source.camera, pmap, attitude)
+        if run_source.truth_of is not None:
+            return TruthTagger(perception, run_source.truth_of)
         return perception
 
     flights: list[asyncio.Task[None]] = []
@@ -162,7 +182,7 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
     try:
         app = await fly(settings, source, bridge, processor, pmap, seconds=seconds,
                         prefix="run", on_start=start_flying if fly_square else None,
-                        attitude=attitude_source)
+                        attitude=run_source.attitude)
     finally:
         for task in flights:
             task.cancel()

@@ -32,6 +32,9 @@ def render_vehicle(view: VehicleView) -> list[str]:
         f"p99 {_num(latency.get('p99'))} ms  link {status.get('link', '-')}  "
         f"dropped frames {status.get('dropped_frames', '-')}",
     ]
+    cause = status.get("no_fix_cause")
+    if isinstance(cause, dict):
+        lines.append(f"  no fix can come: {cause.get('cause')}: {cause.get('detail')}")
     counters = status.get("counters", {})
     if counters:
         lines.append("  " + "  ".join(f"{k} {v}" for k, v in sorted(counters.items())))
