@@ -162,14 +162,11 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         return render_preview(frame.image, tracks, mon.preview_width_px,
                               mon.preview_jpeg_quality, caption)
 
-    try:
-        reporter = reporter_for(settings, landmarks, prefix)
-    except BaseException:
-        processor.close()
-        raise
     loop = asyncio.get_running_loop()
+    reporter: Reporter | None = None
     try:
-        await bridge.start()
+        await bridge.start()  # first: a link that cannot open leaves no empty flight log
+        reporter = reporter_for(settings, landmarks, prefix)
         attitude.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
                            settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
@@ -188,7 +185,8 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
             close()
         await attitude.stop()
         await bridge.stop()
-        reporter.close()
+        if reporter is not None:
+            reporter.close()
         processor.close()
     return app
 
