@@ -8,6 +8,7 @@ import json
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -115,6 +116,8 @@ def test_a_flight_goes_on_with_fixes_when_the_disk_fills_and_stops_when_asked(
             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             preexec_fn=limit_file_size(16_000) if limit == "rlimit" else None)
         assert proc.stderr is not None
+        watchdog = threading.Timer(150, proc.kill)  # a process that hangs fails, not the suite
+        watchdog.start()
         deadline = time.monotonic() + 60
         stderr = []
         for line in proc.stderr:
@@ -127,6 +130,7 @@ def test_a_flight_goes_on_with_fixes_when_the_disk_fills_and_stops_when_asked(
         started = time.monotonic()
         out, rest = proc.communicate(timeout=30)
         stop_s = time.monotonic() - started
+        watchdog.cancel()
     stderr_text = "".join(stderr) + rest
     assert proc.returncode == 143, stderr_text[-2000:]
     assert stop_s < 10.0
