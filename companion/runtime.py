@@ -115,14 +115,15 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     processor = make_processor(attitude)
     try:
         report, watch = _diagnosis(settings, pmap, processor, bridge, attitude)
-        reporter = reporter_for(settings, pmap.landmarks, prefix)
     except BaseException:
         processor.close()
         raise
     mon = settings.monitor
     loop = asyncio.get_running_loop()
+    reporter: Reporter | None = None
     try:
-        await bridge.start()
+        await bridge.start()  # first: a link that cannot open leaves no empty flight log
+        reporter = reporter_for(settings, pmap.landmarks, prefix)
         if history is not None:
             history.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
@@ -146,7 +147,8 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         if history is not None:
             await history.stop()
         await bridge.stop()
-        reporter.close()
+        if reporter is not None:
+            reporter.close()
         processor.close()
     return app
 

@@ -225,6 +225,7 @@ def test_a_port_in_use_is_one_line_and_status_1(
                                          "--set", f"mavlink.endpoint=udpin:127.0.0.1:{port}",
                                          "run", "--seconds", "5"], 1)
     assert line == f"mavlink: udpin:127.0.0.1:{port}: Address already in use"
+    assert list(tmp_path.iterdir()) == []  # no empty flight log per (re)start attempt
 
 
 def test_a_frame_source_that_fails_for_good_exits_1(

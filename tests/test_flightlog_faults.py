@@ -8,6 +8,7 @@ import json
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -115,6 +116,8 @@ def test_a_flight_goes_on_with_fixes_when_the_disk_fills_and_stops_when_asked(
             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             preexec_fn=limit_file_size(16_000) if limit == "rlimit" else None)
         assert proc.stderr is not None
+        watchdog = threading.Timer(150, proc.kill)  # a process that hangs fails, not the suite
+        watchdog.start()
         deadline = time.monotonic() + 60
         stderr = []
         for line in proc.stderr:
@@ -127,6 +130,7 @@ def test_a_flight_goes_on_with_fixes_when_the_disk_fills_and_stops_when_asked(
         started = time.monotonic()
         out, rest = proc.communicate(timeout=30)
         stop_s = time.monotonic() - started
+        watchdog.cancel()
     stderr_text = "".join(stderr) + rest
     assert proc.returncode == 143, stderr_text[-2000:]
     assert stop_s < 10.0
@@ -169,3 +173,40 @@ def test_ctrl_c_ends_the_demo_with_130_and_fps_over_the_time_flown(tmp_path: Pat
 def test_companion_process_helper_reports_status(tmp_path: Path) -> None:
     out = companion_process("--version", cwd=tmp_path)
     assert out.returncode == 0
+
+
+class _Monitor:
+    """What Reporter needs of MonitorPublisher, recording what is published."""
+
+    def __init__(self) -> None:
+        self.published: list[tuple[str, dict[str, object]]] = []
+
+    def publish_json(self, topic: str, data: dict[str, object]) -> None:
+        self.published.append((topic, data))
+
+    def close(self) -> None:
+        return None
+
+
+def test_a_full_disk_is_one_event_on_zenoh_and_monitoring_goes_on(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """/dev/full fails every write with ENOSPC, as a full disk does."""
+    from companion.reporting import Reporter
+
+    log = FlightLogWriter(tmp_path / "f.jsonl", "v1")
+    assert log._file is not None
+    log._file.close()
+    log._file = open("/dev/full", "wb", buffering=0)  # the writer closes it
+    monitor = _Monitor()
+    reporter = Reporter(log, monitor)  # type: ignore[arg-type]
+    for n in range(20):
+        reporter.report("status", n, {"n": n})
+    reporter.close()
+    events = [d for topic, d in monitor.published if topic == "events"]
+    assert [e["event"] for e in events] == ["flightlog-stopped"]
+    assert "No space left on device" in str(events[0]["reason"])
+    assert sum(topic == "status" for topic, _ in monitor.published) == 20
+    assert reporter.failures == 0  # nothing raised out of the writer
+    stopped = [r for r in caplog.records if "flight log stopped" in r.getMessage()]
+    assert len(stopped) == 1
+    assert log.dropped == 20 and log.records == 0

@@ -34,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--profile", choices=("ardupilot", "px4"),
                         help="which autopilot's rules (default: vehicle.profile)")
     parser.add_argument("--endpoint", default="udpin:127.0.0.1:14550", metavar="SPEC",
-                        help="udpin:|udpout:|tcp:|tcpin:HOST:PORT or serial:DEVICE:BAUD "
+                        help="udpin:|udpout:|tcp:|tcpin:HOST:PORT, serial:DEVICE:BAUD or "
+                        "another spelling of docs/mavlink.md "
                         "(default: %(default)s, where the companion's default udpout points)")
     parser.add_argument("--seconds", type=positive_seconds,
                         metavar="S", help="stop after S seconds")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -13,7 +14,7 @@ import cv2
 import numpy as np
 
 from companion.cli import positive_seconds
-from companion.errors import InputError
+from companion.errors import InputError, Interrupted, note_stop_signal
 from companion.monitoring import FleetView, MonitorWatcher
 from companion.monitoring.config import LOCAL_ENDPOINT, watcher_endpoints
 from companion.monitoring.render import render_fleet
@@ -68,7 +69,9 @@ def _watch(watcher: MonitorWatcher, seconds: float | None, live: bool) -> FleetV
                 sys.stdout.write("\x1b[H\x1b[2J" + render_fleet(view) + "\n")
                 sys.stdout.flush()
     except KeyboardInterrupt:
-        pass
+        note_stop_signal(signal.SIGINT)  # show the view, then exit 130
+    except Interrupted as stop:
+        note_stop_signal(stop.signum)  # SIGTERM: show the view, then exit 143
     if not live:
         print(render_fleet(view), file=sys.stderr)
     return view
