@@ -17,7 +17,10 @@ import pytest
 from companion.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-ORIGIN = ("--set", "mavlink.origin_lat_deg=47.3977", "--set", "mavlink.origin_lon_deg=8.5456")
+#: An EKF origin and the sample map: what ``companion run`` needs before it opens anything.
+FLIGHT = ("--set", "mavlink.origin_lat_deg=47.3977", "--set", "mavlink.origin_lon_deg=8.5456",
+          "--set", f'landmarks.map_path="{ROOT / "config" / "landmarks.geojson"}"',
+          "--set", 'source.kind="sim"', "--set", 'source.spec="survey"')
 
 
 def one_line_failure(capsys: pytest.CaptureFixture[str], argv: list[str], status: int) -> str:

@@ -19,6 +19,8 @@ from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 
+SIM_LAYER = Path(__file__).resolve().parents[1] / "config" / "sim.toml"
+
 #: The survey world's origin (config/landmarks.geojson), the EKF origin of these runs.
 ORIGIN = ("47.3769", "8.5417", "408.0")
 
@@ -51,9 +53,11 @@ def write_subset(stream: Path, out: Path, keep: dict[str, dict[str, Any]]) -> Pa
 def run_args(tmp_path: Path, stream: Path, port: int, *extra: str) -> list[str]:
     """``companion run`` on ``stream`` with the survey origin, monitoring off, the flight
     log in ``tmp_path``, the link to ``udpout:127.0.0.1:port`` and the database's map
-    (``extra`` comes last, so it may set ``landmarks.map_path``)."""
+    (``extra`` comes last, so it may set ``landmarks.map_path``).  The recordings are the
+    simulator's, so the simulator's layer of defaults (config/sim.toml) is read."""
     lat, lon, alt = ORIGIN
-    return ["run", "--set", f'source.spec="stream:{stream}"',
+    return ["run", "--config", str(SIM_LAYER), "--set", 'source.kind="auto"',
+            "--set", f'source.spec="stream:{stream}"',
             "--set", f"mavlink.origin_lat_deg={lat}", "--set", f"mavlink.origin_lon_deg={lon}",
             "--set", f"mavlink.origin_alt_m={alt}", "--set", "monitor.enabled=false",
             "--set", f'flightlog.dir="{tmp_path / "logs"}"',

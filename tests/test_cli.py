@@ -160,6 +160,7 @@ def test_a_missing_extra_is_one_line_naming_it(tmp_path: Path) -> None:
     out = without(extras, "run", "--seconds", "1", "--set", "mavlink.backend=mavsdk",
                   "--set", "source.kind=sim", "--set", "source.spec=survey",
                   "--set", "monitor.enabled=false", "--set", "mavlink.origin_lat_deg=47.3769",
-                  "--set", "mavlink.origin_lon_deg=8.5417", "--set", f'flightlog.dir="{tmp_path}"')
+                  "--set", "mavlink.origin_lon_deg=8.5417", "--set", f'flightlog.dir="{tmp_path}"',
+                  "--set", f'landmarks.map_path="{ROOT / "config" / "landmarks.geojson"}"')
     assert out.stderr.endswith("pip install 'landmark-companion[mavsdk]'\n"), out.stderr
     assert out.returncode == 2 and "Traceback" not in out.stderr

@@ -14,7 +14,7 @@ import pytest
 from companion.cli import main
 from companion.flightlog import FlightLogWriter
 from tests.faultkit import (
-    ORIGIN,
+    FLIGHT,
     ROOT,
     companion_process,
     one_line_failure,
@@ -63,7 +63,7 @@ def test_an_unwritable_flightlog_dir_is_refused_before_anything_runs(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     logs = a_file(tmp_path) / "logs"
     for command in (["config"], ["run", "--seconds", "1"], ["demo", "--seconds", "1"]):
-        line = one_line_failure(capsys, [*ORIGIN, "--set", f'flightlog.dir="{logs}"',
+        line = one_line_failure(capsys, [*FLIGHT, "--set", f'flightlog.dir="{logs}"',
                                          *command], 2)
         assert line.startswith("flightlog.dir: ") and "not a directory" in line
     assert not logs.exists()
@@ -75,7 +75,7 @@ def test_a_flightlog_dir_on_a_read_only_file_system_is_refused(
         if mounted is None:
             pytest.skip("needs a tmpfs (root); the not-a-directory case covers the rest")
         remount_read_only(mounted)
-        line = one_line_failure(capsys, [*ORIGIN, "--set", f'flightlog.dir="{mounted}/logs"',
+        line = one_line_failure(capsys, [*FLIGHT, "--set", f'flightlog.dir="{mounted}/logs"',
                                          "run", "--seconds", "1"], 2)
     assert "read-only file system" in line
 
@@ -208,7 +208,7 @@ def test_sigterm_during_a_plain_command_unwinds_and_exits_143(tmp_path: Path) ->
 def test_what_the_link_names_is_checked_before_anything_opens(
         setting: str, says: str, command: list[str], tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:
-    line = one_line_failure(capsys, [*ORIGIN, "--set", f'flightlog.dir="{tmp_path}"',
+    line = one_line_failure(capsys, [*FLIGHT, "--set", f'flightlog.dir="{tmp_path}"',
                                      "--set", setting, *command], 2)
     assert line.startswith(says), line
     assert list(tmp_path.iterdir()) == []  # no flight log: nothing was opened
@@ -221,7 +221,7 @@ def test_a_port_in_use_is_one_line_and_status_1(
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
         port = taken.getsockname()[1]
-        line = one_line_failure(capsys, [*ORIGIN, "--set", f'flightlog.dir="{tmp_path}"',
+        line = one_line_failure(capsys, [*FLIGHT, "--set", f'flightlog.dir="{tmp_path}"',
                                          "--set", f"mavlink.endpoint=udpin:127.0.0.1:{port}",
                                          "run", "--seconds", "5"], 1)
     assert line == f"mavlink: udpin:127.0.0.1:{port}: Address already in use"
@@ -240,7 +240,7 @@ def test_a_frame_source_that_fails_for_good_exits_1(
     for frame in frames:
         frame.write_bytes(b"not a png")
     capsys.readouterr()
-    status = main(["--log-level", "error", *ORIGIN, "--set", f'flightlog.dir="{tmp_path}/l"',
+    status = main(["--log-level", "error", *FLIGHT, "--set", f'flightlog.dir="{tmp_path}/l"',
                    "--set", "source.kind=stream", "--set", f'source.spec="{stream}"',
                    "--set", "source.loop=true", "--set", "source.realtime=false",
                    "run", "--seconds", "30"])
