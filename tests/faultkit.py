@@ -73,6 +73,13 @@ def small_filesystem(where: Path, size_kib: int) -> Iterator[Path | None]:
         subprocess.run([umount, "-l", str(where)], check=False)
 
 
+@contextlib.contextmanager
+def plain_directory(where: Path) -> Iterator[Path]:
+    """``where`` itself, used where :func:`small_filesystem` would be (file-size limit case)."""
+    where.mkdir(parents=True, exist_ok=True)
+    yield where
+
+
 def remount_read_only(where: Path) -> None:
     """Make the tmpfs at ``where`` read-only (root only: see :func:`small_filesystem`)."""
     subprocess.run(["mount", "-o", "remount,ro", str(where)], check=True)

@@ -18,6 +18,7 @@ from tests.faultkit import (
     ROOT,
     companion_process,
     one_line_failure,
+    plain_directory,
     remount_read_only,
     small_filesystem,
 )
@@ -129,7 +130,7 @@ def test_a_read_only_landmark_database_is_one_line(
 def test_a_full_disk_during_import_is_one_line_and_leaves_the_database_as_it_was(
         limit: str, tmp_path: Path) -> None:
     with small_filesystem(tmp_path / "small", 40) if limit == "tmpfs" \
-            else _no_mount(tmp_path) as where:
+            else plain_directory(tmp_path / "plain") as where:
         if where is None:
             pytest.skip("no tmpfs here (not root); the rlimit case runs instead")
         db = where / "lm.db"
@@ -142,16 +143,6 @@ def test_a_full_disk_during_import_is_one_line_and_leaves_the_database_as_it_was
         assert str(db) in lines[0]
         assert "full" in lines[0] or "I/O" in lines[0], lines[0]
 
-
-class _no_mount:  # noqa: N801  (a context manager used like small_filesystem)
-    def __init__(self, where: Path) -> None:
-        self.where = where
-
-    def __enter__(self) -> Path:
-        return self.where
-
-    def __exit__(self, *exc: object) -> None:
-        return None
 
 
 # ---------------------------------------------------------------- output files: status 1

@@ -17,7 +17,7 @@ import pytest
 from companion.flightlog import FlightLogWriter, read_flight_log
 from companion.runtime import reporter_for
 from companion.settings import load_settings
-from tests.faultkit import ROOT, companion_process, limit_file_size, small_filesystem
+from tests.faultkit import ROOT, limit_file_size, plain_directory, small_filesystem
 
 
 def test_two_writers_of_one_name_write_two_files(tmp_path: Path) -> None:
@@ -108,7 +108,7 @@ def test_a_flight_goes_on_with_fixes_when_the_disk_fills_and_stops_when_asked(
     reaching the autopilot, and SIGTERM stops it within seconds with status 143 and its
     summary, no traceback."""
     with small_filesystem(tmp_path / "small", 24) if limit == "tmpfs" \
-            else _as_is(tmp_path / "logs") as logs:
+            else plain_directory(tmp_path / "logs") as logs:
         if logs is None:
             pytest.skip("no tmpfs here (not root); the rlimit case runs instead")
         proc = subprocess.Popen(
@@ -143,16 +143,6 @@ def test_a_flight_goes_on_with_fixes_when_the_disk_fills_and_stops_when_asked(
           f"fixes accepted in {summary['flown_s']} s")
 
 
-class _as_is:  # noqa: N801  (a context manager used like small_filesystem)
-    def __init__(self, where: Path) -> None:
-        self.where = where
-
-    def __enter__(self) -> Path:
-        return self.where
-
-    def __exit__(self, *exc: object) -> None:
-        return None
-
 
 def test_ctrl_c_ends_the_demo_with_130_and_fps_over_the_time_flown(tmp_path: Path) -> None:
     """After Ctrl-C the summary divides the frames by the time actually flown, not by the
@@ -169,10 +159,6 @@ def test_ctrl_c_ends_the_demo_with_130_and_fps_over_the_time_flown(tmp_path: Pat
     assert summary["fps"] == pytest.approx(summary["frames"] / summary["flown_s"], abs=0.01)
     assert summary["fps"] > 10.0  # a 30 fps camera, not frames / 60 s
 
-
-def test_companion_process_helper_reports_status(tmp_path: Path) -> None:
-    out = companion_process("--version", cwd=tmp_path)
-    assert out.returncode == 0
 
 
 class _Monitor:
