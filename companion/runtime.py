@@ -23,16 +23,17 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.autopilot import AttitudeHistory, BridgeSink
+from companion.autopilot import BridgeSink
 from companion.errors import ConfigError, InputError
 from companion.flightlog import FlightLogWriter
 from companion.landmarks.geodesy import LocalFrame
 from companion.landmarks.geojson_io import read_map
 from companion.landmarks.record import Landmark
 from companion.monitoring.publisher import MonitorPublisher
-from companion.perception import DetectFn, Perception, PerceptionWrapper, SideSensors
+from companion.perception import DetectFn, Perception, PerceptionWrapper
 from companion.preview import render_preview
 from companion.reporting import Reporter
+from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
@@ -128,17 +129,17 @@ def detector_for(settings: Settings) -> DetectFn | None:
 
 
 def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
-                   attitude: AttitudeHistory) -> Perception:
+                   sensors: SensorHistory) -> Perception:
     """The per-frame work with the configured tracker, acquisition, pose and gate."""
     return Perception(camera, pmap.landmarks, pmap.references, detect=detector_for(settings),
-                      sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
+                      sensors=sensors,
                       config=settings.perception, tracker_config=settings.tracker,
                       pose_config=settings.pose, acquire_config=settings.acquire,
                       gate_config=settings.fixgate)
 
 
 async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
-              make_processor: Callable[[AttitudeHistory], Perception | PerceptionWrapper],
+              make_processor: Callable[[SensorHistory], Perception | PerceptionWrapper],
               landmarks: tuple[MapLandmark, ...] | list[MapLandmark], *,
               seconds: float | None = None, prefix: str = "flight",
               on_start: Callable[[CompanionApp], None] | None = None) -> CompanionApp:
@@ -150,8 +151,8 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     (``companion.LIBRARY_THREAD_VARS`` says why).
     """
     cv2.setNumThreads(1)
-    attitude = AttitudeHistory(bridge)
-    processor = make_processor(attitude)
+    sensors = SensorHistory(bridge, settings.pose)
+    processor = make_processor(sensors)
     mon = settings.monitor
 
     def preview(frame: Frame, result: FrameResult) -> bytes:
@@ -169,7 +170,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     loop = asyncio.get_running_loop()
     try:
         await bridge.start()
-        attitude.start()
+        sensors.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
                            settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -185,7 +186,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         close = getattr(source, "close", None)
         if callable(close):
             close()
-        await attitude.stop()
+        await sensors.stop()
         await bridge.stop()
         reporter.close()
         processor.close()

@@ -36,12 +36,12 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp, FrameResult
-from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks
 from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
+from companion.sensors import SensorHistory
 from companion.settings import Settings, load_settings
 from companion.sim.effects import EffectSpec
 from companion.sim.scenario import ScenarioConfig, load_scenario
@@ -284,8 +284,8 @@ class Flight:
                                  origin_lat_deg=o.lat, origin_lon_deg=o.lon,
                                  origin_alt_m=o.alt_m, set_origin=True, **self.bridge_overrides)
 
-        def processor(attitude: AttitudeHistory) -> RecordingPerception:
-            perception = perception_for(self.settings, self.sim.scenario.camera, pmap, attitude)
+        def processor(sensors: SensorHistory) -> RecordingPerception:
+            perception = perception_for(self.settings, self.sim.scenario.camera, pmap, sensors)
             return RecordingPerception(perception, self.camera, self.frames)
 
         tasks: list[asyncio.Task[None]] = []

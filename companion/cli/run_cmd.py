@@ -9,9 +9,9 @@ import math
 import sys
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.autopilot import AttitudeHistory
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
+from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
@@ -101,8 +101,8 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
              len(pmap.landmarks), len(pmap.references), settings.source.kind,
              settings.source.spec)
 
-    def processor(attitude: AttitudeHistory) -> Perception | PerceptionWrapper:
-        perception = perception_for(settings, camera, pmap, attitude)
+    def processor(sensors: SensorHistory) -> Perception | PerceptionWrapper:
+        perception = perception_for(settings, camera, pmap, sensors)
         if isinstance(source, FollowCameraSource):
             return TruthTagger(perception, source)
         return perception
