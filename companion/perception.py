@@ -553,4 +553,5 @@ def pose_json(fix: PoseFix) -> dict[str, Any]:
         "quality": fix.quality,
         "landmark_ids": list(fix.landmark_ids),
         "solver": fix.solver,
+        "attitude_prior": fix.attitude_prior,
     }
