@@ -184,6 +184,8 @@ def _check_attitude(
     landmark no longer fits, the prior is dropped for this fix: the autopilot's attitude is
     itself estimated from our fixes, and a fix that follows it would feed its error back.
     """
+    if isinstance(fix, PoseFix) and _consistent_near(ctx, groups, fix):
+        return replace(fix, attitude_prior="used")
     alone = _solve_robust(replace(ctx, attitude=None), groups, time_us, reset_counter, notes)
     if not isinstance(alone, PoseFix) or len(alone.landmark_ids) < len(groups):
         # not observable without the attitude: cannot check; or the landmarks disagree among
@@ -204,6 +206,19 @@ def _check_attitude(
     off = ", ".join(f"{math.degrees(v):+.1f}" for v in d)
     note = f"attitude prior rejected: the landmarks' roll, pitch, yaw differ by ({off}) deg; {why}"
     return replace(alone, notes=(*alone.notes, note), attitude_prior="rejected")
+
+
+def _consistent_near(ctx: Context, groups: list[Group], fix: PoseFix) -> bool:
+    """The cheap first test (no search): every landmark kept with the prior, and freed of
+    it, refined from the fix, their cost falls by no more than the gate.  A refinement
+    that fails (e.g. unobservable without the attitude) decides nothing: the full check
+    solves without the attitude from scratch."""
+    if len(fix.landmark_ids) < len(groups):
+        return False
+    free = replace(ctx, attitude=None)
+    x0 = np.concatenate([fix.position_ned_m, fix.attitude_rpy_rad])
+    ref = _refine(free, point_set(groups), make_priors(free, laser_for(free, groups, x0)), x0)
+    return not ref.reason and fix.chi2 - ref.cost <= ctx.config.attitude_gate_chi2
 
 
 def _solve_robust(
