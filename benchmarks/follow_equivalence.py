@@ -25,9 +25,9 @@ import numpy as np
 from companion.app import Frame, FrameResult
 from companion.demo import map_landmarks, run_demo
 from companion.landmarks.geodesy import LocalFrame
-from companion.nofix import AttitudeSource
 from companion.perception import PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
+from companion.sensors import SensorHistory
 from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.follow import FollowCameraSource, command_sender
 from companion.sim.scenario import load_scenario
@@ -65,8 +65,8 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
     errors: list[float] = []
 
     class Recorder(PerceptionWrapper):
-        def __init__(self, attitude: AttitudeSource) -> None:
-            super().__init__(perception_for(settings, sim.scenario.camera, pmap, attitude))
+        def __init__(self, sensors: SensorHistory) -> None:
+            super().__init__(perception_for(settings, sim.scenario.camera, pmap, sensors))
 
         def process(self, frame: Frame) -> FrameResult:
             result = self.perception.process(frame)

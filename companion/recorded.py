@@ -5,7 +5,7 @@ A recorded stream, an OTB folder or a video file carries the times it was record
 (0 at its start).  Everything downstream runs on the companion's monotonic clock: the
 bridge refuses a fix whose capture time is older than ``mavlink.max_fix_age_ms``
 (``mavlink_bridge/messages.py fix_problem``) and the attitude of a frame is looked up at
-its capture time (``companion.autopilot.AttitudeHistory``).  :class:`OnCompanionClock`
+its capture time (``companion.sensors.SensorHistory``).  :class:`OnCompanionClock`
 therefore stamps each frame with the companion clock at the moment the source delivers
 it (after the source's own pacing), as a live camera's frames are, and remembers which
 recorded frame that was.

@@ -20,16 +20,17 @@ from typing import Any
 import cv2
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.autopilot import AttitudeHistory, BridgeSink
+from companion.autopilot import BridgeSink
 from companion.errors import ConfigError, InputError, note_stop_signal
 from companion.flightlog import FlightLogWriter
 from companion.flightmap import PracticalMap, acquisition_report, log_report, static_blocker
 from companion.monitoring.config import MonitorConfig
 from companion.monitoring.publisher import MonitorPublisher
 from companion.nofix import AttitudeSource, NoFixWatch
-from companion.perception import DetectFn, Perception, PerceptionWrapper, SideSensors
+from companion.perception import DetectFn, Perception, PerceptionWrapper
 from companion.preview import render_preview
 from companion.reporting import Reporter
+from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
@@ -83,17 +84,17 @@ def detector_for(settings: Settings) -> DetectFn | None:
 
 
 def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
-                   attitude: AttitudeSource) -> Perception:
+                   sensors: SensorHistory) -> Perception:
     """The per-frame work with the configured tracker, acquisition, pose and gate."""
     return Perception(camera, pmap.landmarks, pmap.references, detect=detector_for(settings),
-                      sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
+                      sensors=sensors,
                       config=settings.perception, tracker_config=settings.tracker,
                       pose_config=settings.pose, acquire_config=settings.acquire,
                       gate_config=settings.fixgate)
 
 
 async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
-              make_processor: Callable[[AttitudeSource], Perception | PerceptionWrapper],
+              make_processor: Callable[[SensorHistory], Perception | PerceptionWrapper],
               pmap: PracticalMap, *, seconds: float | None = None, prefix: str = "flight",
               on_start: Callable[[CompanionApp], None] | None = None,
               attitude: AttitudeSource | None = None) -> CompanionApp:
@@ -109,12 +110,10 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     (``companion.launch`` says why).
     """
     cv2.setNumThreads(1)
-    history: AttitudeHistory | None = None
-    if attitude is None:
-        attitude = history = AttitudeHistory(bridge)
-    processor = make_processor(attitude)
+    sensors = SensorHistory(bridge, settings.pose, attitude=attitude)
+    processor = make_processor(sensors)
     try:
-        report, watch = _diagnosis(settings, pmap, processor, bridge, attitude)
+        report, watch = _diagnosis(settings, pmap, processor, bridge, sensors)
     except BaseException:
         processor.close()
         raise
@@ -124,8 +123,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     try:
         await bridge.start()  # first: a link that cannot open leaves no empty flight log
         reporter = reporter_for(settings, pmap.landmarks, prefix)
-        if history is not None:
-            history.start()
+        sensors.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
                            settings.vehicle.id, 1.0 / mon.status_rate_hz,
                            preview=preview_for(mon), diagnose=watch,
@@ -144,8 +142,7 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         close = getattr(source, "close", None)
         if callable(close):
             close()
-        if history is not None:
-            await history.stop()
+        await sensors.stop()
         await bridge.stop()
         if reporter is not None:
             reporter.close()

@@ -74,6 +74,9 @@ class FakeAutopilotConfig:
     # the EKF's attitude error on ATTITUDE (and the heading of GLOBAL_POSITION_INT), slowly
     # varying; None: the true attitude.  Truth streams (SIM_STATE ...) stay exact.
     attitude_error: AttitudeErrorConfig | None = None
+    # DISTANCE_SENSOR's orientation (MAV_SENSOR_ORIENTATION): 25 (PITCH_270) a downward
+    # range finder, ArduPilot's RNGFND1_ORIENT default; 0 (NONE) a forward one
+    rangefinder_orientation: int = 25
 
 
 _TRUTH_BY_PROFILE: dict[str, tuple[str, ...]] = {
@@ -254,7 +257,8 @@ class FakeAutopilot:
         elif name == "SYSTEM_TIME":
             mav.system_time_send(int(time.time() * 1e6), boot_ms)
         elif name == "DISTANCE_SENSOR":
-            mav.distance_sensor_send(boot_ms, 20, 4000, round(s.range_m * 100), 0, 0, 25, 0)
+            mav.distance_sensor_send(boot_ms, 20, 4000, round(s.range_m * 100), 0, 0,
+                                     self.config.rangefinder_orientation, 0)
         elif name == "EKF_STATUS_REPORT" and self.config.profile == "ardupilot":
             flags = 0x1FF if self.origin is not None else 0x07
             mav.ekf_status_report_send(flags, 0.1, 0.1, 0.1, 0.1, 0.0)

@@ -36,12 +36,12 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp, FrameResult
-from companion.demo import map_landmarks
+from companion.demo import map_landmarks, nees_3d
 from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
-from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
+from companion.sensors import SensorHistory
 from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.effects import EffectSpec
 from companion.sim.scenario import ScenarioConfig, load_scenario
@@ -183,6 +183,8 @@ class FrameRecord:
     fix_ned_m: tuple[float, float, float] | None = None
     fix_sigma_m: tuple[float, float, float] | None = None
     fix_landmarks: tuple[str, ...] = ()
+    fix_nees: float | None = None  # e^T P_pos^-1 e against the truth
+    fix_solver: str = ""
     bad_frame: bool = False
     brightness: float = 0.0  # mean grey level of the image
 
@@ -215,7 +217,9 @@ class RecordingPerception(PerceptionWrapper):
             n, e, d = (float(v) for v in result.fix.position_ned_m)
             rec = dataclasses.replace(rec, fix_ned_m=(n, e, d),
                                       fix_sigma_m=result.fix.position_sigma_m,
-                                      fix_landmarks=tuple(result.fix.landmark_ids))
+                                      fix_landmarks=tuple(result.fix.landmark_ids),
+                                      fix_nees=nees_3d(result.fix, rec.truth_ned_m),
+                                      fix_solver=result.fix.solver)
         self.out.append(rec)
         return result
 
@@ -284,8 +288,8 @@ class Flight:
                                  origin_lat_deg=o.lat, origin_lon_deg=o.lon,
                                  origin_alt_m=o.alt_m, set_origin=True, **self.bridge_overrides)
 
-        def processor(attitude: AttitudeSource) -> RecordingPerception:
-            perception = perception_for(self.settings, self.sim.scenario.camera, pmap, attitude)
+        def processor(sensors: SensorHistory) -> RecordingPerception:
+            perception = perception_for(self.settings, self.sim.scenario.camera, pmap, sensors)
             return RecordingPerception(perception, self.camera, self.frames)
 
         tasks: list[asyncio.Task[None]] = []

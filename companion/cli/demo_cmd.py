@@ -28,6 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--attitude-error", action="store_true",
                         help="the fake autopilot's attitude drifts as a real estimate does "
                         "(0.2 deg roll/pitch, 1 deg yaw); default: the exact attitude")
+    parser.add_argument("--deployment-prior", action="store_true",
+                        help="state the autopilot's attitude to the pose solver with the "
+                        "configured sigmas (pose.attitude_*_sigma_deg, a few degrees); "
+                        "default: the fake autopilot's own accuracy, 0.2 deg / 1 deg")
     parser.set_defaults(handler=run, shipped=SIM_LAYERS)
 
 
@@ -41,7 +45,8 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         sys.stderr.flush()
 
     result = asyncio.run(run_demo(settings, args.scenario, args.seconds,
-                                  progress if live else None, args.attitude_error))
+                                  progress if live else None, args.attitude_error,
+                                  args.deployment_prior))
     if live:
         sys.stderr.write("\n")
     if args.json:

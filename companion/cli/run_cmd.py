@@ -26,6 +26,7 @@ from companion.recorded import (
     recording_camera,
 )
 from companion.runtime import bridge_for, fly, perception_for
+from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
@@ -162,8 +163,8 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
     source = run_source.source
     pmap = with_sim_references(pmap, source)
 
-    def processor(attitude: AttitudeSource) -> Perception | PerceptionWrapper:
-        perception = perception_for(settings, run_source.camera, pmap, attitude)
+    def processor(sensors: SensorHistory) -> Perception | PerceptionWrapper:
+        perception = perception_for(settings, run_source.camera, pmap, sensors)
         if run_source.truth_of is not None:
             return TruthTagger(perception, run_source.truth_of)
         return perception
