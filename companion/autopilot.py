@@ -29,7 +29,7 @@ RESET_SIGMAS = 5.0
 #: The pipeline's state as the heartbeat's health (MAV_STATE via the link).
 HEARTBEAT_HEALTH: dict[State, HealthState] = {
     "starting": "starting", "searching": "ok", "tracking": "ok", "lost": "degraded",
-    "degraded": "degraded", "link-down": "ok",
+    "degraded": "degraded", "link-down": "ok", "blocked": "degraded",
 }
 
 
@@ -85,7 +85,7 @@ class BridgeSink:
         self.bridge.report_health(HEARTBEAT_HEALTH[state])
         if state != self._last_state:
             self._last_state = state
-            if state in ("tracking", "lost", "degraded"):
+            if state in ("tracking", "lost", "degraded", "blocked"):
                 self.bridge.statustext(state)
 
     async def send_fix(self, fix: Any) -> bool:
