@@ -37,6 +37,7 @@ from tracker.particles import (
     window_sums,
 )
 from tracker.ranking import log_likelihood_ratio, masked_histograms, rank_features, ring_masks
+from tracker.template import crop, grey, match, template_size
 from tracker.types import Box, Cue, TrackResult
 from tracker.validation import check_box, check_image, check_same_frame
 from tracker.window import Window, cut_window, work_factor
@@ -86,6 +87,11 @@ class AdaptiveTracker:
         self._cue: Cue = "grayscale" if is_grayscale(window.patch, cfg.gray_tolerance) else "colour"
         self._candidates = GRAY_FEATURES if self._cue == "grayscale" else tuple(range(49))
         self._first = (window, self._state.copy())
+        box_wh = 2.0 * self._half(1.0, window)[0]
+        self._tsize = template_size(box_wh)
+        centre = window.to_patch(self._state[:2])
+        self._tfirst = crop(grey(window.patch), centre, box_wh, self._tsize)
+        self._tcurrent = self._tfirst.copy()
         self._ref_mean = self._box_mean(window, self._state)
         self._ref_frame_mean = _frame_mean(image)
         self._gain = np.ones(3)
@@ -350,11 +356,59 @@ class AdaptiveTracker:
         rhos = bhattacharyya(cand_hists, model)
         best = int(np.argmax(rhos))
         self._particles = particles[systematic_resample(kept, self.rng)]
-        result = self._accept(window, candidates[best], cand_hists[best], float(rhos[best]))
+        state, hist, rho = candidates[best], cand_hists[best], float(rhos[best])
+        image_grey = grey(raw.patch)
+        refined, score = self._refine(image_grey, raw, state)
+        if score >= cfg.template_accept_score:  # feed the refined estimate to the particles
+            self._particles[:, :2] += refined[:2] - state[:2]
+            self._particles[:, 2] *= refined[2] / state[2]
+            state = refined
+            hist = self._kernel(
+                planes, window.to_patch(state[None, :2]), self._half(state[2], window)
+            )[0]
+            rho = float(bhattacharyya(hist[None], model)[0])
+        result = self._accept(window, state, hist, rho, score)
         trusted = result.box is not None and result.confidence >= cfg.lost_below_confidence
         if cfg.gain_source == "target" and trusted:
-            self._update_gain(raw, candidates[best])
+            self._update_gain(raw, state)
+        if trusted and score >= cfg.template_update_score:
+            self._update_template(image_grey, raw, state)
         return result
+
+    def _template(self) -> npt.NDArray[np.float32]:
+        a = self.config.template_anchor
+        return np.asarray(a * self._tfirst + (1.0 - a) * self._tcurrent, dtype=np.float32)
+
+    def _refine(
+        self, image_grey: npt.NDArray[np.float32], raw: Window, state: FloatArray
+    ) -> tuple[FloatArray, float]:
+        """The estimate refined on the template: (x, y, scale) and the NCC score (-1: off).
+
+        Searched around the filter's centre, at the last frame's scale times
+        ``template_scale_step`` ** (-1, 0, 1); the scale found is smoothed
+        (``template_scale_rate``).
+        """
+        cfg = self.config
+        if not cfg.template_refine:
+            return state, -1.0
+        step = cfg.template_scale_step
+        scales = (1.0,) if step <= 1.0 else (1.0, 1.0 / step, step)
+        centre = raw.to_patch(state[None, :2])[0]
+        box = 2.0 * self._half(self._state[2], raw)[0]
+        found = match(image_grey, self._template(), centre, box, cfg.template_search_frac, scales)
+        xy = raw.to_frame(found.centre[None])[0]
+        scale = self._state[2] * found.scale**cfg.template_scale_rate
+        scale = min(max(scale, cfg.min_scale), cfg.max_scale)
+        return np.array([xy[0], xy[1], scale]), found.score
+
+    def _update_template(
+        self, image_grey: npt.NDArray[np.float32], raw: Window, state: FloatArray
+    ) -> None:
+        """current <- (1 - r) current + r * the box at ``state`` (first frame's kept apart)."""
+        box = 2.0 * self._half(state[2], raw)[0]
+        now = crop(image_grey, raw.to_patch(state[None, :2])[0], box, self._tsize)
+        rate = self.config.template_update_rate
+        self._tcurrent = (1.0 - rate) * self._tcurrent + rate * now
 
     def _llr_factor(
         self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
@@ -376,16 +430,21 @@ class AdaptiveTracker:
         return np.exp(self.config.llr_gain * (vote - vote.max()))
 
     def _accept(
-        self, window: Window, state: FloatArray, hist: FloatArray, rho: float
+        self, window: Window, state: FloatArray, hist: FloatArray, rho: float, score: float
     ) -> TrackResult:
-        """Commit an estimate: model update, re-ranking, lost bookkeeping."""
+        """Commit an estimate: model update, re-ranking, lost bookkeeping.
+
+        A frame counts towards "lost" only if the histograms say so and the template does not
+        match well (``score`` < ``template_confident_score``).
+        """
         cfg = self.config
         confidence = float(self._confidence(np.array([rho]))[0])
-        self._low_frames = self._low_frames + 1 if confidence < cfg.lost_below_confidence else 0
+        low = confidence < cfg.lost_below_confidence and score < cfg.template_confident_score
+        self._low_frames = self._low_frames + 1 if low else 0
         if self._low_frames >= cfg.lost_after_frames:
             self._lost_frames = 1
             return self._result(None, confidence)
-        self._state = state
+        self._state = state = self._inside(state)
         self._history.append((state[0], state[1]))
         del self._history[: -cfg.motion_history_frames - 1]
         if confidence >= cfg.rerank_below_confidence:
@@ -425,12 +484,23 @@ class AdaptiveTracker:
         if confidence < cfg.reacquire_confidence:
             return self._result(None, confidence)
         xy = window.to_frame(centres[best])
-        self._state = np.array([xy[0], xy[1], self._state[2]])
+        state = np.array([xy[0], xy[1], self._state[2]])
+        if cfg.template_refine:  # the template must agree: histograms alone re-acquire clutter
+            state, score = self._refine(grey(window.patch), window, state)
+            if score < cfg.template_accept_score:
+                return self._result(None, confidence)
+        self._state = self._inside(state)
         self._particles = np.tile(self._state, (cfg.particles, 1))
         self._history = [(self._state[0], self._state[1])]
         self._lost_frames = 0
         self._low_frames = 0
         return self._result(self._box(self._state), confidence)
+
+    def _inside(self, state: FloatArray) -> FloatArray:
+        """The state with its centre clipped to the frame (the target's centre is in view)."""
+        assert self._shape is not None
+        h, w = self._shape[:2]
+        return np.array([min(max(state[0], 0.0), w), min(max(state[1], 0.0), h), state[2]])
 
     def _box(self, state: FloatArray) -> Box:
         w, h = self._size0[0] * state[2], self._size0[1] * state[2]

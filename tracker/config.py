@@ -62,6 +62,15 @@ class TrackerConfig:
     reacquire_confidence: float = field(default=0.45, metadata={"ge": 0.0, "le": 1.0})
     reacquire_growth: float = field(default=1.5, metadata={"gt": 1.0})
     gray_tolerance: float = field(default=1.0, metadata={"ge": 0.0})
+    template_refine: bool = True
+    template_search_frac: float = field(default=0.3, metadata={"gt": 0.0, "le": 2.0})
+    template_scale_step: float = field(default=1.03, metadata={"ge": 1.0, "le": 1.5})
+    template_scale_rate: float = field(default=0.5, metadata={"ge": 0.0, "le": 1.0})
+    template_accept_score: float = field(default=0.5, metadata={"ge": -1.0, "le": 1.0})
+    template_update_score: float = field(default=0.7, metadata={"ge": -1.0, "le": 1.0})
+    template_update_rate: float = field(default=0.1, metadata={"ge": 0.0, "le": 1.0})
+    template_anchor: float = field(default=0.3, metadata={"ge": 0.0, "le": 1.0})
+    template_confident_score: float = field(default=0.7, metadata={"ge": -1.0, "le": 1.0})
 
 
 def check_config(config: TrackerConfig) -> None:
