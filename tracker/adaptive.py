@@ -92,6 +92,7 @@ class AdaptiveTracker:
         centre = window.to_patch(self._state[:2])
         self._tfirst = crop(grey(window.patch), centre, box_wh, self._tsize)
         self._tcurrent = self._tfirst.copy()
+        self._aspect_step = 1.0
         self._ref_mean = self._box_mean(window, self._state)
         self._ref_frame_mean = _frame_mean(image)
         self._gain = np.ones(3)
@@ -359,7 +360,14 @@ class AdaptiveTracker:
         state, hist, rho = candidates[best], cand_hists[best], float(rhos[best])
         image_grey = grey(raw.patch)
         refined, score = self._refine(image_grey, raw, state)
-        if score >= cfg.template_accept_score:  # feed the refined estimate to the particles
+        if cfg.template_refine and score < cfg.template_accept_score:
+            # the template does not see the target: keep the last scale, since the histograms
+            # cannot tell scales apart and the filter's scale wanders
+            refined = np.array([state[0], state[1], self._state[2]])
+        elif cfg.template_refine:  # aspect: width x f, height / f (area kept)
+            w0, h0 = self._size0
+            self._size0 = (w0 * self._aspect_step, h0 / self._aspect_step)
+        if cfg.template_refine:  # feed the refined estimate to the particles
             self._particles[:, :2] += refined[:2] - state[:2]
             self._particles[:, 2] *= refined[2] / state[2]
             state = refined
@@ -384,21 +392,30 @@ class AdaptiveTracker:
     ) -> tuple[FloatArray, float]:
         """The estimate refined on the template: (x, y, scale) and the NCC score (-1: off).
 
-        Searched around the filter's centre, at the last frame's scale times
-        ``template_scale_step`` ** (-1, 0, 1); the scale found is smoothed
-        (``template_scale_rate``).
+        Searched around the filter's centre (and the last centre if the filter moved further
+        than the search reaches), at the last box, that box scaled by ``template_scale_step``
+        ``k`` or ``1/k``, and widened by ``k`` and narrowed by ``1/k`` or the reverse (aspect);
+        the change found is smoothed (``template_scale_rate``); the aspect step is left in
+        ``self._aspect_step``.
         """
         cfg = self.config
         if not cfg.template_refine:
             return state, -1.0
-        step = cfg.template_scale_step
-        scales = (1.0,) if step <= 1.0 else (1.0, 1.0 / step, step)
-        centre = raw.to_patch(state[None, :2])[0]
+        k = cfg.template_scale_step
+        scales = tuple(dict.fromkeys(((1.0, 1.0), (k, k), (1 / k, 1 / k), (k, 1 / k), (1 / k, k))))
         box = 2.0 * self._half(self._state[2], raw)[0]
-        found = match(image_grey, self._template(), centre, box, cfg.template_search_frac, scales)
+        template = self._template()
+        centres = raw.to_patch(np.stack([state[:2], self._state[:2]]))
+        found = match(image_grey, template, centres[0], box, cfg.template_search_frac, scales)
+        if np.any(np.abs(centres[1] - centres[0]) > cfg.template_search_frac * box):
+            # the filter moved further than the search reaches: look where the target was too
+            last = match(image_grey, template, centres[1], box, cfg.template_search_frac, scales)
+            found = last if last.score > found.score else found
         xy = raw.to_frame(found.centre[None])[0]
-        scale = self._state[2] * found.scale**cfg.template_scale_rate
+        sx, sy = found.scale
+        scale = self._state[2] * np.sqrt(sx * sy) ** cfg.template_scale_rate
         scale = min(max(scale, cfg.min_scale), cfg.max_scale)
+        self._aspect_step = float(np.sqrt(sx / sy) ** cfg.template_scale_rate)
         return np.array([xy[0], xy[1], scale]), found.score
 
     def _update_template(

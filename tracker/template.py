@@ -24,10 +24,10 @@ MIN_TEMPLATE_SIDE_PX = 8
 
 @dataclass(frozen=True)
 class Match:
-    """The template's best match: centre (x, y) and scale factor in patch terms, NCC score."""
+    """The template's best match: centre (x, y), scale factors (x, y) and the NCC score."""
 
     centre: FloatArray
-    scale: float
+    scale: tuple[float, float]
     score: float
 
 
@@ -90,15 +90,15 @@ def match(
     centre: FloatArray,
     box_wh: FloatArray,
     search_frac: float,
-    scales: tuple[float, ...],
+    scales: tuple[tuple[float, float], ...],
 ) -> Match:
-    """Best NCC match of ``template`` around ``centre`` over ``scales`` of the box ``box_wh``.
+    """Best NCC match of ``template`` around ``centre`` over ``scales`` (x, y) of ``box_wh``.
 
     The search reaches ``search_frac`` of the box size each side of ``centre``.
     """
     th, tw = template.shape
     mx, my = max(1, round(search_frac * tw)), max(1, round(search_frac * th))
-    best = Match(np.asarray(centre, dtype=np.float64), 1.0, -1.0)
+    best = Match(np.asarray(centre, dtype=np.float64), (1.0, 1.0), -1.0)
     for s in scales:
         step = np.asarray(box_wh, dtype=np.float64) * s / np.array([tw, th], dtype=np.float64)
         region = _resample(image, centre, step, (tw + 2 * mx, th + 2 * my))
@@ -109,5 +109,5 @@ def match(
         if peak > best.score:
             dx, dy = _subpixel(response, ix, iy)
             offset = np.array([ix + dx - mx, iy + dy - my]) * step
-            best = Match(np.asarray(centre, dtype=np.float64) + offset, float(s), float(peak))
+            best = Match(np.asarray(centre, dtype=np.float64) + offset, s, float(peak))
     return best
