@@ -37,6 +37,8 @@ from tracker.particles import (
     window_sums,
 )
 from tracker.ranking import log_likelihood_ratio, masked_histograms, rank_features, ring_masks
+from tracker.scale_filter import ScaleFilter, factor_pairs, sample_size
+from tracker.scale_filter import samples as scale_samples
 from tracker.template import crop, grey, match, template_size
 from tracker.types import Box, Cue, TrackResult
 from tracker.validation import check_box, check_image, check_same_frame
@@ -56,6 +58,15 @@ class _Model:
     recent: FloatArray  # (k, bins) running kernel histograms of recent estimates
     rho_ref: float  # rho of the first frame's target against the model
     rho_bg: float  # mean rho of the background around the target against the model
+
+
+@dataclass(frozen=True)
+class _Sizer:
+    """A scale (or aspect) filter with its factor pairs and sample size."""
+
+    factors: FloatArray
+    size: tuple[int, int]
+    model: ScaleFilter
 
 
 class AdaptiveTracker:
@@ -93,6 +104,7 @@ class AdaptiveTracker:
         self._tfirst = crop(grey(window.patch), centre, box_wh, self._tsize)
         self._tcurrent = self._tfirst.copy()
         self._aspect_step = 1.0
+        self._sizers = self._train_sizers(image, self._state)
         self._ref_mean = self._box_mean(window, self._state)
         self._ref_frame_mean = _frame_mean(image)
         self._gain = np.ones(3)
@@ -359,7 +371,7 @@ class AdaptiveTracker:
         self._particles = particles[systematic_resample(kept, self.rng)]
         state, hist, rho = candidates[best], cand_hists[best], float(rhos[best])
         image_grey = grey(raw.patch)
-        refined, score = self._refine(image_grey, raw, state)
+        refined, score = self._refine(image, image_grey, raw, state)
         if cfg.template_refine and score < cfg.template_accept_score:
             # the template does not see the target: keep the last scale, since the histograms
             # cannot tell scales apart and the filter's scale wanders
@@ -380,52 +392,86 @@ class AdaptiveTracker:
         if cfg.gain_source == "target" and trusted:
             self._update_gain(raw, state)
         if trusted and score >= cfg.template_update_score:
-            self._update_template(image_grey, raw, state)
+            self._update_template(image, image_grey, raw, state)
         return result
 
-    def _template(self) -> npt.NDArray[np.float32]:
-        a = self.config.template_anchor
+    def _template(self, a: float) -> npt.NDArray[np.float32]:
+        """``a`` x the first frame's template + the rest x the running one."""
         return np.asarray(a * self._tfirst + (1.0 - a) * self._tcurrent, dtype=np.float32)
 
     def _refine(
-        self, image_grey: npt.NDArray[np.float32], raw: Window, state: FloatArray
+        self,
+        image: npt.NDArray[np.uint8],
+        image_grey: npt.NDArray[np.float32],
+        raw: Window,
+        state: FloatArray,
     ) -> tuple[FloatArray, float]:
         """The estimate refined on the template: (x, y, scale) and the NCC score (-1: off).
 
-        Searched around the filter's centre (and the last centre if the filter moved further
-        than the search reaches), at the last box, that box scaled by ``template_scale_step``
-        ``k`` or ``1/k``, and widened by ``k`` and narrowed by ``1/k`` or the reverse (aspect);
-        the change found is smoothed (``template_scale_rate``); the aspect step is left in
-        ``self._aspect_step``.
+        The template is searched around the filter's centre, and around the last centre too
+        if the filter moved further than the search reaches.  At the position found the
+        scale filter gives the size change and the aspect filter (``template_aspect``) the
+        change of width against height, left in ``self._aspect_step``.
         """
         cfg = self.config
         if not cfg.template_refine:
             return state, -1.0
-        k = cfg.template_scale_step
-        scales = tuple(dict.fromkeys(((1.0, 1.0), (k, k), (1 / k, 1 / k), (k, 1 / k), (1 / k, k))))
         box = 2.0 * self._half(self._state[2], raw)[0]
-        template = self._template()
+        template = self._template(cfg.template_anchor)
         centres = raw.to_patch(np.stack([state[:2], self._state[:2]]))
-        found = match(image_grey, template, centres[0], box, cfg.template_search_frac, scales)
-        if np.any(np.abs(centres[1] - centres[0]) > cfg.template_search_frac * box):
+        frac = cfg.template_search_frac
+        found = match(image_grey, template, centres[0], box, frac, ((1.0, 1.0),))
+        if np.any(np.abs(centres[1] - centres[0]) > frac * box):
             # the filter moved further than the search reaches: look where the target was too
-            last = match(image_grey, template, centres[1], box, cfg.template_search_frac, scales)
+            last = match(image_grey, template, centres[1], box, frac, ((1.0, 1.0),))
             found = last if last.score > found.score else found
         xy = raw.to_frame(found.centre[None])[0]
-        sx, sy = found.scale
-        scale = self._state[2] * np.sqrt(sx * sy) ** cfg.template_scale_rate
-        scale = min(max(scale, cfg.min_scale), cfg.max_scale)
-        self._aspect_step = float(np.sqrt(sx / sy) ** cfg.template_scale_rate)
+        box = np.array(self._size0) * self._state[2]  # full-resolution pixels from here on
+        steps = []
+        for sizer in self._sizers:
+            rows = scale_samples(image, xy, box, sizer.factors, sizer.size)
+            steps.append(float(sizer.factors[sizer.model.peak(rows) + len(rows) // 2, 0]))
+            box = box * np.array([steps[-1], steps[-1] if len(steps) == 1 else 1 / steps[-1]])
+        self._aspect_step = steps[1] if len(steps) > 1 else 1.0
+        scale = min(max(self._state[2] * steps[0], cfg.min_scale), cfg.max_scale)
         return np.array([xy[0], xy[1], scale]), found.score
 
+    def _train_sizers(self, image: npt.NDArray[np.uint8], state: FloatArray) -> list[_Sizer]:
+        """The scale filter and (``template_aspect``) the aspect filter, trained at ``state``."""
+        cfg = self.config
+        box = np.array(self._size0) * state[2]
+        centre = state[:2]
+        size = sample_size(box)
+        counts = [(cfg.scale_filter_scales, False)]
+        if cfg.template_aspect:
+            counts.append((cfg.scale_filter_scales // 2 + 1, True))
+        out = []
+        for count, aspect in counts:
+            factors = factor_pairs(count, cfg.scale_filter_step, aspect)
+            rows = scale_samples(image, centre, box, factors, size)
+            out.append(_Sizer(factors, size, ScaleFilter.train(rows)))
+        return out
+
     def _update_template(
-        self, image_grey: npt.NDArray[np.float32], raw: Window, state: FloatArray
+        self,
+        image: npt.NDArray[np.uint8],
+        image_grey: npt.NDArray[np.float32],
+        raw: Window,
+        state: FloatArray,
     ) -> None:
-        """current <- (1 - r) current + r * the box at ``state`` (first frame's kept apart)."""
+        """current <- (1 - r) current + r * the box at ``state`` (first frame's kept apart).
+
+        The scale and aspect filters learn the box at ``state`` (rate ``scale_filter_rate``).
+        """
         box = 2.0 * self._half(state[2], raw)[0]
-        now = crop(image_grey, raw.to_patch(state[None, :2])[0], box, self._tsize)
+        centre = raw.to_patch(state[None, :2])[0]
+        now = crop(image_grey, centre, box, self._tsize)
         rate = self.config.template_update_rate
         self._tcurrent = (1.0 - rate) * self._tcurrent + rate * now
+        box_full = np.array(self._size0) * state[2]
+        for sizer in self._sizers:
+            rows = scale_samples(image, state[:2], box_full, sizer.factors, sizer.size)
+            sizer.model.update(rows, self.config.scale_filter_rate)
 
     def _llr_factor(
         self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
@@ -437,6 +483,13 @@ class AdaptiveTracker:
         alone favours boxes smaller than the target (its most distinctive pixels); the
         contrast drops both when background enters the box and when target enters the ring.
         """
+        vote = self._vote(lik, centres, halves)
+        return np.exp(self.config.llr_gain * (vote - vote.max()))
+
+    def _vote(
+        self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
+    ) -> FloatArray:
+        """Mean LLR in each box, minus (``llr_vote = "contrast"``) the mean in its ring."""
         table: FloatArray = np.asarray(cv2.integral(lik, sdepth=cv2.CV_64F), np.float64)[None]
         sums, area = window_sums(table, centres, halves)
         vote = sums[0] / np.maximum(area, 1.0)
@@ -444,7 +497,7 @@ class AdaptiveTracker:
             grow = float(np.sqrt(1.0 + self.config.ring_area_ratio))
             outer, outer_area = window_sums(table, centres, halves * grow)
             vote = vote - (outer[0] - sums[0]) / np.maximum(outer_area - area, 1.0)
-        return np.exp(self.config.llr_gain * (vote - vote.max()))
+        return vote
 
     def _accept(
         self, window: Window, state: FloatArray, hist: FloatArray, rho: float, score: float
@@ -503,7 +556,7 @@ class AdaptiveTracker:
         xy = window.to_frame(centres[best])
         state = np.array([xy[0], xy[1], self._state[2]])
         if cfg.template_refine:  # the template must agree: histograms alone re-acquire clutter
-            state, score = self._refine(grey(window.patch), window, state)
+            state, score = self._refine(image, grey(window.patch), window, state)
             if score < cfg.template_accept_score:
                 return self._result(None, confidence)
         self._state = self._inside(state)
