@@ -1,12 +1,15 @@
 """Template refinement of the particle filter's estimate: centre and scale to a few pixels.
 
-Colour histograms locate a target to a fraction of its size; a grey template of the target,
-matched by normalised cross-correlation (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``) on a small
+Colour histograms locate a target to a fraction of its size; a template of the target (the
+window's B, G and R as float32; on a grey camera the three are equal), matched by normalised
+cross-correlation (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``) on a small
 search region around the filter's estimate, locates it to a pixel or better (issue 22).  The
 region is resampled once per candidate scale so that a box of that scale maps onto the template's
 fixed size; the best (scale, offset) wins and the peak is refined to sub-pixel by a parabola
-through its neighbours.  NCC is invariant to an affine change of the grey levels, so the cue
-works unchanged under illumination changes and on grey cameras.
+through its neighbours.  NCC is invariant to an affine change of the levels, so the cue works
+under illumination changes and on grey cameras.  A colour template rather than a grey one:
+on Crossing a grey template slid from the pedestrian onto a dark car passing behind (3 seeds:
+AUC 0.535 grey, 0.736 colour; Coke 0.375 / 0.485).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
-GreyImage = npt.NDArray[np.float32]
+Image = npt.NDArray[np.float32]
 MIN_TEMPLATE_SIDE_PX = 8
 
 
@@ -31,9 +34,9 @@ class Match:
     score: float
 
 
-def grey(patch_bgr: npt.NDArray[np.uint8]) -> GreyImage:
-    """The patch as float32 grey levels."""
-    return np.asarray(cv2.cvtColor(patch_bgr, cv2.COLOR_BGR2GRAY), dtype=np.float32)
+def as_float(patch_bgr: npt.NDArray[np.uint8]) -> Image:
+    """The patch as float32 (H, W, 3): what templates are cut from and matched on."""
+    return np.asarray(patch_bgr, dtype=np.float32)
 
 
 def template_size(box_wh: FloatArray) -> tuple[int, int]:
@@ -45,8 +48,8 @@ def template_size(box_wh: FloatArray) -> tuple[int, int]:
 
 
 def _resample(
-    image: GreyImage, centre: FloatArray, step: FloatArray, out_wh: tuple[int, int]
-) -> GreyImage:
+    image: Image, centre: FloatArray, step: FloatArray, out_wh: tuple[int, int]
+) -> Image:
     """``out[v, u] = image(centre + ((u, v) - (out - 1) / 2) * step)``, bilinear, edge copied."""
     ow, oh = out_wh
     m = np.array(
@@ -63,8 +66,8 @@ def _resample(
 
 
 def crop(
-    image: GreyImage, centre: FloatArray, box_wh: FloatArray, size: tuple[int, int]
-) -> GreyImage:
+    image: Image, centre: FloatArray, box_wh: FloatArray, size: tuple[int, int]
+) -> Image:
     """The box ``centre`` +- ``box_wh`` / 2 (patch pixels) resampled to ``size`` = (w, h)."""
     step = np.asarray(box_wh, dtype=np.float64) / np.array(size, dtype=np.float64)
     return _resample(image, centre, step, size)
@@ -85,8 +88,8 @@ def _subpixel(response: npt.NDArray[np.float32], ix: int, iy: int) -> tuple[floa
 
 
 def match(
-    image: GreyImage,
-    template: GreyImage,
+    image: Image,
+    template: Image,
     centre: FloatArray,
     box_wh: FloatArray,
     search_frac: float,
@@ -96,7 +99,7 @@ def match(
 
     The search reaches ``search_frac`` of the box size each side of ``centre``.
     """
-    th, tw = template.shape
+    th, tw = template.shape[:2]
     mx, my = max(1, round(search_frac * tw)), max(1, round(search_frac * th))
     best = Match(np.asarray(centre, dtype=np.float64), (1.0, 1.0), -1.0)
     for s in scales:
