@@ -456,13 +456,13 @@ class AdaptiveTracker:
             found = last if last.score > found.score else found
         xy = raw.to_frame(found.centre[None])[0]
         box = np.array(self._size0) * self._state[2]  # full-resolution pixels from here on
-        steps = []
-        for sizer in self._sizers:
-            rows = scale_samples(image, xy, box, sizer.factors, sizer.size)
-            steps.append(float(sizer.factors[sizer.model.peak(rows) + len(rows) // 2, 0]))
-            box = box * np.array([steps[-1], steps[-1] if len(steps) == 1 else 1 / steps[-1]])
-        self._aspect_step = steps[1] if len(steps) > 1 else 1.0
-        scale = min(max(self._state[2] * steps[0], cfg.min_scale), cfg.max_scale)
+        change = np.ones(2)
+        for sizer in self._sizers:  # each filter's (width, height) factor, one after the other
+            rows = scale_samples(image, xy, box * change, sizer.factors, sizer.size)
+            change = change * sizer.factors[sizer.model.peak(rows) + len(rows) // 2]
+        self._aspect_step = float(np.sqrt(change[0] / change[1]))
+        scale = self._state[2] * float(np.sqrt(change[0] * change[1]))
+        scale = min(max(scale, cfg.min_scale), cfg.max_scale)
         return np.array([xy[0], xy[1], scale]), found.score
 
     def _train_sizers(self, image: npt.NDArray[np.uint8], state: FloatArray) -> list[_Sizer]:
@@ -471,12 +471,9 @@ class AdaptiveTracker:
         box = np.array(self._size0) * state[2]
         centre = state[:2]
         size = sample_size(box)
-        counts = [(cfg.scale_filter_scales, False)]
-        if cfg.template_aspect:
-            counts.append((cfg.scale_filter_scales // 2 + 1, True))
         out = []
-        for count, aspect in counts:
-            factors = factor_pairs(count, cfg.scale_filter_step, aspect)
+        for kind in cfg.size_filters.split("+"):
+            factors = factor_pairs(cfg.scale_filter_scales, cfg.scale_filter_step, kind)
             rows = scale_samples(image, centre, box, factors, size)
             out.append(_Sizer(factors, size, ScaleFilter.train(rows)))
         return out

@@ -9,7 +9,8 @@ rows gives a Gaussian peaked at the current size.  In a new frame the peak of th
 the rows is the size change.  With the model ``A = conj(G) F``, ``B = sum_d conj(F_d) F_d``
 (FFT along the scale axis, per feature ``d``), the response is
 ``y = IFFT(sum_d conj(A_d) Z_d / (B + lambda))`` and both terms are running averages with rate
-``eta`` (paper eq. 3-5 for the 1-D case).
+``eta`` (paper eq. 3-5 for the 1-D case).  The rows are real, so the spectra are kept for the
+non-negative frequencies only (``rfft``), which halves the work.
 
 Here the features are the grey levels of each resampled box, normalised to zero mean and unit
 norm (so a change of light does not look like a change of size), and rows are weighted by a
@@ -33,11 +34,16 @@ REGULARISATION = 0.01  # lambda
 SIGMA_FACTOR = 0.25  # the Gaussian's width is SIGMA_FACTOR * sqrt(S) samples (paper: 1/4)
 
 
-def factor_pairs(count: int, step: float, aspect: bool) -> FloatArray:
-    """(S, 2) factors on (width, height): ``(a**n, a**n)``, or ``(a**n, a**-n)`` for aspect."""
+def factor_pairs(count: int, step: float, kind: str) -> FloatArray:
+    """(S, 2) factors on (width, height) with ``f = a**n``: ``"scale"`` (f, f), ``"aspect"``
+    (f, 1/f), ``"width"`` (f, 1), ``"height"`` (1, f)."""
     n = np.arange(count, dtype=np.float64) - (count - 1) / 2.0
     f = step**n
-    return np.stack([f, 1.0 / f if aspect else f], axis=1)
+    one = np.ones_like(f)
+    pairs = {"scale": (f, f), "aspect": (f, 1.0 / f), "width": (f, one), "height": (one, f)}
+    if kind not in pairs:
+        raise ValueError(f"kind: expected one of {', '.join(pairs)}, got {kind!r}")
+    return np.stack(pairs[kind], axis=1)
 
 
 def sample_size(box_wh: FloatArray) -> tuple[int, int]:
@@ -92,11 +98,11 @@ def samples(
 
 @dataclass
 class ScaleFilter:
-    """The running numerator ``A`` (S, d) and denominator ``B`` (S,) of the filter."""
+    """The running numerator ``A`` and denominator ``B`` of the filter (per frequency)."""
 
     num: ComplexArray
     den: FloatArray
-    target: ComplexArray  # conj(FFT of the desired Gaussian response), (S,)
+    target: ComplexArray  # conj(rFFT of the desired Gaussian response), (S // 2 + 1,)
 
     @classmethod
     def train(cls, rows: FloatArray) -> ScaleFilter:
@@ -105,22 +111,22 @@ class ScaleFilter:
         n = np.arange(s, dtype=np.float64) - (s - 1) / 2.0
         sigma = SIGMA_FACTOR * np.sqrt(s)
         gauss = np.exp(-0.5 * n * n / (sigma * sigma))
-        target = np.conj(np.fft.fft(np.fft.ifftshift(gauss)))
-        f = np.fft.fft(rows, axis=0)
+        target = np.conj(np.fft.rfft(np.fft.ifftshift(gauss)))
+        f = np.fft.rfft(rows, axis=0)
         num = target[:, None] * f
         den = (np.conj(f) * f).real.sum(axis=1)
         return cls(num, den, target)
 
     def update(self, rows: FloatArray, rate: float) -> None:
         """``A <- (1-eta) A + eta conj(G) F``, ``B <- (1-eta) B + eta sum conj(F) F``."""
-        f = np.fft.fft(rows, axis=0)
+        f = np.fft.rfft(rows, axis=0)
         self.num = (1.0 - rate) * self.num + rate * self.target[:, None] * f
         self.den = (1.0 - rate) * self.den + rate * (np.conj(f) * f).real.sum(axis=1)
 
     def peak(self, rows: FloatArray) -> int:
         """Row offset of the response's peak from the centre row (0 = no change)."""
-        z = np.fft.fft(rows, axis=0)
-        response = np.fft.ifft((np.conj(self.num) * z).sum(axis=1) / (self.den + REGULARISATION))
         s = rows.shape[0]
-        index = int(np.argmax(response.real))
+        z = np.fft.rfft(rows, axis=0)
+        spectrum = (np.conj(self.num) * z).sum(axis=1) / (self.den + REGULARISATION)
+        index = int(np.argmax(np.fft.irfft(spectrum, n=s)))
         return index - s if index > s // 2 else index  # circular: the Gaussian sits at row 0
