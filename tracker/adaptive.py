@@ -530,16 +530,20 @@ class AdaptiveTracker:
     ) -> TrackResult:
         """Commit an estimate: model update, re-ranking, lost bookkeeping.
 
-        A frame counts towards "lost" only if the histograms say so and the template does not
-        match well (``score`` < ``template_confident_score``).
+        A frame counts towards "lost" only if the histograms say so and the template did not
+        locate the target (``score`` below ``template_accept_score``).  The reported
+        confidence is the histograms' or, when the template located the target, its NCC
+        score if that is higher (grey targets: the histograms separate them poorly).
         """
         cfg = self.config
         confidence = float(self._confidence(np.array([rho]))[0])
-        low = confidence < cfg.lost_below_confidence and score < cfg.template_confident_score
+        located = score >= cfg.template_accept_score
+        low = confidence < cfg.lost_below_confidence and not located
         self._low_frames = self._low_frames + 1 if low else 0
         if self._low_frames >= cfg.lost_after_frames:
             self._lost_frames = 1
             return self._result(None, confidence)
+        reported = max(confidence, score) if located else confidence
         self._state = state = self._inside(state)
         self._history.append((state[0], state[1]))
         del self._history[: -cfg.motion_history_frames - 1]
@@ -554,7 +558,7 @@ class AdaptiveTracker:
         if due and confidence >= cfg.lost_below_confidence:
             self._model = self._rank(window, state, not low)
             self._since_rank = 0
-        return self._result(self._box(state), confidence)
+        return self._result(self._box(state), reported)
 
     def _search_lost(self, image: npt.NDArray[np.uint8]) -> TrackResult:
         """Widening search: mode of the smoothed likelihood plus scattered, mean-shifted samples."""

@@ -72,7 +72,6 @@ class TrackerConfig:
     scale_filter_scales: int = field(default=17, metadata={"ge": 3, "le": 65})
     scale_filter_step: float = field(default=1.02, metadata={"gt": 1.0, "le": 1.2})
     scale_filter_rate: float = field(default=0.025, metadata={"ge": 0.0, "le": 1.0})
-    template_confident_score: float = field(default=0.7, metadata={"ge": -1.0, "le": 1.0})
 
 
 def check_config(config: TrackerConfig) -> None:
