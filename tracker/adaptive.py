@@ -37,9 +37,8 @@ from tracker.particles import (
     window_sums,
 )
 from tracker.ranking import log_likelihood_ratio, masked_histograms, rank_features, ring_masks
-from tracker.scale_filter import ScaleFilter, factor_pairs, sample_size
-from tracker.scale_filter import samples as scale_samples
-from tracker.template import as_float, crop, match, template_size
+from tracker.refine import Refiner
+from tracker.template import as_float
 from tracker.types import Box, Cue, TrackResult
 from tracker.validation import check_box, check_image, check_same_frame
 from tracker.window import Window, cut_window, work_factor
@@ -58,15 +57,6 @@ class _Model:
     recent: FloatArray  # (k, bins) running kernel histograms of recent estimates
     rho_ref: float  # rho of the first frame's target against the model
     rho_bg: float  # mean rho of the background around the target against the model
-
-
-@dataclass(frozen=True)
-class _Sizer:
-    """A scale (or aspect) filter with its factor pairs and sample size."""
-
-    factors: FloatArray
-    size: tuple[int, int]
-    model: ScaleFilter
 
 
 class AdaptiveTracker:
@@ -98,13 +88,16 @@ class AdaptiveTracker:
         self._cue: Cue = "grayscale" if is_grayscale(window.patch, cfg.gray_tolerance) else "colour"
         self._candidates = GRAY_FEATURES if self._cue == "grayscale" else tuple(range(49))
         self._first = (window, self._state.copy())
-        box_wh = 2.0 * self._half(1.0, window)[0]
-        self._tsize = template_size(box_wh)
-        centre = window.to_patch(self._state[:2])
-        self._tfirst = crop(as_float(window.patch), centre, box_wh, self._tsize)
-        self._tcurrent = self._tfirst.copy()
+        self._refiner = Refiner(
+            cfg,
+            as_float(window.patch),
+            window.to_patch(self._state[:2]),
+            2.0 * self._half(1.0, window)[0],
+            image,
+            self._state[:2],
+            np.array(self._size0),
+        )
         self._aspect_step = 1.0
-        self._sizers = self._train_sizers(image, self._state)
         self._ref_mean = self._box_mean(window, self._state)
         self._ref_frame_mean = _frame_mean(image)
         self._gain = np.ones(3)
@@ -381,7 +374,8 @@ class AdaptiveTracker:
         if cfg.gain_source == "target" and trusted:
             self._update_gain(raw, state)
         if trusted and score >= cfg.template_update_score:
-            self._update_template(image, image_f32, raw, state)
+            box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
+            self._refiner.learn(image_f32, box, image, (state[:2], self._box_px(state)))
         return result
 
     def _refined(
@@ -424,10 +418,6 @@ class AdaptiveTracker:
         centre = window.to_patch(state[None, :2])
         return self._kernel(planes, centre, self._half(state[2], window))[0]
 
-    def _template(self, a: float) -> npt.NDArray[np.float32]:
-        """``a`` x the first frame's template + the rest x the running one."""
-        return np.asarray(a * self._tfirst + (1.0 - a) * self._tcurrent, dtype=np.float32)
-
     def _refine(
         self,
         image: npt.NDArray[np.uint8],
@@ -437,67 +427,28 @@ class AdaptiveTracker:
     ) -> tuple[FloatArray, float]:
         """The estimate refined on the template: (x, y, scale) and the NCC score (-1: off).
 
-        The template is searched around the filter's centre, and around the last centre too
-        if the filter moved further than the search reaches.  At the position found the
-        scale filter gives the size change and the aspect filter (``template_aspect``) the
-        change of width against height, left in ``self._aspect_step``.
+        The template is searched around the filter's centre (and the last centre, see
+        :meth:`Refiner.locate`); at the position found the size filters give the change of
+        width and height: the scale is their geometric mean, the aspect step (width x f,
+        height / f) is left in ``self._aspect_step``.
         """
         cfg = self.config
         if not cfg.template_refine:
             return state, -1.0
         box = 2.0 * self._half(self._state[2], raw)[0]
-        template = self._template(cfg.template_anchor)
-        centres = raw.to_patch(np.stack([state[:2], self._state[:2]]))
-        frac = cfg.template_search_frac
-        found = match(image_f32, template, centres[0], box, frac, ((1.0, 1.0),))
-        if np.any(np.abs(centres[1] - centres[0]) > frac * box):
-            # the filter moved further than the search reaches: look where the target was too
-            last = match(image_f32, template, centres[1], box, frac, ((1.0, 1.0),))
-            found = last if last.score > found.score else found
+        found = self._refiner.locate(
+            image_f32, raw.to_patch(np.stack([state[:2], self._state[:2]])), box
+        )
         xy = raw.to_frame(found.centre[None])[0]
-        box = np.array(self._size0) * self._state[2]  # full-resolution pixels from here on
-        change = np.ones(2)
-        for sizer in self._sizers:  # each filter's (width, height) factor, one after the other
-            rows = scale_samples(image, xy, box * change, sizer.factors, sizer.size)
-            change = change * sizer.factors[sizer.model.peak(rows) + len(rows) // 2]
+        change = self._refiner.size_change(image, xy, self._box_px(self._state))
         self._aspect_step = float(np.sqrt(change[0] / change[1]))
         scale = self._state[2] * float(np.sqrt(change[0] * change[1]))
         scale = min(max(scale, cfg.min_scale), cfg.max_scale)
         return np.array([xy[0], xy[1], scale]), found.score
 
-    def _train_sizers(self, image: npt.NDArray[np.uint8], state: FloatArray) -> list[_Sizer]:
-        """The scale filter and (``template_aspect``) the aspect filter, trained at ``state``."""
-        cfg = self.config
-        box = np.array(self._size0) * state[2]
-        centre = state[:2]
-        size = sample_size(box)
-        out = []
-        for kind in cfg.size_filters.split("+"):
-            factors = factor_pairs(cfg.scale_filter_scales, cfg.scale_filter_step, kind)
-            rows = scale_samples(image, centre, box, factors, size)
-            out.append(_Sizer(factors, size, ScaleFilter.train(rows)))
-        return out
-
-    def _update_template(
-        self,
-        image: npt.NDArray[np.uint8],
-        image_f32: npt.NDArray[np.float32],
-        raw: Window,
-        state: FloatArray,
-    ) -> None:
-        """current <- (1 - r) current + r * the box at ``state`` (first frame's kept apart).
-
-        The scale and aspect filters learn the box at ``state`` (rate ``scale_filter_rate``).
-        """
-        box = 2.0 * self._half(state[2], raw)[0]
-        centre = raw.to_patch(state[None, :2])[0]
-        now = crop(image_f32, centre, box, self._tsize)
-        rate = self.config.template_update_rate
-        self._tcurrent = (1.0 - rate) * self._tcurrent + rate * now
-        box_full = np.array(self._size0) * state[2]
-        for sizer in self._sizers:
-            rows = scale_samples(image, state[:2], box_full, sizer.factors, sizer.size)
-            sizer.model.update(rows, self.config.scale_filter_rate)
+    def _box_px(self, state: FloatArray) -> FloatArray:
+        """(width, height) of the box ``state`` in full-resolution pixels."""
+        return np.array(self._size0) * state[2]
 
     def _llr_factor(
         self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
