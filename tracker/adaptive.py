@@ -90,7 +90,7 @@ class AdaptiveTracker:
         self._first = (window, self._state.copy())
         self._refiner = Refiner(
             cfg,
-            as_float(window.patch),
+            as_float(window.patch, self._cue == "grayscale"),
             window.to_patch(self._state[:2]),
             2.0 * self._half(1.0, window)[0],
             image,
@@ -363,7 +363,7 @@ class AdaptiveTracker:
         best = int(np.argmax(rhos))
         self._particles = particles[systematic_resample(kept, self.rng)]
         state, hist, rho = candidates[best], cand_hists[best], float(rhos[best])
-        image_f32 = as_float(raw.patch)
+        image_f32 = as_float(raw.patch, self._cue == "grayscale")
         if cfg.template_refine:
             pair = (raw, window)
             state, hist, rho, score = self._refined(image, image_f32, pair, planes, state)
@@ -537,7 +537,8 @@ class AdaptiveTracker:
         xy = window.to_frame(centres[best])
         state = np.array([xy[0], xy[1], self._state[2]])
         if cfg.template_refine:  # the template must agree: histograms alone re-acquire clutter
-            state, score = self._refine(image, as_float(window.patch), window, state)
+            patch = as_float(window.patch, self._cue == "grayscale")
+            state, score = self._refine(image, patch, window, state)
             if score < cfg.template_accept_score:
                 return self._result(None, confidence)
         self._state = self._inside(state)

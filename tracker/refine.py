@@ -15,7 +15,14 @@ import numpy as np
 import numpy.typing as npt
 
 from tracker.config import TrackerConfig
-from tracker.scale_filter import ScaleFilter, factor_pairs, sample_size, samples
+from tracker.scale_filter import (
+    GreyRegion,
+    ScaleFilter,
+    factor_pairs,
+    grey_region,
+    sample_size,
+    samples,
+)
 from tracker.template import Match, crop, match, template_size
 
 FloatArray = npt.NDArray[np.float64]
@@ -54,11 +61,19 @@ class Refiner:
         self._first = crop(patch, centre, box, self._size)
         self._current = self._first.copy()
         shape = sample_size(box_px)
-        self._sizers = []
-        for kind in config.size_filters.split("+"):
-            factors = factor_pairs(config.scale_filter_scales, config.scale_filter_step, kind)
-            rows = samples(frame, xy, box_px, factors, shape)
-            self._sizers.append(_Sizer(factors, shape, ScaleFilter.train(rows)))
+        count, step = config.scale_filter_scales, config.scale_filter_step
+        steps = [factor_pairs(count, step, kind) for kind in config.size_filters.split("+")]
+        # the largest box any filter samples, as a multiple of the box (filters compound)
+        self._reach = np.prod([f.max(axis=0) for f in steps], axis=0)
+        region = self._region(frame, xy, box_px)
+        self._sizers = [
+            _Sizer(f, shape, ScaleFilter.train(samples(region, xy, box_px, f, shape)))
+            for f in steps
+        ]
+
+    def _region(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> GreyRegion:
+        """The grey part of the frame that every size filter's samples fall in."""
+        return grey_region(frame, xy, box_px * self._reach / 2.0 + 2.0)
 
     def template(self) -> Patch:
         """``template_anchor`` x the first frame's template + the rest x the running one."""
@@ -82,8 +97,9 @@ class Refiner:
     def size_change(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> FloatArray:
         """(width, height) factors of the box at ``xy``: each filter's peak, in turn."""
         change = np.ones(2)
+        region = self._region(frame, xy, box_px)
         for sizer in self._sizers:
-            rows = samples(frame, xy, box_px * change, sizer.factors, sizer.size)
+            rows = samples(region, xy, box_px * change, sizer.factors, sizer.size)
             change = change * sizer.factors[sizer.model.peak(rows) + len(rows) // 2]
         return change
 
@@ -99,6 +115,7 @@ class Refiner:
         rate = self.config.template_update_rate
         self._current = (1.0 - rate) * self._current + rate * crop(patch, centre, box, self._size)
         xy, box_px = box_in_frame
+        region = self._region(frame, xy, box_px)
         for sizer in self._sizers:
-            rows = samples(frame, xy, box_px, sizer.factors, sizer.size)
+            rows = samples(region, xy, box_px, sizer.factors, sizer.size)
             sizer.model.update(rows, self.config.scale_filter_rate)

@@ -34,9 +34,11 @@ class Match:
     score: float
 
 
-def as_float(patch_bgr: npt.NDArray[np.uint8]) -> Image:
-    """The patch as float32 (H, W, 3): what templates are cut from and matched on."""
-    return np.asarray(patch_bgr, dtype=np.float32)
+def as_float(patch_bgr: npt.NDArray[np.uint8], grey: bool) -> Image:
+    """What templates are cut from and matched on: the patch as float32, (H, W, 3), or one
+    channel (H, W) when the camera is grey (its three channels are equal: a third of the work).
+    """
+    return np.asarray(patch_bgr[:, :, 0] if grey else patch_bgr, dtype=np.float32)
 
 
 def template_size(box_wh: FloatArray) -> tuple[int, int]:

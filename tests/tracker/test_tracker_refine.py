@@ -8,7 +8,7 @@ import numpy.typing as npt
 import pytest
 
 from tracker import AdaptiveTracker
-from tracker.scale_filter import ScaleFilter, factor_pairs, sample_size, samples
+from tracker.scale_filter import ScaleFilter, factor_pairs, grey_region, sample_size, samples
 from tracker.template import as_float, crop, match
 
 Frames = list[npt.NDArray[np.uint8]]
@@ -48,7 +48,7 @@ def _zoom_scene(frames: int, grow: float, stretch: float, seed: int = 1) -> tupl
 
 
 def test_template_match_finds_a_subpixel_shift() -> None:
-    image = as_float(_texture(80, 80, 3).astype(np.uint8))
+    image = as_float(_texture(80, 80, 3).astype(np.uint8), grey=False)
     box = np.array([30.0, 24.0])
     template = crop(image, np.array([40.0, 40.0]), box, (30, 24))
     found = match(image, template, np.array([42.7, 38.6]), box, 0.3, ((1.0, 1.0),))
@@ -63,8 +63,9 @@ def test_scale_filter_reads_the_size_change() -> None:
     centre, box = np.array([x + w / 2, y + h / 2]), np.array([w, h])
     factors = factor_pairs(17, 1.02, "scale")
     size = sample_size(box)
-    model = ScaleFilter.train(samples(frame, centre, box, factors, size))
-    found = [model.peak(samples(frame, centre, box * 1.02**k, factors, size)) for k in (-3, 0, 3)]
+    region = grey_region(frame, centre, box)  # +- a whole box: covers every size sampled
+    model = ScaleFilter.train(samples(region, centre, box, factors, size))
+    found = [model.peak(samples(region, centre, box * 1.02**k, factors, size)) for k in (-3, 0, 3)]
     assert found == [3, 0, -3]
 
 
