@@ -16,7 +16,6 @@ import numpy.typing as npt
 
 from tracker.config import TrackerConfig
 from tracker.scale_filter import (
-    GreyRegion,
     ScaleFilter,
     factor_pairs,
     grey_region,
@@ -32,10 +31,9 @@ Patch = npt.NDArray[np.float32]
 
 @dataclass(frozen=True)
 class _Sizer:
-    """One size filter with its (width, height) factor pairs and sample size."""
+    """One size filter with its (width, height) factor pairs."""
 
     factors: FloatArray
-    size: tuple[int, int]
     model: ScaleFilter
 
 
@@ -60,20 +58,26 @@ class Refiner:
         self._size = template_size(box)
         self._first = crop(patch, centre, box, self._size)
         self._current = self._first.copy()
-        shape = sample_size(box_px)
+        self._shape = sample_size(box_px)
         count, step = config.scale_filter_scales, config.scale_filter_step
         steps = [factor_pairs(count, step, kind) for kind in config.size_filters.split("+")]
-        # the largest box any filter samples, as a multiple of the box (filters compound)
-        self._reach = np.prod([f.max(axis=0) for f in steps], axis=0)
-        region = self._region(frame, xy, box_px)
+        self._factors = np.vstack(steps)  # every filter's rows, sampled together
+        self._reach = self._factors.max(axis=0)
+        rows = self._rows(frame, xy, box_px)
         self._sizers = [
-            _Sizer(f, shape, ScaleFilter.train(samples(region, xy, box_px, f, shape)))
-            for f in steps
+            _Sizer(f, ScaleFilter.train(part)) for f, part in zip(steps, rows, strict=True)
         ]
 
-    def _region(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> GreyRegion:
-        """The grey part of the frame that every size filter's samples fall in."""
-        return grey_region(frame, xy, box_px * self._reach / 2.0 + 2.0)
+    def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
+        """Each size filter's rows for the box ``box_px`` at ``xy`` (one resampling for all).
+
+        The filters all look at the same box (the width filter at widths ``a**n`` x the box's
+        height, the height filter the other way), so their answers multiply.
+        """
+        region = grey_region(frame, xy, box_px * self._reach / 2.0 + 2.0)
+        rows = samples(region, xy, box_px, self._factors, self._shape)
+        count = self.config.scale_filter_scales
+        return [rows[i : i + count] for i in range(0, len(rows), count)]
 
     def template(self) -> Patch:
         """``template_anchor`` x the first frame's template + the rest x the running one."""
@@ -95,11 +99,9 @@ class Refiner:
         return found
 
     def size_change(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> FloatArray:
-        """(width, height) factors of the box at ``xy``: each filter's peak, in turn."""
+        """(width, height) factors of the box at ``xy``: the product of the filters' peaks."""
         change = np.ones(2)
-        region = self._region(frame, xy, box_px)
-        for sizer in self._sizers:
-            rows = samples(region, xy, box_px * change, sizer.factors, sizer.size)
+        for sizer, rows in zip(self._sizers, self._rows(frame, xy, box_px), strict=True):
             change = change * sizer.factors[sizer.model.peak(rows) + len(rows) // 2]
         return change
 
@@ -115,7 +117,5 @@ class Refiner:
         rate = self.config.template_update_rate
         self._current = (1.0 - rate) * self._current + rate * crop(patch, centre, box, self._size)
         xy, box_px = box_in_frame
-        region = self._region(frame, xy, box_px)
-        for sizer in self._sizers:
-            rows = samples(region, xy, box_px, sizer.factors, sizer.size)
+        for sizer, rows in zip(self._sizers, self._rows(frame, xy, box_px), strict=True):
             sizer.model.update(rows, self.config.scale_filter_rate)

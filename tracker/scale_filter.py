@@ -83,7 +83,8 @@ def samples(
     factors: FloatArray,
     size: tuple[int, int],
 ) -> FloatArray:
-    """(S, d) rows: the box scaled by each factor pair, resampled to ``size``, normalised.
+    """(S, d) rows: the box scaled by each factor pair, resampled to ``size``, normalised to
+    zero mean and unit norm.
 
     ``centre`` and ``box_wh`` in frame pixels; ``region`` must cover the largest box.  Sampled
     from the full-resolution frame: on the tracker's downscaled window a box is ~30 px wide
@@ -91,27 +92,34 @@ def samples(
     size found drifted to 1.4x Car4's).
     """
     sw, sh = size
-    x0, y0 = region.x0, region.y0
-    cx, cy = float(centre[0]) - x0, float(centre[1]) - y0
-    u = np.arange(sw, dtype=np.float32) - (sw - 1) / 2.0
-    v = np.arange(sh, dtype=np.float32) - (sh - 1) / 2.0
-    step = (np.asarray(box_wh, dtype=np.float32)[None] * factors.astype(np.float32)) / np.array(
-        [sw, sh], dtype=np.float32
-    )  # (S, 2) frame pixels per sample pixel
     count = len(factors)
-    map_x = np.broadcast_to(cx - 0.5 + step[:, None, None, 0] * u[None, None, :], (count, sh, sw))
-    map_y = np.broadcast_to(cy - 0.5 + step[:, None, None, 1] * v[None, :, None], (count, sh, sw))
+    u, v = _grid(size)
+    step = np.asarray(box_wh, dtype=np.float32)[None] * factors.astype(np.float32)
+    step /= np.array([sw, sh], dtype=np.float32)  # (S, 2) frame pixels per sample pixel
+    map_x = np.empty((count, sh, sw), np.float32)
+    map_y = np.empty((count, sh, sw), np.float32)
+    map_x[:] = (float(centre[0]) - region.x0 - 0.5) + step[:, 0, None, None] * u[None, None, :]
+    map_y[:] = (float(centre[1]) - region.y0 - 0.5) + step[:, 1, None, None] * v[None, :, None]
     stacked = cv2.remap(
         region.image,
-        np.ascontiguousarray(map_x.reshape(-1, sw), dtype=np.float32),
-        np.ascontiguousarray(map_y.reshape(-1, sw), dtype=np.float32),
+        map_x.reshape(-1, sw),
+        map_y.reshape(-1, sw),
         cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REPLICATE,
     )
     rows = np.asarray(stacked, dtype=np.float64).reshape(count, sw * sh)
     rows -= rows.mean(axis=1, keepdims=True)
-    rows /= np.maximum(np.linalg.norm(rows, axis=1, keepdims=True), 1e-6)
-    return rows * np.hanning(len(factors) + 2)[1:-1, None]
+    rows /= np.maximum(np.sqrt(np.einsum("ij,ij->i", rows, rows))[:, None], 1e-6)
+    return rows
+
+
+@lru_cache(maxsize=16)
+def _grid(size: tuple[int, int]) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Sample pixel offsets from the centre along x and y."""
+    sw, sh = size
+    u = np.arange(sw, dtype=np.float32) - (sw - 1) / 2.0
+    v = np.arange(sh, dtype=np.float32) - (sh - 1) / 2.0
+    return u, v
 
 
 @lru_cache(maxsize=8)
@@ -136,30 +144,32 @@ class ScaleFilter:
     num: ComplexArray
     den: FloatArray
     target: ComplexArray  # conj(rFFT of the desired Gaussian response), (S // 2 + 1,)
+    window: FloatArray  # Hann weights of the rows, (S, 1)
 
     @classmethod
     def train(cls, rows: FloatArray) -> ScaleFilter:
-        """A filter from the first frame's rows."""
+        """A filter from the first frame's rows (as :func:`samples` gives them)."""
         s = rows.shape[0]
         n = np.arange(s, dtype=np.float64) - (s - 1) / 2.0
         sigma = SIGMA_FACTOR * np.sqrt(s)
         gauss = np.exp(-0.5 * n * n / (sigma * sigma))
         target = np.conj(np.fft.rfft(np.fft.ifftshift(gauss)))
-        f = _spectrum(rows)
+        window = np.hanning(s + 2)[1:-1, None]
+        f = _spectrum(rows * window)
         num = target[:, None] * f
         den = (np.conj(f) * f).real.sum(axis=1)
-        return cls(num, den, target)
+        return cls(num, den, target, window)
 
     def update(self, rows: FloatArray, rate: float) -> None:
         """``A <- (1-eta) A + eta conj(G) F``, ``B <- (1-eta) B + eta sum conj(F) F``."""
-        f = _spectrum(rows)
+        f = _spectrum(rows * self.window)
         self.num = (1.0 - rate) * self.num + rate * self.target[:, None] * f
         self.den = (1.0 - rate) * self.den + rate * (np.conj(f) * f).real.sum(axis=1)
 
     def peak(self, rows: FloatArray) -> int:
         """Row offset of the response's peak from the centre row (0 = no change)."""
         s = rows.shape[0]
-        z = _spectrum(rows)
+        z = _spectrum(rows * self.window)
         spectrum = (np.conj(self.num) * z).sum(axis=1) / (self.den + REGULARISATION)
         index = int(np.argmax(np.fft.irfft(spectrum, n=s)))
         return index - s if index > s // 2 else index  # circular: the Gaussian sits at row 0
