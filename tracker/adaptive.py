@@ -440,6 +440,8 @@ class AdaptiveTracker:
             image_f32, raw.to_patch(np.stack([state[:2], self._state[:2]])), box
         )
         xy = raw.to_frame(found.centre[None])[0]
+        if found.score < cfg.template_accept_score:  # not located: the caller keeps the size
+            return np.array([xy[0], xy[1], self._state[2]]), found.score
         change = self._refiner.size_change(image, xy, self._box_px(self._state))
         self._aspect_step = float(np.sqrt(change[0] / change[1]))
         scale = self._state[2] * float(np.sqrt(change[0] * change[1]))
