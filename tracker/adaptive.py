@@ -152,9 +152,9 @@ class AdaptiveTracker:
     # ------------------------------------------------------------------ internals
     def _half(self, scale: FloatArray | float, window: Window) -> FloatArray:
         """Half box sizes in patch pixels for one or more scales -> (P, 2)."""
-        s = np.atleast_1d(np.asarray(scale, dtype=np.float64))
         w0, h0 = self._size0
-        return np.stack([s * w0 * window.fx / 2.0, s * h0 * window.fy / 2.0], axis=1)
+        half = np.array([w0 * window.fx / 2.0, h0 * window.fy / 2.0])
+        return np.multiply.outer(np.atleast_1d(np.asarray(scale, dtype=np.float64)), half)
 
     def _window(
         self, image: npt.NDArray[np.uint8], state: FloatArray, extra_px: float, widen: float
