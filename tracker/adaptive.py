@@ -121,7 +121,7 @@ class AdaptiveTracker:
 
     @property
     def cue(self) -> Cue:
-        """``"colour"`` or ``"grayscale"`` (intensity and gradient fallback)."""
+        """``"colour"`` or ``"grayscale"`` (the grey features and the template, no colour)."""
         return self._cue
 
     def update(self, image_bgr: npt.NDArray[np.uint8]) -> TrackResult:

@@ -116,7 +116,7 @@ def colour_feature_bins(
 def gray_feature_bins(
     patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int, stretch: bool = False
 ) -> npt.NDArray[np.intp]:
-    """Bin index images of the grayscale fallback features, shape (k, H, W).
+    """Bin index images of the grayscale features, shape (k, H, W).
 
     With ``stretch`` the grey levels are first stretched to the patch's [min, max].
     """
