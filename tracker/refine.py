@@ -127,7 +127,7 @@ class Refiner:
         self._current = (1.0 - rate) * self._current + rate * crop(patch, centre, box, self._size)
         xy, box_px = box_in_frame
         read = self._read
-        if read is not None and np.allclose(read[0], xy) and np.allclose(read[1], box_px):
+        if read is not None and bool(np.all(read[0] == xy) and np.all(read[1] == box_px)):
             spectra = read[2]  # the box the filters just read (no size change): same rows
         else:
             spectra = self._spectra(frame, xy, box_px)
