@@ -370,13 +370,25 @@ class AdaptiveTracker:
         else:
             score = -1.0
         result = self._accept(window, state, hist, rho, score)
-        trusted = result.box is not None and result.confidence >= cfg.lost_below_confidence
-        if cfg.gain_source == "target" and trusted:
-            self._update_gain(raw, state)
-        if trusted and score >= cfg.template_update_score:
-            box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
-            self._refiner.learn(image_f32, box, image, (state[:2], self._box_px(state)))
+        if result.box is not None and result.confidence >= cfg.lost_below_confidence:
+            self._learn((image, image_f32), raw, state, score)
         return result
+
+    def _learn(
+        self,
+        images: tuple[npt.NDArray[np.uint8], npt.NDArray[np.float32]],
+        raw: Window,
+        state: FloatArray,
+        score: float,
+    ) -> None:
+        """After a trusted frame: the gain; the template and size filters where the template
+        matched closely (``template_update_score``).  ``images``: the frame, the window."""
+        if self.config.gain_source == "target":
+            self._update_gain(raw, state)
+        if score >= self.config.template_update_score:
+            frame, image_f32 = images
+            box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
+            self._refiner.learn(image_f32, box, frame, (state[:2], self._box_px(state)))
 
     def _refined(
         self,

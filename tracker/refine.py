@@ -25,6 +25,7 @@ from tracker.scale_filter import (
 from tracker.template import Match, crop, match, template_size
 
 FloatArray = npt.NDArray[np.float64]
+ComplexArray = npt.NDArray[np.complex128]
 Frame = npt.NDArray[np.uint8]
 Patch = npt.NDArray[np.float32]
 
@@ -67,6 +68,7 @@ class Refiner:
         self._sizers = [
             _Sizer(f, ScaleFilter.train(part)) for f, part in zip(steps, rows, strict=True)
         ]
+        self._read: tuple[FloatArray, FloatArray, list[ComplexArray]] | None = None
 
     def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
         """Each size filter's rows for the box ``box_px`` at ``xy`` (one resampling for all).
@@ -101,9 +103,16 @@ class Refiner:
     def size_change(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> FloatArray:
         """(width, height) factors of the box at ``xy``: the product of the filters' peaks."""
         change = np.ones(2)
-        for sizer, rows in zip(self._sizers, self._rows(frame, xy, box_px), strict=True):
-            change = change * sizer.factors[sizer.model.peak(rows) + len(rows) // 2]
+        spectra = self._spectra(frame, xy, box_px)
+        for sizer, z in zip(self._sizers, spectra, strict=True):
+            change = change * sizer.factors[sizer.model.peak(z) + len(sizer.factors) // 2]
+        self._read = (xy.copy(), box_px.copy(), spectra)
         return change
+
+    def _spectra(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[ComplexArray]:
+        """Each size filter's spectrum of its rows for the box ``box_px`` at ``xy``."""
+        rows = self._rows(frame, xy, box_px)
+        return [s.model.spectrum(r) for s, r in zip(self._sizers, rows, strict=True)]
 
     def learn(
         self,
@@ -117,5 +126,10 @@ class Refiner:
         rate = self.config.template_update_rate
         self._current = (1.0 - rate) * self._current + rate * crop(patch, centre, box, self._size)
         xy, box_px = box_in_frame
-        for sizer, rows in zip(self._sizers, self._rows(frame, xy, box_px), strict=True):
-            sizer.model.update(rows, self.config.scale_filter_rate)
+        read = self._read
+        if read is not None and bool(np.all(read[0] == xy) and np.all(read[1] == box_px)):
+            spectra = read[2]  # the box the filters just read (no size change): same rows
+        else:
+            spectra = self._spectra(frame, xy, box_px)
+        for sizer, f in zip(self._sizers, spectra, strict=True):
+            sizer.model.update(f, self.config.scale_filter_rate)

@@ -160,16 +160,24 @@ class ScaleFilter:
         den = (np.conj(f) * f).real.sum(axis=1)
         return cls(num, den, target, window)
 
-    def update(self, rows: FloatArray, rate: float) -> None:
-        """``A <- (1-eta) A + eta conj(G) F``, ``B <- (1-eta) B + eta sum conj(F) F``."""
-        f = _spectrum(rows * self.window)
+    def spectrum(self, rows: FloatArray) -> ComplexArray:
+        """The rows' spectrum as the filter uses it (Hann-weighted), for reuse."""
+        return _spectrum(rows * self.window)
+
+    def update(self, f: ComplexArray, rate: float) -> None:
+        """``A <- (1-eta) A + eta conj(G) F``, ``B <- (1-eta) B + eta sum conj(F) F``.
+
+        ``f`` is :meth:`spectrum` of the rows to learn.
+        """
         self.num = (1.0 - rate) * self.num + rate * self.target[:, None] * f
         self.den = (1.0 - rate) * self.den + rate * (np.conj(f) * f).real.sum(axis=1)
 
-    def peak(self, rows: FloatArray) -> int:
-        """Row offset of the response's peak from the centre row (0 = no change)."""
-        s = rows.shape[0]
-        z = _spectrum(rows * self.window)
+    def peak(self, z: ComplexArray) -> int:
+        """Row offset of the response's peak from the centre row (0 = no change).
+
+        ``z`` is :meth:`spectrum` of the rows to read.
+        """
+        s = self.window.shape[0]
         spectrum = (np.conj(self.num) * z).sum(axis=1) / (self.den + REGULARISATION)
         index = int(np.argmax(np.fft.irfft(spectrum, n=s)))
         return index - s if index > s // 2 else index  # circular: the Gaussian sits at row 0

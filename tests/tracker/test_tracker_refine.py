@@ -65,7 +65,10 @@ def test_scale_filter_reads_the_size_change() -> None:
     size = sample_size(box)
     region = grey_region(frame, centre, box)  # +- a whole box: covers every size sampled
     model = ScaleFilter.train(samples(region, centre, box, factors, size))
-    found = [model.peak(samples(region, centre, box * 1.02**k, factors, size)) for k in (-3, 0, 3)]
+    found = [
+        model.peak(model.spectrum(samples(region, centre, box * 1.02**k, factors, size)))
+        for k in (-3, 0, 3)
+    ]
     assert found == [3, 0, -3]
 
 
