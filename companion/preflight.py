@@ -146,7 +146,8 @@ def check_landmarks(settings: Settings) -> Check:
     for lm in pmap.landmarks:
         image = pmap.references.get(lm.landmark_id)
         if image is None:
-            problems.append(f"{lm.landmark_id} has no appearance image")
+            why = pmap.unusable.get(lm.landmark_id, "no appearance image")
+            problems.append(f"{lm.landmark_id}: {why}")
             continue
         try:
             ref = matcher.add(lm.landmark_id, image)
