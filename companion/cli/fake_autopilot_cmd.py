@@ -1,8 +1,10 @@
 """``companion fake-autopilot``: run the scripted fake autopilot (ArduPilot or PX4 rules).
 
-It flies the default hover-then-circle trajectory, streams telemetry, answers commands,
-judges every vision message like the real autopilot would, and on exit prints (or writes) a
-JSON summary of what it received.  Point ``companion run`` (``mavlink.endpoint``) at it.
+It flies the default hover-then-circle trajectory (or, with ``--vehicle guided``, whatever
+the companion commands), streams what it is asked for, answers commands and parameters,
+fuses every vision message in its own estimator like the real autopilot would, and on exit
+prints (or writes) a JSON summary of what it received.  Point ``companion run``
+(``mavlink.endpoint``) at it.  ``--streams all --judge truth`` is the old permissive fake.
 """
 
 from __future__ import annotations
@@ -45,6 +47,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="enforce MAVLink signing with this key file")
     parser.add_argument("--timesync-samples", type=int, default=500, metavar="N",
                         help="PX4: good TIMESYNC round trips before stamps are converted")
+    parser.add_argument("--streams", choices=("strict", "all"), default="strict",
+                        help="strict: nothing but HEARTBEAT until asked with "
+                        "SET_MESSAGE_INTERVAL, like a real port (default); all: every stream")
+    parser.add_argument("--judge", choices=("estimate", "truth"), default="estimate",
+                        help="gate fixes against the fake's own EKF estimate (default) or, "
+                        "permissive, against the true state")
+    parser.add_argument("--vehicle", choices=("scripted", "guided"), default="scripted",
+                        help="scripted: fly the built-in trajectory, armed; guided: on the "
+                        "ground, flown by GUIDED/OFFBOARD commands (companion run --fly)")
+    parser.add_argument("--absent", action="append", default=[], metavar="MESSAGE",
+                        help="accept SET_MESSAGE_INTERVAL for MESSAGE but never send it "
+                        "(a sensor not fitted); repeatable")
     parser.set_defaults(handler=run)
 
 
@@ -60,7 +74,8 @@ def _config(args: argparse.Namespace, settings: Settings) -> FakeAutopilotConfig
     return FakeAutopilotConfig(
         profile=args.profile or settings.vehicle.profile, endpoint=args.endpoint,
         system_id=args.sysid, signing_key=key, origin_fail_first=max(0, args.origin_fail_first),
-        timesync_samples_required=max(1, args.timesync_samples))
+        timesync_samples_required=max(1, args.timesync_samples), streams=args.streams,
+        judge=args.judge, vehicle=args.vehicle, absent=tuple(args.absent))
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:

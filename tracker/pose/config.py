@@ -42,6 +42,8 @@ class PoseConfig:
     min_confidence: float = field(default=0.3, metadata={"ge": 0, "le": 1})
     #: Image points spanning less than this (px) are degenerate.
     min_point_spread_px: float = field(default=3.0, metadata={"gt": 0})
+    #: A range finder (DISTANCE_SENSOR) is fitted: the companion asks the autopilot for it.
+    rangefinder: bool = False
     #: Attitude, altitude and range samples older than this (vs the frame) are ignored.
     max_sample_age_s: float = field(default=0.1, metadata={"gt": 0})
     #: Gauss-Newton iterations of the final refinement.
