@@ -33,6 +33,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "synth_cmd",
     "record_cmd",
     "fake_autopilot_cmd",
+    "autopilot_cmd",
     "landmarks_cmd",
     "eval_cmd",
 )
