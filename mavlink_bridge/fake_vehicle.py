@@ -136,6 +136,11 @@ class GuidedVehicle:
     def on_ground(self) -> bool:
         return self.p[2] >= self.start_ned_m[2] - 0.05
 
+    def hover(self, height_m: float) -> None:
+        """Start in the air, ``height_m`` above the start, holding there."""
+        self.p[2] = self.start_ned_m[2] - height_m
+        self.target = self.p.copy()
+
     def takeoff(self, altitude_m: float) -> None:
         self.target = np.array([self.p[0], self.p[1], self.start_ned_m[2] - altitude_m])
 

@@ -56,6 +56,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--vehicle", choices=("scripted", "guided"), default="scripted",
                         help="scripted: fly the built-in trajectory, armed; guided: on the "
                         "ground, flown by GUIDED/OFFBOARD commands (companion run --fly)")
+    parser.add_argument("--start", type=float, nargs=4, metavar=("N", "E", "D", "YAW"),
+                        help="guided: where the vehicle stands (m, m, m, deg)")
+    parser.add_argument("--airborne", type=float, default=0.0, metavar="M",
+                        help="guided: start hovering M metres up, armed, in GUIDED/OFFBOARD")
     parser.add_argument("--absent", action="append", default=[], metavar="MESSAGE",
                         help="accept SET_MESSAGE_INTERVAL for MESSAGE but never send it "
                         "(a sensor not fitted); repeatable")
@@ -71,11 +75,16 @@ def _config(args: argparse.Namespace, settings: Settings) -> FakeAutopilotConfig
         key = load_signing_key(args.signing_key) if args.signing_key else None
     except SigningKeyError as err:
         raise InputError(str(err)) from err
+    start = FakeAutopilotConfig().guided_start
+    if args.start:
+        n, e, d, yaw = (float(v) for v in args.start)
+        start = (n, e, d, yaw)
     return FakeAutopilotConfig(
         profile=args.profile or settings.vehicle.profile, endpoint=args.endpoint,
         system_id=args.sysid, signing_key=key, origin_fail_first=max(0, args.origin_fail_first),
         timesync_samples_required=max(1, args.timesync_samples), streams=args.streams,
-        judge=args.judge, vehicle=args.vehicle, absent=tuple(args.absent))
+        judge=args.judge, vehicle=args.vehicle, absent=tuple(args.absent),
+        guided_airborne_m=max(0.0, args.airborne), guided_start=start)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
