@@ -163,6 +163,8 @@ class FakeAutopilot:
                                   custom_mode=self._guided_mode_number() if airborne else 0)
         self.params = FakeParams(config.profile)
         self.estimator_config = config.estimator or estimator_defaults(config.profile)
+        self.streams = FakeStreams(config.streams, config.profile, config.periods_s,
+                                   self._sendable(), config.absent)
         self.track: list[tuple[float, tuple[float, float, float],
                                tuple[float, float, float]]] = []  # (t, estimate, truth)
         self.attitude_drift = None if config.attitude_error is None else AttitudeDrift(
@@ -179,6 +181,7 @@ class FakeAutopilot:
                                          "deprecated_origin_ignored": 0}
         self.connection: Connection | None = None
         self._start_ns = clock_ns()
+        self._blind_until_ns = 0
         self._task: asyncio.Task[None] | None = None
         self._boot()
 
@@ -195,8 +198,7 @@ class FakeAutopilot:
         self.timesync_offset_ns = 0.0
         self.timesync_samples = 0
         self.judge.reset()
-        self.streams = FakeStreams(self.config.streams, self.config.profile,
-                                   self.config.periods_s, self._sendable(), self.config.absent)
+        self.streams.reset()  # a reboot forgets every asked interval
         self.ekf = FakeEstimator(self.estimator_config, self.config.seed)
         self._last_track_s = -1.0
         self._prev_velocity: tuple[float, np.ndarray] | None = None
@@ -255,6 +257,11 @@ class FakeAutopilot:
     def drop_link(self, seconds: float) -> None:
         """Nothing passes in either direction for ``seconds``."""
         self.faults.state.drop_until_ns = self.clock_ns() + int(seconds * 1e9)
+
+    def blind(self, seconds: float) -> None:
+        """A vision outage: for ``seconds`` every incoming vision message is dropped
+        (counted as ``vision_blinded``), as if the companion's fixes stopped."""
+        self._blind_until_ns = self.clock_ns() + int(seconds * 1e9)
 
     def reboot(self, silent_s: float = 1.0) -> None:
         """Reboot: silent for ``silent_s``, then sequence 0, boot time 0, no origin."""
@@ -401,6 +408,9 @@ class FakeAutopilot:
     def _handle(self, msg: MAVLinkMessage) -> None:
         name = msg.get_type()
         if name in ("VISION_POSITION_ESTIMATE", "ODOMETRY"):
+            if self.clock_ns() < self._blind_until_ns:
+                self.counters["vision_blinded"] = self.counters.get("vision_blinded", 0) + 1
+                return
             self._on_vision(name, msg)
         elif name == "LANDING_TARGET":
             ok, why = judge_landing_target(self.config.profile, msg.to_dict())

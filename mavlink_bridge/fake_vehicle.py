@@ -166,6 +166,7 @@ class GuidedVehicle:
         norm = float(np.linalg.norm(a))
         if norm > self.max_accel_m_s2:
             a *= self.max_accel_m_s2 / norm
+        v0 = self.v
         self.v = self.v + a * dt
         speed = float(np.linalg.norm(self.v))
         if speed > self.max_speed_m_s:
@@ -173,7 +174,7 @@ class GuidedVehicle:
         self.p = self.p + self.v * dt
         if self.p[2] > self.start_ned_m[2]:  # the ground
             self.p[2], self.v[2] = self.start_ned_m[2], min(self.v[2], 0.0)
-        self.a = a
+        self.a = (self.v - v0) / dt  # what the accelerometer feels
         dyaw = math.remainder(self.target_yaw - self.yaw_rad, math.tau)
         self.yaw_rad += max(-1.0 * dt, min(1.0 * dt, dyaw))
 
