@@ -302,7 +302,10 @@ class FakeAutopilot:
             self._prev_velocity = (t, v)
         self.ekf.predict(t, accel)
         if self.config.judge == "estimate":
-            self.flight.check_ekf(t, self.ekf.horizontal_ok(t), self._text)
+            # a vehicle flying from the start (scripted, or guided airborne) had its position
+            # before this fake began: the failsafe watches outages after the first fix
+            ok = self.ekf.horizontal_ok(t) or not self.ekf.initialised
+            self.flight.check_ekf(t, ok, self._text)
         if self.guided is not None:
             self.guided.landing = self.flight.landing
         if self.ekf.initialised and t - self._last_track_s >= 0.1:
