@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import json
 import signal
 import sys
@@ -23,6 +24,7 @@ from companion.settings import Settings
 from mavlink_bridge.codec import load_signing_key
 from mavlink_bridge.errors import EndpointError, LinkOpenError, SigningKeyError
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.fake_ekf import AttitudeModel, estimator_defaults
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -60,6 +62,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="guided: where the vehicle stands (m, m, m, deg)")
     parser.add_argument("--airborne", type=float, default=0.0, metavar="M",
                         help="guided: start hovering M metres up, armed, in GUIDED/OFFBOARD")
+    parser.add_argument("--attitude-deg", type=float, nargs=3, default=(0.0, 0.0, 0.0),
+                        metavar=("ROLL", "PITCH", "YAW"),
+                        help="the estimated attitude's initial error (degrees)")
+    parser.add_argument("--yaw-drift", type=float, default=0.0, metavar="DEG_PER_MIN",
+                        help="the estimated yaw's drift")
+    parser.add_argument("--coupled", action="store_true",
+                        help="the attitude error leaks into the estimate and fused fixes pull "
+                        "the attitude (a real EKF's cross-covariance)")
     parser.add_argument("--absent", action="append", default=[], metavar="MESSAGE",
                         help="accept SET_MESSAGE_INTERVAL for MESSAGE but never send it "
                         "(a sensor not fitted); repeatable")
@@ -75,16 +85,20 @@ def _config(args: argparse.Namespace, settings: Settings) -> FakeAutopilotConfig
         key = load_signing_key(args.signing_key) if args.signing_key else None
     except SigningKeyError as err:
         raise InputError(str(err)) from err
+    r, p, y = (float(v) for v in args.attitude_deg)
+    profile = args.profile or settings.vehicle.profile
+    estimator = dataclasses.replace(estimator_defaults(profile), attitude=AttitudeModel(
+        initial_deg=(r, p, y), yaw_drift_deg_min=args.yaw_drift, coupled=args.coupled))
     start = FakeAutopilotConfig().guided_start
     if args.start:
         n, e, d, yaw = (float(v) for v in args.start)
         start = (n, e, d, yaw)
     return FakeAutopilotConfig(
-        profile=args.profile or settings.vehicle.profile, endpoint=args.endpoint,
+        profile=profile, endpoint=args.endpoint,
         system_id=args.sysid, signing_key=key, origin_fail_first=max(0, args.origin_fail_first),
         timesync_samples_required=max(1, args.timesync_samples), streams=args.streams,
         judge=args.judge, vehicle=args.vehicle, absent=tuple(args.absent),
-        guided_airborne_m=max(0.0, args.airborne), guided_start=start)
+        guided_airborne_m=max(0.0, args.airborne), guided_start=start, estimator=estimator)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
