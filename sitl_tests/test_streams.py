@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from pathlib import Path
 
 import pytest
 
@@ -20,6 +21,7 @@ from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.streams import needed_streams
+from sitl_tests.harness import Flight, sitl_settings, wait_until
 
 ORIGIN = {"origin_lat_deg": 47.39, "origin_lon_deg": 8.54, "origin_alt_m": 400.0}
 
@@ -104,3 +106,25 @@ async def test_a_needed_stream_that_never_comes_is_a_warning(
     assert len(lines) == 1 and "missing (asked 20 Hz)" in lines[0], lines
     texts = [t for t in fake.statustexts if "DISTANCE_SENSOR" in t]
     assert texts == ["LMC: DISTANCE_SENSOR missing (asked 20 Hz)"], fake.statustexts
+
+
+async def test_the_status_carries_the_streams(tmp_path: Path) -> None:
+    """The whole companion against the strict fake: its status (Zenoh, flight log, monitor,
+    dashboard) reports each needed stream arriving and no warning."""
+    seen: dict[str, object] = {}
+
+    async def script(flight: Flight) -> None:
+        await wait_until(flight, lambda: flight.app is not None
+                         and flight.app.status()["autopilot_streams"].get("ATTITUDE", {})
+                         .get("state") == "arriving", timeout_s=4.0, what="ATTITUDE arriving")
+        await flight.sleep_until(flight.flight_s() + 2.5)
+        assert flight.app is not None
+        seen.update(flight.app.status())
+
+    await Flight("hover", 6.0, sitl_settings(tmp_path)).run(script)
+    streams = seen["autopilot_streams"]
+    assert isinstance(streams, dict)
+    assert set(streams) == {"ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT",
+                            "EKF_STATUS_REPORT"}
+    assert all(s["state"] == "arriving" for s in streams.values()), streams
+    assert seen["warnings"] == []
