@@ -29,6 +29,8 @@ LOCKS = {"runtime": ROOT / "requirements" / "runtime.lock",
 #: Test tools installed without their declared dependencies (see the file's header).
 TOOLS = ROOT / "requirements" / "tools.lock"
 PYTEST_NO_TESTS = 5
+#: The optional features (pyproject.toml); the locks and so the dev environment hold them all.
+EXTRAS = ("postgis", "dashboard", "mavsdk")
 
 
 def say(text: str) -> None:
@@ -102,8 +104,12 @@ def cmd_lock(args: list[str]) -> int:
     run(PY, "-m", "pip", "install", "--quiet", "pip-tools")
     common = ["--quiet", "--generate-hashes", "--strip-extras", "--allow-unsafe",
               "--no-emit-index-url", "--no-emit-find-links", *args]
-    run(PY, "-m", "piptools", "compile", *common, "-o", LOCKS["runtime"], "pyproject.toml")
-    run(PY, "-m", "piptools", "compile", *common, "--extra", "dev", "-o", LOCKS["dev"],
+    # every extra a user may install (postgis, dashboard, mavsdk) is in both locks: the demo's
+    # environment serves the dashboard, the tests test all of them
+    extras = [arg for name in EXTRAS for arg in ("--extra", name)]
+    run(PY, "-m", "piptools", "compile", *common, *extras, "-o", LOCKS["runtime"],
+        "pyproject.toml")
+    run(PY, "-m", "piptools", "compile", *common, *extras, "--extra", "dev", "-o", LOCKS["dev"],
         "pyproject.toml")
     return 0
 

@@ -23,12 +23,12 @@ from typing import Any
 import numpy as np
 
 from companion.app import Frame, FrameResult
-from companion.autopilot import AttitudeHistory
 from companion.demo import map_landmarks, run_demo
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
-from companion.settings import Settings, load_settings
+from companion.sensors import SensorHistory
+from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.follow import FollowCameraSource, command_sender
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
@@ -65,8 +65,8 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
     errors: list[float] = []
 
     class Recorder(PerceptionWrapper):
-        def __init__(self, attitude: AttitudeHistory) -> None:
-            super().__init__(perception_for(settings, sim.scenario.camera, pmap, attitude))
+        def __init__(self, sensors: SensorHistory) -> None:
+            super().__init__(perception_for(settings, sim.scenario.camera, pmap, sensors))
 
         def process(self, frame: Frame) -> FrameResult:
             result = self.perception.process(frame)
@@ -76,7 +76,7 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
             return result
 
     try:
-        app = await fly(settings, source, bridge, Recorder, landmarks, seconds=seconds,
+        app = await fly(settings, source, bridge, Recorder, pmap, seconds=seconds,
                         prefix="follow")
     finally:
         await fake.stop()
@@ -93,7 +93,8 @@ async def main() -> None:
     parser.add_argument("--fps", type=float, default=15.0)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        settings = load_settings(sets=["monitor.enabled=false", f'flightlog.dir="{tmp}"'])
+        settings = load_settings(shipped=SIM_LAYERS,
+                                 sets=["monitor.enabled=false", f'flightlog.dir="{tmp}"'])
         scenario = scenario_at(args.fps, Path(tmp))
         scripted = await run_demo(settings, scenario, args.seconds)
         follow = await follow_flight(settings, scenario, args.seconds)

@@ -20,7 +20,7 @@ import numpy as np
 
 from companion.demo import map_landmarks
 from companion.perception import Perception
-from companion.settings import load_settings
+from companion.settings import SIM_LAYERS, load_settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
@@ -29,7 +29,7 @@ from tracker.pose.types import PoseFix
 
 def run(glitch_m: float, glitch_frame: int, fps: float = 15.0) -> list[float]:
     sim = Simulator(replace(load_scenario("survey"), fps=fps))
-    settings = load_settings()
+    settings = load_settings(shipped=SIM_LAYERS)
     landmarks, references = map_landmarks(sim)
     perception = Perception(sim.scenario.camera, landmarks, references,
                             config=settings.perception, tracker_config=settings.tracker,

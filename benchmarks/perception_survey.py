@@ -2,8 +2,9 @@
 
 Renders every frame of a scenario, runs ``companion.perception.Perception`` on it with the
 attitude an autopilot would give it -- the truth plus Gaussian noise of exactly the 1-sigma
-the pose covariance assumes (``AttitudeSample``'s 0.2 deg roll/pitch, 1 deg yaw), drawn
-afresh each frame; ``--exact-attitude`` feeds the truth instead -- and prints, for all
+the pose covariance assumes (``--attitude-sigma-deg``, by default 0.2 deg roll/pitch and
+1 deg yaw, the simulated autopilot's, stated to the solver as its sigmas), drawn afresh each
+frame; ``--exact-attitude`` feeds the truth instead -- and prints, for all
 fixes, by the number of landmarks used and for the fixes from two or more (issue 6's
 accuracy figure): position RMSE, as a share of the mean distance to the landmarks used, the
 RMS 1-sigma the covariances promised, the share of fixes whose NEES lies inside the 95 %
@@ -13,7 +14,7 @@ corners the perception hands the pose solver against the rendered truth, by the 
 width on screen (plates wholly in view), and of the tracker's box centres.
 
     PYTHONPATH=. python benchmarks/perception_survey.py [--scenario survey] [--frames 900]
-        [--pixel-sigma 0.15] [--exact-attitude] [--check]
+        [--pixel-sigma 0.15] [--exact-attitude] [--attitude-sigma-deg 0.2 1.0] [--check]
 
 ``--check`` exits 1 when fewer than 90 % of the fixes (all, or those from 2+ landmarks) have
 their NEES inside the 95 % bounds, or the 2+ fixes' RMSE is above 0.5 % of their distance
@@ -40,7 +41,7 @@ from companion.sources.stream_format import TruthBox
 from tracker.camera import CameraModel
 from tracker.geometry import FloatArray
 from tracker.pose.config import PoseConfig
-from tracker.pose.types import AttitudeSample, PoseFix
+from tracker.pose.types import AltitudeSample, AttitudeSample, PoseFix
 
 NEES_LOW, NEES_HIGH = 0.2158, 9.348  # chi-square, 3 DOF, 2.5 % and 97.5 %
 
@@ -54,7 +55,14 @@ def main() -> int:
     parser.add_argument("--exact-attitude", action="store_true",
                         help="feed the true attitude (default: the truth plus the autopilot's "
                         "stated noise, AttitudeSample's sigmas, as the covariance assumes)")
+    parser.add_argument("--attitude-sigma-deg", type=float, nargs=2, default=[0.2, 1.0],
+                        metavar=("ROLL_PITCH", "YAW"),
+                        help="the simulated autopilot's attitude 1-sigma, stated to the solver")
+    parser.add_argument("--altitude-sigma-m", type=float, default=None,
+                        help="also give the autopilot's height, the truth plus noise of this "
+                        "1-sigma, stated to the solver (default: no height)")
     args = parser.parse_args()
+    sig_rp, sig_yaw = (float(np.deg2rad(v)) for v in args.attitude_sigma_deg)
     cv2.setNumThreads(1)
     sim = Simulator(dataclasses.replace(load_scenario(args.scenario),
                                         seconds=args.frames / 30.0))
@@ -63,8 +71,13 @@ def main() -> int:
 
     def sensors(t_us: int) -> SideSensors:
         s = sim.state_at(t_us / 1e6)
-        att = AttitudeSample(t_us, *s.attitude_rpy_rad)
-        return SideSensors(attitude=att if args.exact_attitude else noisy_attitude(att))
+        att = AttitudeSample(t_us, *s.attitude_rpy_rad, sig_rp, sig_yaw)
+        alt = None
+        if args.altitude_sigma_m is not None:  # the autopilot's height: truth + its noise
+            noise = np.random.default_rng(t_us + 1).normal(0.0, args.altitude_sigma_m)
+            alt = AltitudeSample(t_us, float(s.position_ned_m[2]) + noise, args.altitude_sigma_m)
+        return SideSensors(attitude=att if args.exact_attitude else noisy_attitude(att),
+                           altitude=alt)
 
     perception = Perception(sim.scenario.camera, landmarks, references, sensors=sensors,
                             pose_config=PoseConfig(pixel_sigma_px=args.pixel_sigma))

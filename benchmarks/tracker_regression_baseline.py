@@ -8,8 +8,12 @@ Run after an intended accuracy change:
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
-from companion.evaluation.regression import BASELINE_PATH, regression_scores
+from companion.evaluation.regression import regression_scores
+
+#: The test's fixture (tests/tracker/test_tracker_regression.py reads it).
+BASELINE_PATH = Path(__file__).resolve().parents[1] / "tests/tracker/regression_baseline.json"
 
 
 def main() -> None:

@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.pipeline.background import BackgroundLane
-from companion.pipeline.health import HealthInputs, HealthPolicy, State, health_state
+from companion.pipeline.health import Blocker, HealthInputs, HealthPolicy, State, health_state
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
 
@@ -143,7 +143,11 @@ class CompanionApp:
                  reporter: Reporter, vehicle_id: str, status_period_s: float = 1.0,
                  policy: HealthPolicy | None = None,
                  clock_s: Callable[[], float] = time.monotonic,
-                 preview: PreviewFn | None = None) -> None:
+                 preview: PreviewFn | None = None,
+                 diagnose: Callable[[], Blocker | None] | None = None,
+                 facts: dict[str, Any] | None = None) -> None:
+        """``diagnose`` names why no fix can come (:class:`companion.nofix.NoFixWatch`);
+        ``facts`` are fixed for the flight and shown in every status (e.g. the map)."""
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -153,6 +157,9 @@ class CompanionApp:
         self.policy = policy or HealthPolicy()
         self.clock_s = clock_s
         self.preview = preview
+        self.diagnose = diagnose
+        self.facts = facts or {}
+        self.blocker: Blocker | None = None
         self.counters = Counters()
         self.stats = AppStats()
         self.state: State = "starting"
@@ -165,6 +172,10 @@ class CompanionApp:
         self._last_fix_s: float | None = None
         self._ever_tracked = False
         self._recent_bad: list[bool] = []
+        #: How long :meth:`run` ran until it was asked to stop (the flight's own time).
+        self.run_s = 0.0
+        #: Why the source failed for good (None: it ended or was stopped).
+        self.source_failure: Exception | None = None
 
     # -- public -----------------------------------------------------------------------
 
@@ -184,6 +195,7 @@ class CompanionApp:
             asyncio.create_task(self._worker(), name="worker"),
             asyncio.create_task(self._status_loop(), name="status"),
         ]
+        started_s = self.clock_s()
         try:
             if seconds is None:
                 await self._stop.wait()
@@ -192,6 +204,7 @@ class CompanionApp:
         except TimeoutError:
             pass
         finally:
+            self.run_s = self.clock_s() - started_s
             await self._shutdown()
 
     # -- tasks ------------------------------------------------------------------------
@@ -211,6 +224,7 @@ class CompanionApp:
             pass
         except Exception as err:  # a source failure stops the flight cleanly, with a reason
             log.error("frame source failed: %s", err)
+            self.source_failure = err
             self.counters.source_errors += 1
             self._event("source-failed", reason=str(err))
         finally:
@@ -304,17 +318,37 @@ class CompanionApp:
 
     def _update_health(self) -> None:
         bad_ratio = sum(self._recent_bad) / len(self._recent_bad) if self._recent_bad else 0.0
+        blocker = self.diagnose() if self.diagnose is not None else None
         state = health_state(
             HealthInputs(self.clock_s(), self.counters.frames, self._last_frame_s,
-                         self._last_fix_s, self._ever_tracked, self.sink.link_up, bad_ratio),
+                         self._last_fix_s, self._ever_tracked, self.sink.link_up, bad_ratio,
+                         blocker),
             self.policy,
         )
+        self._note_blocker(blocker if state == "blocked" else None)
         self.sink.set_health(state)  # every time: the heartbeat shows the app is alive
         if state != self.state:
             old, self.state = self.state, state
             log.info("health %s -> %s", old, state)
             self._event("health", old=old, new=state)
             self.reporter.report("status", now_us(), self.status())
+
+    def report_event(self, name: str, fields: dict[str, Any]) -> None:
+        """Publish an event (monitoring and the flight log) stamped now."""
+        self._event(name, **fields)
+
+    def _note_blocker(self, blocker: Blocker | None) -> None:
+        """Log and publish a change of the reason no fix can come (its detail, e.g. how
+        long the link has been silent, is refreshed in the status without a new event)."""
+        previous, self.blocker = self.blocker, blocker
+        if (previous and previous.cause) == (blocker and blocker.cause):
+            return
+        if blocker is not None:
+            log.warning("no fix can come: %s: %s", blocker.cause, blocker.detail)
+            self._event("no-fix", **blocker.as_dict())
+        elif previous is not None:
+            log.info("no longer blocked (%s)", previous.cause)
+            self._event("no-fix-cleared", cause=previous.cause)
 
     def _event(self, name: str, **fields: Any) -> None:
         self.reporter.report("events", now_us(), {"event": name, **fields})
@@ -329,6 +363,7 @@ class CompanionApp:
         return {
             "vehicle": self.vehicle_id,
             "state": self.state,
+            "no_fix_cause": None if self.blocker is None else self.blocker.as_dict(),
             "fps": round(self.stats.fps.rate(self.clock_s()), 2),
             "latency_ms": self.stats.capture_to_wire_ms.summary(),
             "link": "up" if self.sink.link_up else "down",
@@ -337,6 +372,7 @@ class CompanionApp:
             "source": source,
             "autopilot_streams": streams() if callable(streams) else {},
             "warnings": warnings() if callable(warnings) else [],
+            **self.facts,
         }
 
     async def _shutdown(self) -> None:

@@ -2,16 +2,14 @@
 
 ``tracker`` and ``mavlink_bridge`` do not know each other; this module converts a
 :class:`tracker.pose.types.PoseFix` into the bridge's :class:`VisionFix`, decides when a
-fix is a deliberate jump (``reset_counter``), and turns the autopilot's telemetry into the
-side samples the pose solver uses.
+fix is a deliberate jump (``reset_counter``), and follows the pipeline's health.  The
+autopilot's side sensors for the pose solver: :mod:`companion.sensors`.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import math
-from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,7 +19,7 @@ from companion.pipeline.health import State
 from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.link import HealthState
 from mavlink_bridge.messages import VisionFix
-from tracker.pose.types import AttitudeSample, PoseFix
+from tracker.pose.types import PoseFix
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +29,7 @@ RESET_SIGMAS = 5.0
 #: The pipeline's state as the heartbeat's health (MAV_STATE via the link).
 HEARTBEAT_HEALTH: dict[State, HealthState] = {
     "starting": "starting", "searching": "ok", "tracking": "ok", "lost": "degraded",
-    "degraded": "degraded", "link-down": "ok",
+    "degraded": "degraded", "link-down": "ok", "blocked": "degraded",
 }
 
 
@@ -87,7 +85,7 @@ class BridgeSink:
         self.bridge.report_health(HEARTBEAT_HEALTH[state])
         if state != self._last_state:
             self._last_state = state
-            if state in ("tracking", "lost", "degraded"):
+            if state in ("tracking", "lost", "degraded", "blocked"):
                 self.bridge.statustext(state)
 
     async def send_fix(self, fix: Any) -> bool:
@@ -113,49 +111,3 @@ class BridgeSink:
             return None
         v = item.value
         return [round(float(v.north_m), 3), round(float(v.east_m), 3), round(float(v.down_m), 3)]
-
-
-class AttitudeHistory:
-    """The autopilot's recent ATTITUDE messages, to look up the attitude at a frame's time.
-
-    A frame is solved some milliseconds after it was captured; the attitude that belongs
-    to it is the one of its capture time, interpolated between the two nearest samples
-    (stamped with their arrival on the companion's clock).
-    """
-
-    def __init__(self, bridge: VisionBridge, keep: int = 200) -> None:
-        self.bridge = bridge
-        self._samples: deque[tuple[int, float, float, float]] = deque(maxlen=keep)
-        self._task: asyncio.Task[None] | None = None
-
-    def start(self) -> None:
-        """Follow the bridge's ATTITUDE stream until :meth:`stop`."""
-        self._task = asyncio.create_task(self._follow(), name="attitude-history")
-
-    async def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            await asyncio.gather(self._task, return_exceptions=True)
-
-    async def _follow(self) -> None:
-        async for item in self.bridge.subscribe("ATTITUDE"):
-            v = item.value
-            self._samples.append((item.received_ns // 1000, float(v.roll_rad),
-                                  float(v.pitch_rad), float(v.yaw_rad)))
-
-    def at(self, t_us: int, max_gap_us: int = 100_000) -> AttitudeSample | None:
-        """The attitude at ``t_us`` (interpolated; yaw the short way round), or None."""
-        samples = list(self._samples)  # a copy: the event loop appends while we read
-        if not samples:
-            return None
-        after = next((i for i, s in enumerate(samples) if s[0] >= t_us), None)
-        if after is None or after == 0:
-            near = samples[-1] if after is None else samples[0]
-            if abs(near[0] - t_us) > max_gap_us:
-                return None
-            return AttitudeSample(t_us, near[1], near[2], near[3])
-        a, b = samples[after - 1], samples[after]
-        f = (t_us - a[0]) / max(b[0] - a[0], 1)
-        dyaw = math.remainder(b[3] - a[3], math.tau)
-        return AttitudeSample(t_us, a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]),
-                              math.remainder(a[3] + f * dyaw, math.tau))

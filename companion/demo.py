@@ -16,6 +16,7 @@ import math
 import os
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -23,10 +24,11 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp
-from companion.autopilot import AttitudeHistory
 from companion.landmarks.geodesy import LocalFrame
+from companion.monitoring.config import local_meeting
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, detector_for, fly, perception_for
+from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
@@ -34,6 +36,7 @@ from companion.sim.source import SimCameraSource
 from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.fake_drift import AttitudeErrorConfig
+from tracker.pose.scenarios import NEES_HIGH_3DOF, NEES_LOW_3DOF
 from tracker.pose.types import MapLandmark, PoseFix
 
 log = logging.getLogger(__name__)
@@ -70,6 +73,12 @@ class TruthRecorder(PerceptionWrapper):
         return result
 
 
+def nees_3d(fix: PoseFix, truth: tuple[float, float, float]) -> float:
+    """``e^T P_pos^-1 e`` of a fix against the truth (chi-square, 3 DOF, if consistent)."""
+    e = np.asarray(fix.position_ned_m) - np.asarray(truth)
+    return float(e @ np.linalg.solve(np.asarray(fix.covariance)[:3, :3], e))
+
+
 def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarray]]:
     """The practical map (NED) and appearance references of the simulated world."""
     landmarks, references = [], {}
@@ -84,17 +93,33 @@ def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarr
 
 async def run_demo(settings: Settings, scenario: str, seconds: float,
                    progress: Callable[[str], None] | None = None,
-                   attitude_error: bool = False) -> dict[str, Any]:
+                   attitude_error: bool = False,
+                   deployment_prior: bool = False) -> dict[str, Any]:
     """Run the embedded demo and return its summary (see :func:`summary`).
 
-    ``attitude_error``: the fake autopilot's ATTITUDE carries the slowly varying error the
-    pose solver assumes (0.2 deg roll/pitch, 1 deg yaw), as a real one's estimate does;
-    off, it reports the simulator's exact attitude (docs/decisions.md).
+    ``attitude_error``: the fake autopilot's ATTITUDE carries a slowly varying error (0.2 deg
+    roll/pitch, 1 deg yaw), as a real one's estimate does; off, it reports the simulator's
+    exact attitude (docs/decisions.md).  The pose solver is told the fake autopilot's own
+    accuracy (0.2 deg / 1 deg: its attitude is that good by construction) unless
+    ``deployment_prior``: then the configured sigmas (a few degrees, for a real autopilot
+    whose attitude is itself made of our fixes, docs/decisions.md).
     """
+    settings = dataclasses.replace(settings, monitor=local_meeting(settings.monitor))
+    if settings.monitor.enabled:
+        m = settings.monitor
+        log.info("monitoring on Zenoh: %s (companion monitor or dashboard in another terminal "
+                 "shows this flight)", ", ".join(f"listening on {e}" for e in m.listen)
+                 or ", ".join(f"connected to {e}" for e in m.connect))
+    if not deployment_prior:
+        fake_att = AttitudeErrorConfig()
+        settings = dataclasses.replace(settings, pose=dataclasses.replace(
+            settings.pose, attitude_roll_pitch_sigma_deg=fake_att.roll_pitch_sigma_deg,
+            attitude_yaw_sigma_deg=fake_att.yaw_sigma_deg))
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin
-    pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m))
+    pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m),
+                        described=f"the simulated world of scenario {scenario!r}")
     detector_for(settings)  # load the detector now, not on the camera's clock (and fail early)
     # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
     drift = AttitudeErrorConfig() if attitude_error else None
@@ -110,8 +135,8 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
                         set_origin=True)
     recorders: list[TruthRecorder] = []
 
-    def processor(attitude: AttitudeHistory) -> TruthRecorder:
-        perception = perception_for(settings, sim.scenario.camera, pmap, attitude)
+    def processor(sensors: SensorHistory) -> TruthRecorder:
+        perception = perception_for(settings, sim.scenario.camera, pmap, sensors)
         recorders.append(TruthRecorder(perception, source,
                                        {lm.landmark_id: lm for lm in landmarks}))
         return recorders[0]
@@ -119,7 +144,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     tickers: list[asyncio.Task[None]] = []
     cpu0, wall0 = os.times(), time.monotonic()
     try:
-        app = await fly(settings, source, bridge, processor, landmarks, seconds=seconds + 5.0,
+        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds + 5.0,
                         prefix="demo", on_start=lambda a: tickers.append(asyncio.create_task(
                             _progress(a, fake, seconds, progress))))
     finally:
@@ -158,15 +183,19 @@ def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result
     ``cpu_cores_busy_total`` is the whole process.  The keys the README and the issue
     name, and a few more."""
     errors = [math.dist(fix.position_ned_m, truth) for fix, truth, _ in result.fixes]
+    nees = [nees_3d(fix, truth) for fix, truth, _ in result.fixes]
     dists = [d for _, _, d in result.fixes if math.isfinite(d)]
     rmse = float(np.sqrt(np.mean(np.square(errors)))) if errors else None
     mean_dist = float(np.mean(dists)) if dists else None
     lat = app.stats.capture_to_wire_ms
     sent = app.counters.fixes_sent
     accepted = len(fake.accepted())
+    flown_s = min(source.seconds, app.run_s) if app.run_s > 0 else source.seconds
     return {
         "frames": app.counters.frames,
-        "fps": round(app.counters.frames / max(source.seconds, 1e-9), 2),
+        # frames over the time actually flown: a flight stopped early (Ctrl-C) is shorter
+        "fps": round(app.counters.frames / max(flown_s, 1e-9), 2),
+        "flown_s": round(flown_s, 2),
         "fixes_sent": sent,
         "fixes_accepted": accepted,
         "fixes_accepted_ratio": round(accepted / sent, 4) if sent else None,
@@ -182,9 +211,24 @@ def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result
         "stage_ms": {"capture_to_worker": app.stats.queue_ms.summary(),
                      "process": app.stats.process_ms.summary()},
         "no_fix_frames": app.counters.no_fix,
+        "nees_inside_95": round(float(np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF
+                                               for n in nees])), 3) if nees else None,
+        "attitude_prior_rejected": sum(f.attitude_prior == "rejected" for f, _, _ in
+                                       result.fixes),
+        "solvers": dict(Counter(f.solver for f, _, _ in result.fixes)),
+        "position_rmse_m_by_solver": _rmse_by_solver(result),
         "autopilot_rejections": fake.summary()["vision_reasons"],
         "bridge": {k: v for k, v in bridge.stats().items() if isinstance(v, int | float | str)},
     }
+
+
+def _rmse_by_solver(result: DemoResult) -> dict[str, float]:
+    """Position RMSE (m) of the fixes of each solver: one-landmark box fixes are weak (their
+    covariance says so) and weigh on the all-fix RMSE out of proportion to their number."""
+    errors: dict[str, list[float]] = {}
+    for fix, truth, _ in result.fixes:
+        errors.setdefault(fix.solver, []).append(math.dist(fix.position_ned_m, truth))
+    return {k: round(float(np.sqrt(np.mean(np.square(v)))), 4) for k, v in errors.items()}
 
 
 def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
@@ -193,13 +237,16 @@ def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
         return "-" if v is None else f"{v}{unit}"
 
     lines = [
-        f"frames            {s['frames']}  ({f(s['fps'])} fps, {s['dropped_frames']} dropped)",
+        f"frames            {s['frames']} in {f(s.get('flown_s'), ' s')}  ({f(s['fps'])} fps, "
+        f"{s['dropped_frames']} dropped)",
         f"fixes sent        {s['fixes_sent']}",
         f"fixes accepted    {s['fixes_accepted']} by the fake autopilot "
         f"({f(s['fixes_accepted_ratio'] and round(100 * s['fixes_accepted_ratio'], 1), ' %')})",
         f"position RMSE     {f(s['position_rmse_m'], ' m')} at a mean "
         f"{f(s['mean_landmark_distance_m'], ' m')} from the landmarks "
         f"({f(s['position_rmse_pct_of_distance'], ' %')})",
+        f"NEES inside 95 %  {f(s['nees_inside_95'])} of the fixes (attitude prior "
+        f"rejected for {s['attitude_prior_rejected']})",
         f"latency           p50 {f(s['latency_p50_ms'], ' ms')}  p99 "
         f"{f(s['latency_p99_ms'], ' ms')} (capture -> on the wire)",
         f"cpu               {s['cpu_cores_busy']} cores busy on average by the companion "

@@ -7,8 +7,10 @@ Runs in the pipeline's worker thread (synchronous, no asyncio).  For each frame:
 2. its four corners are refined by aligning the landmark's appearance reference onto the
    frame (ECC), started from the last homography moved with the tracker's box -- the
    tracker says *where*, the alignment says *exactly where the corners are*;
-3. the observations go to the pose solver with the latest attitude / altitude / range from
-   the autopilot.
+3. the observations go to the pose solver with the autopilot's attitude, height and range
+   at the frame's capture time (``sensors``, :class:`companion.sensors.SensorHistory` in a
+   flight); a fix for which the solver rejected the attitude is an event
+   ("attitude prior rejected") and counted in ``attitude_rejections``.
 
 :meth:`Perception.housekeeping` (after the fix is out, on the pipeline's background
 thread, possibly while :meth:`Perception.process` works on a later frame) looks for map
@@ -130,6 +132,8 @@ class Perception:
         self._search_turn = 0
         self.detect = detect
         self._seed = seed
+        #: fixes for which the autopilot's attitude disagreed with the landmarks' (not used)
+        self.attitude_rejections = 0
         self._frames = 0
 
     def process(self, frame: Frame) -> FrameResult:
@@ -433,6 +437,8 @@ class Perception:
 
         When some tracks have corners, box-only tracks are left out: a box centre is not
         the landmark's centre under perspective, and mixing it in costs more than it adds.
+        Without corners, a box that reaches out of the image is left out too: its centre is
+        off its plate's by up to half the part out of view.
         """
         out = []
         size = (self.camera.width, self.camera.height)
@@ -444,6 +450,8 @@ class Perception:
         tracks = list(self.tracks.values())
         if any(usable.values()):
             tracks = [t for t in tracks if usable[t.landmark_id]]
+        else:  # boxes only: a box reaching out of the image is not centred on its plate
+            tracks = [t for t in tracks if inside(box_corners(t.box), *size, margin=1.0)]
         for t in tracks:
             x, y, w, h = t.box
             corners = None if t.corners is None or not usable[t.landmark_id] else tuple(
@@ -502,6 +510,11 @@ class Perception:
         if isinstance(fix, NoFix):
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
                                particles=particles)
+        if fix.attitude_prior == "rejected":
+            self.attitude_rejections += 1
+            why = next(n for n in fix.notes if n.startswith("attitude prior rejected"))
+            events.append({"event": "attitude prior rejected", "detail": why,
+                           "count": self.attitude_rejections})
         if not self.gate.admit(fix):
             return FrameResult(frame.index, frame.t_us, tracks, None,
                                "held back: inconsistent with recent fixes", tuple(events),
@@ -540,4 +553,5 @@ def pose_json(fix: PoseFix) -> dict[str, Any]:
         "quality": fix.quality,
         "landmark_ids": list(fix.landmark_ids),
         "solver": fix.solver,
+        "attitude_prior": fix.attitude_prior,
     }

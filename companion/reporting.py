@@ -22,6 +22,7 @@ class Reporter:
         self.flightlog = flightlog
         self.monitor = monitor
         self.failures = 0
+        self._told_flightlog_stopped = False
 
     def report(self, topic: str, t_us: int, data: dict[str, Any]) -> None:
         """Log and publish one payload; a failing sink is counted, never fatal."""
@@ -31,12 +32,27 @@ class Reporter:
             except (OSError, ValueError) as err:
                 self.failures += 1
                 log.warning("flight log write failed: %s", err)
+            self._tell_flightlog_stopped(t_us)
         if self.monitor is not None:
             try:
                 self.monitor.publish_json(topic, {"t_us": t_us, **data})
             except Exception as err:  # zenoh raises its own ZError
                 self.failures += 1
                 log.warning("monitor publish failed: %s", err)
+
+    def _tell_flightlog_stopped(self, t_us: int) -> None:
+        """Once, when the flight log stopped (full disk): an event on Zenoh, which still
+        works, so whoever watches the flight sees it (docs/flightlog.md)."""
+        failure = None if self.flightlog is None else self.flightlog.failure
+        if failure is None or self._told_flightlog_stopped or self.monitor is None:
+            return
+        self._told_flightlog_stopped = True
+        try:
+            self.monitor.publish_json("events", {"t_us": t_us, "event": "flightlog-stopped",
+                                                 "reason": failure})
+        except Exception as err:  # zenoh raises its own ZError
+            self.failures += 1
+            log.warning("monitor publish failed: %s", err)
 
     def preview_due(self) -> bool:
         """True when a preview would be published now (so it is only drawn when needed)."""

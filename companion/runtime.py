@@ -1,9 +1,8 @@
 """Assembling a flight: the parts ``companion run`` and ``companion demo`` share.
 
-:func:`load_practical_map` turns the configured landmark map into the pose solver's map
-(local NED about the EKF origin) and the appearance references the acquisition looks for;
-:func:`fly` wires a source, a perception and a bridge into a :class:`CompanionApp`, runs
-it until the source ends, a signal or a time limit, and tears everything down in order.
+The flight's landmark map comes from :mod:`companion.flightmap`; :func:`fly` wires a
+source, a perception and a bridge into a :class:`CompanionApp`, runs it until the source
+ends, a signal or a time limit, and tears everything down in order.
 """
 
 from __future__ import annotations
@@ -11,91 +10,48 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import logging
 import signal
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import cv2
-import numpy as np
-import numpy.typing as npt
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.autopilot import AttitudeHistory, BridgeSink
-from companion.errors import ConfigError, InputError
+from companion.autopilot import BridgeSink
+from companion.errors import ConfigError, InputError, note_stop_signal
 from companion.flightlog import FlightLogWriter
-from companion.landmarks.geodesy import LocalFrame
-from companion.landmarks.geojson_io import read_map
-from companion.landmarks.record import Landmark
+from companion.flightmap import PracticalMap, acquisition_report, log_report, static_blocker
+from companion.monitoring.config import MonitorConfig
 from companion.monitoring.publisher import MonitorPublisher
-from companion.perception import DetectFn, Perception, PerceptionWrapper, SideSensors
+from companion.nofix import AttitudeSource, NoFixWatch
+from companion.perception import DetectFn, Perception, PerceptionWrapper
 from companion.preview import render_preview
 from companion.reporting import Reporter
+from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
+from mavlink_bridge.errors import BackendError
 from mavlink_bridge.streams import needed_streams
 from tracker.camera import CameraModel
 from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
 
-ImageU8 = npt.NDArray[np.uint8]
+__all__ = ["PracticalMap", "bridge_for", "detector_for", "fly", "noise_status", "perception_for"]
 
 
-@dataclass(frozen=True)
-class PracticalMap:
-    """The landmarks of this flight in local NED, and the images to look for."""
-
-    landmarks: tuple[MapLandmark, ...]
-    references: dict[str, ImageU8]
-    origin: LocalFrame
-
-
-def reference_image(lm: Landmark) -> ImageU8 | None:
-    """The landmark's appearance reference, cropped to its box, or None."""
-    if lm.appearance is None:
-        return None
-    image = cv2.imdecode(np.frombuffer(lm.appearance.data, np.uint8), cv2.IMREAD_COLOR)
-    if image is None:
-        raise InputError(f"landmark {lm.id}: appearance: cannot decode the image")
-    if lm.appearance.box_px is not None:
-        x, y, w, h = lm.appearance.box_px
-        image = image[y:y + h, x:x + w]
-    return np.asarray(image, np.uint8)
-
-
-def load_practical_map(settings: Settings) -> PracticalMap:
-    """Read ``landmarks.map_path`` and place it about the configured EKF origin."""
-    mav = settings.mavlink
-    if mav.origin_lat_deg == 0.0 and mav.origin_lon_deg == 0.0:
-        raise ConfigError("mavlink.origin_lat_deg, mavlink.origin_lon_deg: expected the EKF "
-                          "origin (WGS84) that the landmark map is placed about, got 0, 0")
-    path = settings.landmarks.map_path
-    if not path or not Path(path).is_file():
-        raise InputError(f"{path or 'landmarks.map_path'}: no landmark map (set "
-                         "landmarks.map_path to a GeoJSON file: companion landmarks export "
-                         "writes one)")
-    frame = LocalFrame(mav.origin_lat_deg, mav.origin_lon_deg, mav.origin_alt_m)
-    records = [lm for lm in read_map(path) if lm.status != "rejected"]
-    landmarks, references = [], {}
-    for lm in records:
-        n, e, d = (float(v) for v in frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m))
-        landmarks.append(MapLandmark(lm.id, (n, e, d), lm.width_m, lm.height_m,
-                                     lm.facing_deg, lm.category))
-        image = reference_image(lm)
-        if image is not None:
-            references[lm.id] = image
-    return PracticalMap(tuple(landmarks), references, frame)
-
+log = logging.getLogger(__name__)
 
 def reporter_for(settings: Settings, landmarks: tuple[MapLandmark, ...] | list[MapLandmark],
                  prefix: str) -> Reporter:
     """Flight log in ``flightlog.dir`` and, when enabled, Zenoh monitoring."""
-    name = time.strftime(f"{prefix}-%Y%m%d-%H%M%S.jsonl")
-    flightlog = FlightLogWriter(Path(settings.flightlog.dir) / name, settings.vehicle.id,
-                                settings.flightlog.fsync_interval_s)
+    name = time.strftime(f"{prefix}-%Y%m%d-%H%M%S.jsonl")  # the writer makes it unique
+    fl = settings.flightlog
+    flightlog = FlightLogWriter(Path(fl.dir) / name, settings.vehicle.id, fl.fsync_interval_s,
+                                max_file_bytes=round(fl.max_file_mb * 1e6))
     monitor = None
     if settings.monitor.enabled:
         providers: dict[str, Callable[[], Any]] = {
@@ -129,53 +85,54 @@ def detector_for(settings: Settings) -> DetectFn | None:
 
 
 def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
-                   attitude: AttitudeHistory) -> Perception:
+                   sensors: SensorHistory) -> Perception:
     """The per-frame work with the configured tracker, acquisition, pose and gate."""
     return Perception(camera, pmap.landmarks, pmap.references, detect=detector_for(settings),
-                      sensors=lambda t_us: SideSensors(attitude=attitude.at(t_us)),
+                      sensors=sensors,
                       config=settings.perception, tracker_config=settings.tracker,
                       pose_config=settings.pose, acquire_config=settings.acquire,
                       gate_config=settings.fixgate)
 
 
 async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
-              make_processor: Callable[[AttitudeHistory], Perception | PerceptionWrapper],
-              landmarks: tuple[MapLandmark, ...] | list[MapLandmark], *,
-              seconds: float | None = None, prefix: str = "flight",
-              on_start: Callable[[CompanionApp], None] | None = None) -> CompanionApp:
+              make_processor: Callable[[SensorHistory], Perception | PerceptionWrapper],
+              pmap: PracticalMap, *, seconds: float | None = None, prefix: str = "flight",
+              on_start: Callable[[CompanionApp], None] | None = None,
+              attitude: AttitudeSource | None = None) -> CompanionApp:
     """Run one flight to its end; SIGINT/SIGTERM stop it cleanly.  Returns the app.
 
-    Everything that can fail on bad input (the processor: a detector model, references)
-    is built before anything is started, so such a failure leaves nothing running.
+    ``attitude``: where frames' attitude comes from (default: the autopilot's ATTITUDE
+    through the bridge).  Everything that can fail on bad input (the processor: a
+    detector model, references) is built before anything is started, so such a failure
+    leaves nothing running.  The map's acquisition report is logged, published (an
+    ``map`` event and the status' ``map``) and, with the bridge and the attitude, feeds
+    the diagnosis of why no fix can come (:class:`companion.nofix.NoFixWatch`).
     OpenCV runs single-threaded: the pipeline's own threads use the cores
-    (``companion.LIBRARY_THREAD_VARS`` says why).
+    (``companion.launch`` says why).
     """
     cv2.setNumThreads(1)
-    attitude = AttitudeHistory(bridge)
-    processor = make_processor(attitude)
-    mon = settings.monitor
-
-    def preview(frame: Frame, result: FrameResult) -> bytes:
-        caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
-        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
-                  for t in result.tracks]
-        return render_preview(frame.image, tracks, mon.preview_width_px,
-                              mon.preview_jpeg_quality, caption)
-
+    sensors = SensorHistory(bridge, settings.pose, attitude=attitude)
+    processor = make_processor(sensors)
     try:
-        reporter = reporter_for(settings, landmarks, prefix)
+        report, watch = _diagnosis(settings, pmap, processor, bridge, sensors)
     except BaseException:
         processor.close()
         raise
+    mon = settings.monitor
     loop = asyncio.get_running_loop()
+    reporter: Reporter | None = None
     try:
-        await bridge.start()
-        attitude.start()
+        await bridge.start()  # first: a link that cannot open leaves no empty flight log
+        reporter = reporter_for(settings, pmap.landmarks, prefix)
+        sensors.start()
         app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
-                           settings.vehicle.id, 1.0 / mon.status_rate_hz, preview=preview)
+                           settings.vehicle.id, 1.0 / mon.status_rate_hz,
+                           preview=preview_for(mon), diagnose=watch,
+                           facts={"map": _map_summary(report), "noise": noise_status(settings)})
+        app.report_event("map", report)
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
-                loop.add_signal_handler(sig, app.request_stop)
+                loop.add_signal_handler(sig, _stop_by_signal, app, sig)
         if on_start is not None:
             on_start(app)
         await app.run(seconds)
@@ -186,9 +143,10 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
         close = getattr(source, "close", None)
         if callable(close):
             close()
-        await attitude.stop()
+        await sensors.stop()
         await bridge.stop()
-        reporter.close()
+        if reporter is not None:
+            reporter.close()
         processor.close()
     return app
 
@@ -207,6 +165,51 @@ def stream_rates(settings: Settings) -> tuple[tuple[str, float], ...]:
     specs = needed_streams(fps, profile=settings.vehicle.profile,
                            rangefinder=settings.pose.rangefinder, follow=follow)
     return tuple((s.name, s.rate_hz) for s in specs)
+def preview_for(mon: MonitorConfig) -> Callable[[Frame, FrameResult], bytes]:
+    """Draws a frame's preview (boxes, particles, the fix or why there is none)."""
+    def preview(frame: Frame, result: FrameResult) -> bytes:
+        caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
+        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
+                  for t in result.tracks]
+        return render_preview(frame.image, tracks, mon.preview_width_px,
+                              mon.preview_jpeg_quality, caption)
+    return preview
+
+
+def _diagnosis(settings: Settings, pmap: PracticalMap,
+               processor: Perception | PerceptionWrapper, bridge: VisionBridge,
+               attitude: AttitudeSource) -> tuple[dict[str, Any], NoFixWatch]:
+    """The map's acquisition report (logged) and the watch that names why no fix comes."""
+    perception = processor.perception if isinstance(processor, PerceptionWrapper) \
+        else processor
+    report = acquisition_report(pmap, perception)
+    log_report(report)
+    static = static_blocker(pmap, report, settings.landmarks.max_origin_distance_m)
+    return report, NoFixWatch(static, bridge, attitude, perception.camera, pmap.landmarks,
+                              settings.mavlink.endpoint)
+
+
+def _map_summary(report: dict[str, Any]) -> dict[str, Any]:
+    """The status' ``map``: counts and the reasons, not the full lists of ids."""
+    return {"from": report["from"], "loaded": len(report["loaded"]),
+            "with_reference": len(report["with_reference"]),
+            "cannot_acquire": report["cannot_acquire"]}
+
+
+def noise_status(settings: Settings) -> str:
+    """``"measured"``, or ``"uncalibrated"`` (logged as a warning) while the pixel noise is
+    the deployment's conservative default: the covariance sent is then a guess."""
+    if settings.noise_measured:
+        return "measured"
+    log.warning("uncalibrated noise: pose.pixel_sigma_px = %g is the conservative default, "
+                "not measured on this camera (docs/deploy.md: companion calibrate noise)",
+                settings.pose.pixel_sigma_px)
+    return "uncalibrated"
+
+
+def _stop_by_signal(app: CompanionApp, signum: int) -> None:
+    note_stop_signal(signum)  # the CLI exits 128 + signum once the flight is wound down
+    app.request_stop()
 
 
 def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
@@ -216,4 +219,7 @@ def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
 
     overrides.setdefault("streams", stream_rates(settings))
     cfg = dataclasses.replace(settings.mavlink, profile=settings.vehicle.profile, **overrides)
-    return create_bridge(cfg)
+    try:
+        return create_bridge(cfg)
+    except BackendError as err:  # e.g. the mavsdk extra is not installed: one line
+        raise ConfigError(str(err)) from None

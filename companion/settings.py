@@ -2,7 +2,9 @@
 
 Layers, later ones win (tables merge key by key, lists are replaced):
 
-1. ``config/default.toml`` (with the files it ``include``-s, e.g. the camera model);
+1. ``config/default.toml``: the deployment's defaults (a real camera, conservative noise);
+   then the shipped layers a command asks for, e.g. ``config/sim.toml`` (the simulator's
+   camera and the values calibrated on its rendered plates) for ``demo`` and ``synth``;
 2. the vehicle profile ``config/<vehicle.profile>.toml`` (``ardupilot`` or ``px4``);
 3. each ``--config FILE`` in order (a file may ``include = ["other.toml"]`` too);
 4. each ``--set section.key=value`` in order (the value is read as a TOML value; a bare
@@ -28,6 +30,7 @@ from companion.fixgate import FixGateConfig
 from companion.landmarks.config import LandmarksConfig
 from companion.monitoring.config import MonitorConfig
 from companion.perception import PerceptionConfig
+from companion.resources import config_dir
 from companion.sources.config import SourceConfig
 from companion.validate import FieldError, build
 from mavlink_bridge.config import MavlinkConfig
@@ -39,6 +42,12 @@ from tracker.pose.config import PoseConfig
 
 PROFILES = ("ardupilot", "px4")
 SET_SOURCE = "--set"
+#: The origin of a key no layer set: the dataclass field's default.
+BUILT_IN = "built-in default"
+#: The key whose origin says whether the pixel noise was measured (docs/deploy.md).
+NOISE_KEY = "pose.pixel_sigma_px"
+#: The simulator's shipped layer (config/sim.toml), for commands that fly the simulator.
+SIM_LAYERS = ("sim",)
 
 
 @dataclass(frozen=True)
@@ -59,10 +68,12 @@ class LoggingConfig:
 
 @dataclass(frozen=True)
 class FlightLogConfig:
-    """Where the flight log goes (relative to the working directory) and how often it syncs."""
+    """Where the flight log goes (relative to the working directory), how often it syncs and
+    the size at which it rotates to a new part (0: never)."""
 
     dir: str = field(default="flightlogs", metadata={"min_len": 1})
     fsync_interval_s: float = field(default=1.0, metadata={"gt": 0, "le": 10})
+    max_file_mb: float = field(default=100.0, metadata={"ge": 0})
 
 
 @dataclass(frozen=True)
@@ -85,11 +96,20 @@ class Settings:
     flightlog: FlightLogConfig = field(default_factory=FlightLogConfig)
     #: The files that were read, in order (set by the loader, not by users).
     config_files: tuple[str, ...] = field(default=(), metadata={"internal": True})
+    #: (dotted key, the layer that set it) for every key a layer set (set by the loader).
+    origins: tuple[tuple[str, str], ...] = field(default=(), metadata={"internal": True})
+    #: The shipped default.toml as shown in ``config_files`` (set by the loader).
+    default_file: str = field(default="", metadata={"internal": True})
 
+    def origin_of(self, key: str) -> str:
+        """Which layer set ``key`` (a file as shown, ``--set``) or :data:`BUILT_IN`."""
+        return dict(self.origins).get(key, BUILT_IN)
 
-def config_dir() -> Path:
-    """The directory holding the shipped configuration (``config/`` of the project)."""
-    return Path(__file__).resolve().parent.parent / "config"
+    @property
+    def noise_measured(self) -> bool:
+        """False while ``pose.pixel_sigma_px`` is the shipped conservative default: the
+        status then says "uncalibrated noise" (``companion calibrate noise`` measures it)."""
+        return self.origin_of(NOISE_KEY) not in (BUILT_IN, self.default_file)
 
 
 def display_path(path: Path) -> str:
@@ -144,6 +164,9 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{shown}: cannot read: {err.strerror}") from None
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{shown}: invalid TOML: {err}") from None
+    except UnicodeDecodeError as err:  # TOML is UTF-8 (a Latin-1 or UTF-16 file lands here)
+        raise ConfigError(f"{shown}: not UTF-8 text (byte {err.start}: {err.reason}); "
+                          "save the file as UTF-8") from None
 
 
 def _load_file(layers: _Layers, path: Path, seen: tuple[Path, ...] = ()) -> None:
@@ -179,10 +202,13 @@ def _nest(key: str, value: Any) -> dict[str, Any]:
     return {head: _nest(rest, value) if rest else value}
 
 
-def _gather(config_files: Sequence[Path], sets: Sequence[str], profile: str | None) -> _Layers:
+def _gather(config_files: Sequence[Path], sets: Sequence[str], profile: str | None,
+            shipped: Sequence[str]) -> _Layers:
     layers = _Layers()
     root = config_dir()
     _load_file(layers, root / "default.toml")
+    for name in shipped:
+        _load_file(layers, root / f"{name}.toml")
     if profile is not None:
         _load_file(layers, root / f"{profile}.toml")
     for path in config_files:
@@ -193,12 +219,17 @@ def _gather(config_files: Sequence[Path], sets: Sequence[str], profile: str | No
     return layers
 
 
-def load_settings(config_files: Sequence[Path] = (), sets: Sequence[str] = ()) -> Settings:
-    """Read, merge and validate every layer; raise ConfigError with one clear line."""
-    layers = _gather(config_files, sets, None)
+def load_settings(config_files: Sequence[Path] = (), sets: Sequence[str] = (),
+                  shipped: Sequence[str] = ()) -> Settings:
+    """Read, merge and validate every layer; raise ConfigError with one clear line.
+
+    ``shipped``: names of shipped layers read right after default.toml (``("sim",)`` for
+    the simulator's: ``companion demo``, ``synth`` and the scenario tests).
+    """
+    layers = _gather(config_files, sets, None, shipped)
     profile = layers.data.get("vehicle", {}).get("profile", PROFILES[0])
     if profile in PROFILES and (config_dir() / f"{profile}.toml").is_file():
-        layers = _gather(config_files, sets, profile)
+        layers = _gather(config_files, sets, profile, shipped)
 
     def resolve(key: str, value: str) -> str:
         base = layers.base_dir.get(key.split("[", 1)[0], Path.cwd())
@@ -208,4 +239,8 @@ def load_settings(config_files: Sequence[Path] = (), sets: Sequence[str] = ()) -
         settings = build(Settings, layers.data, resolve_path=resolve)
     except FieldError as err:
         raise ConfigError(f"{layers.source_of(err.key)}: {err.key}: {err.message}") from None
-    return dataclasses.replace(settings, config_files=tuple(layers.files))
+    return dataclasses.replace(
+        settings, config_files=tuple(layers.files),
+        default_file=display_path(config_dir() / "default.toml"),
+        origins=tuple((key, source) for key, source in layers.origin.items()
+                      if key in layers.base_dir))

@@ -5,6 +5,7 @@ Every component keeps its configuration as a frozen stdlib dataclass in its own 
 
 * its type: ``int``, ``float``, ``bool``, ``str``, ``typing.Literal[...]``, ``tuple[T, ...]``,
   ``tuple[T1, T2]``, ``T | None`` (only as a default: TOML has no null) or another dataclass;
+* every number must be finite (TOML's ``inf`` and ``nan`` are refused);
 * optional constraints in ``field(metadata=...)``: ``ge``, ``gt``, ``le``, ``lt`` (numbers),
   ``min_len`` (strings and lists), and ``path=True`` for a file path that is resolved
   relative to the config file that set it.
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import re
 import types
 import typing
@@ -46,6 +48,8 @@ def show_value(value: object) -> str:
         return "true" if value else "false"
     if isinstance(value, Mapping):
         return "a table"
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)  # inf, -inf, nan as TOML spells them
     try:
         return json.dumps(value, default=str)
     except (TypeError, ValueError):
@@ -159,6 +163,8 @@ def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any],
         if not ok or isinstance(value, bool):
             raise fail()
         number = tp(value)
+        if not math.isfinite(number):  # TOML's inf and nan: no setting means either
+            raise FieldError(key, f"expected a finite number, got {show_value(value)}")
         if not all(check(number, meta[k]) for k, _, check in _BOUNDS if k in meta):
             raise fail()
         return number

@@ -13,6 +13,7 @@ from collections.abc import AsyncGenerator, Callable
 from typing import Any, Protocol
 
 from mavlink_bridge.config import MavlinkConfig
+from mavlink_bridge.errors import BackendError
 from mavlink_bridge.link import HealthState, MavlinkLink
 from mavlink_bridge.messages import (
     LandingTargetFix,
@@ -235,7 +236,12 @@ class PymavlinkBridge:
 def create_bridge(config: MavlinkConfig) -> VisionBridge:
     """The backend the configuration asks for."""
     if config.backend == "mavsdk":
-        from mavlink_bridge.mavsdk_backend import MavsdkBridge  # native library: load lazily
+        try:  # native library: load lazily
+            from mavlink_bridge.mavsdk_backend import MavsdkBridge
+        except ImportError as err:
+            raise BackendError(
+                f"mavlink.backend = \"mavsdk\" needs the optional package mavsdk ({err.name} "
+                "is not installed): pip install 'landmark-companion[mavsdk]'") from None
 
         return MavsdkBridge(config)
     return PymavlinkBridge(config)

@@ -19,8 +19,10 @@ VisionOutput = Literal["vpe", "odometry"]
 class MavlinkConfig:
     """Everything the bridge needs to talk to one autopilot.
 
-    ``endpoint`` uses pymavlink's spelling: ``udpin:HOST:PORT`` (listen), ``udpout:HOST:PORT``
-    (send to), ``tcp:HOST:PORT`` (connect), ``tcpin:HOST:PORT`` (listen), ``serial:DEVICE:BAUD``.
+    ``endpoint``: ``udpin:HOST:PORT`` (listen), ``udpout:HOST:PORT`` (send to),
+    ``tcp:HOST:PORT`` (connect), ``tcpin:HOST:PORT`` (listen), ``serial:DEVICE:BAUD``, or
+    any other spelling of mavutil, MAVProxy, MAVSDK or MAVROS in docs/mavlink.md's table
+    (:func:`mavlink_bridge.endpoint.parse_endpoint`).
     """
 
     endpoint: str = field(default="udpout:127.0.0.1:14550", metadata={"min_len": 5})

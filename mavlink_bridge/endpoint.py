@@ -1,9 +1,11 @@
 """Connection strings and the asyncio byte transports behind them.
 
-Spelling follows pymavlink's ``mavutil``: ``udpin:HOST:PORT`` listens and answers the last
-sender, ``udpout:HOST:PORT`` sends to a peer, ``tcp:HOST:PORT`` connects, ``tcpin:HOST:PORT``
-listens for one client at a time (the newest wins) and ``serial:DEVICE:BAUD`` opens a tty in raw
-mode.  The transports only move bytes; MAVLink framing lives in :mod:`mavlink_bridge.codec`.
+Five transports: ``udpin`` (bind HOST:PORT, answer the last sender), ``udpout`` (send to
+HOST:PORT), ``tcp`` (connect; reconnected by the link), ``tcpin`` (listen for one client at a
+time, the newest wins) and ``serial`` (a tty in raw mode).  :func:`parse_endpoint` accepts
+the spellings users bring from pymavlink's ``mavutil``, MAVProxy, MAVSDK and MAVROS; the
+table (spelling -> meaning -> what is opened) with its sources is in docs/mavlink.md.  The
+transports only move bytes; MAVLink framing lives in :mod:`mavlink_bridge.codec`.
 Everything runs on the event loop; nothing blocks it (serial uses ``add_reader`` on a
 non-blocking file descriptor, writes that would block are dropped and counted).
 """
@@ -13,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import re
 import termios
 import tty
 from collections.abc import Callable
@@ -23,7 +26,33 @@ from mavlink_bridge.errors import EndpointError, LinkOpenError
 
 EndpointKind = Literal["udpin", "udpout", "tcp", "tcpin", "serial"]
 DataCallback = Callable[[bytes], None]
-_KINDS: tuple[EndpointKind, ...] = ("udpin", "udpout", "tcp", "tcpin", "serial")
+
+#: pymavlink mavutil's default baud rate (``mavlink_connection(device, baud=115200)``),
+#: used when a serial spelling gives none.
+DEFAULT_BAUD = 115200
+#: ``KIND:...`` spellings: mavutil (``udp:`` listens, like ``udpin:``; mavutil.py
+#: mavlink_connection passes ``input=True`` by default), MAVProxy (``tcpout:``) and ours
+#: (``serial:DEVICE:BAUD``).
+_COLON_KINDS: dict[str, EndpointKind] = {
+    "udpin": "udpin", "udp": "udpin", "udpout": "udpout", "tcp": "tcp", "tcpout": "tcp",
+    "tcpin": "tcpin", "serial": "serial",
+}
+#: ``SCHEME://...`` spellings: MAVSDK (src/mavsdk/core/cli_arg.cpp; ``udp://`` and ``tcp://``
+#: are its legacy forms, resolved by host below) and MAVROS's ``tcp-l://`` and ``serial://``.
+_URL_KINDS: dict[str, EndpointKind] = {
+    "udpin": "udpin", "udpout": "udpout", "tcpin": "tcpin", "tcpout": "tcp", "tcp-l": "tcpin",
+    "serial": "serial",
+}
+_UNSUPPORTED = {
+    "udpbcast": "UDP broadcast", "mcast": "UDP multicast", "uds": "Unix sockets",
+    "unix": "Unix sockets", "ws": "WebSocket", "wss": "WebSocket", "wsserver": "WebSocket",
+    "serial_flowcontrol": "serial hardware flow control",
+    "serial-hwfc": "serial hardware flow control", "udp-b": "UDP broadcast",
+    "udp-pb": "UDP broadcast", "csv": "log files",
+}
+_LISTEN_ANY = ("", "0.0.0.0", "::")
+_SHAPES = ("udpin:|udpout:|tcp:|tcpin:HOST:PORT, udpin://|udpout://|tcp://|tcpin://HOST:PORT, "
+           "bare HOST:PORT (listen), serial:DEVICE:BAUD, serial://DEVICE:BAUD or DEVICE[,:]BAUD")
 
 
 @dataclass(frozen=True)
@@ -48,24 +77,71 @@ class Endpoint:
 
 
 def parse_endpoint(spec: str) -> Endpoint:
-    """Parse ``KIND:HOST:PORT`` or ``serial:DEVICE:BAUD``; raise :class:`EndpointError`."""
-    kind, sep, rest = spec.strip().partition(":")
-    if not sep or kind not in _KINDS:
-        raise EndpointError(
-            f"endpoint {spec!r}: expected udpin:|udpout:|tcp:|tcpin:HOST:PORT or serial:DEVICE:BAUD"
-        )
-    where, sep, number = rest.rpartition(":")
-    if not sep or not where or not number.isdigit():
-        shape = "DEVICE:BAUD" if kind == "serial" else "HOST:PORT"
-        raise EndpointError(f"endpoint {spec!r}: expected {kind}:{shape}")
-    value = int(number)
-    if kind == "serial":
-        if value <= 0:
-            raise EndpointError(f"endpoint {spec!r}: baud rate must be > 0")
-        return Endpoint(kind="serial", device=where, baud=value)
-    if value > 65535:
+    """Parse any spelling of docs/mavlink.md's table; raise :class:`EndpointError` (one line,
+    with the string) for anything else."""
+    text = spec.strip()
+    scheme, sep, rest = text.partition("://")
+    if sep:
+        return _parse_url(spec, scheme.lower(), rest)
+    head, sep, rest = text.partition(":")
+    if head.lower() in _UNSUPPORTED:
+        raise EndpointError(f"endpoint {spec!r}: {_UNSUPPORTED[head.lower()]} is not supported")
+    if sep and head.lower() in _COLON_KINDS:
+        kind = _COLON_KINDS[head.lower()]
+        return _serial(spec, rest) if kind == "serial" else _socket(spec, kind, rest)
+    if text.startswith("/") or re.fullmatch(r"COM\d+([,:]\d+)?", text):
+        return _serial(spec, text)  # mavutil/MAVProxy DEVICE[,BAUD], MAVROS DEVICE[:BAUD]
+    if re.fullmatch(r"([A-Za-z0-9.-]*|\[[0-9A-Fa-f:.]+\]):\d+", text):
+        return _socket(spec, "udpin", text)  # mavutil: a bare HOST:PORT listens on UDP
+    raise EndpointError(f"endpoint {spec!r}: expected {_SHAPES}")
+
+
+def _parse_url(spec: str, scheme: str, rest: str) -> Endpoint:
+    if scheme in _UNSUPPORTED:
+        raise EndpointError(f"endpoint {spec!r}: {_UNSUPPORTED[scheme]} is not supported")
+    if "@" in rest:
+        raise EndpointError(f"endpoint {spec!r}: MAVROS's BIND@REMOTE form is not supported; "
+                            "use udpin://BIND:PORT or udpout://REMOTE:PORT")
+    if scheme in ("udp", "tcp"):  # MAVSDK's legacy forms: no host or 0.0.0.0 listens
+        host = rest.rpartition(":")[0].strip("[]")
+        listen = host in _LISTEN_ANY
+        kind: EndpointKind = ("udpin" if listen else "udpout") if scheme == "udp" else (
+            "tcpin" if listen else "tcp")
+        return _socket(spec, kind, rest)
+    if scheme not in _URL_KINDS:
+        raise EndpointError(f"endpoint {spec!r}: unknown scheme {scheme!r}; expected {_SHAPES}")
+    kind = _URL_KINDS[scheme]
+    return _serial(spec, rest) if kind == "serial" else _socket(spec, kind, rest)
+
+
+def _socket(spec: str, kind: EndpointKind, rest: str) -> Endpoint:
+    host, sep, number = rest.rpartition(":")
+    if not sep or not number.isdigit():
+        raise EndpointError(f"endpoint {spec!r}: expected {kind}:HOST:PORT")
+    port = int(number)
+    if port > 65535:
         raise EndpointError(f"endpoint {spec!r}: port must be 0..65535")
-    return Endpoint(kind=kind, host=where.strip("[]"), port=value)
+    host = host.strip("[]")
+    if not host:
+        if kind in ("udpout", "tcp"):
+            raise EndpointError(f"endpoint {spec!r}: {kind} needs a host to send to")
+        host = "0.0.0.0"  # a listener without a host listens on every interface
+    return Endpoint(kind=kind, host=host, port=port)
+
+
+def _serial(spec: str, rest: str) -> Endpoint:
+    device, baud_text = rest, ""
+    for mark in (",", ":"):
+        head, sep, tail = rest.rpartition(mark)
+        if sep and tail.isdigit():
+            device, baud_text = head, tail
+            break
+    if not device or device.endswith((",", ":")):
+        raise EndpointError(f"endpoint {spec!r}: expected a serial DEVICE and a BAUD rate")
+    baud = int(baud_text) if baud_text else DEFAULT_BAUD
+    if baud <= 0 or getattr(termios, f"B{baud}", None) is None:  # B0 means "hang up"
+        raise EndpointError(f"endpoint {spec!r}: unsupported baud rate {baud}")
+    return Endpoint(kind="serial", device=device, baud=baud)
 
 
 class Connection:

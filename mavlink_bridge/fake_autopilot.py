@@ -101,6 +101,9 @@ class FakeAutopilotConfig:
     # an extra slowly varying error on ATTITUDE (and the heading of GLOBAL_POSITION_INT) on
     # top of the estimator's; None: none.  Truth streams (SIM_STATE ...) stay exact.
     attitude_error: AttitudeErrorConfig | None = None
+    # DISTANCE_SENSOR's orientation (MAV_SENSOR_ORIENTATION): 25 (PITCH_270) a downward
+    # range finder, ArduPilot's RNGFND1_ORIENT default; 0 (NONE) a forward one
+    rangefinder_orientation: int = 25
     # "strict": nothing but HEARTBEAT (PX4: and TIMESYNC) until asked; "all": the old fake
     streams: StreamMode = "strict"
     # messages accepted for SET_MESSAGE_INTERVAL but never sent (a sensor not fitted)
@@ -369,7 +372,8 @@ class FakeAutopilot:
         elif name == "SYSTEM_TIME":
             mav.system_time_send(int(time.time() * 1e6), boot_ms)
         elif name == "DISTANCE_SENSOR":
-            mav.distance_sensor_send(boot_ms, 20, 4000, round(s.range_m * 100), 0, 0, 25, 0)
+            mav.distance_sensor_send(boot_ms, 20, 4000, round(s.range_m * 100), 0, 0,
+                                     self.config.rangefinder_orientation, 0)
         elif name == "EKF_STATUS_REPORT" and self.config.profile == "ardupilot":
             flags = self.ekf.flags(self.flight_s(), self.origin is not None) if own \
                 else (0x33F if self.origin is not None else 0x07)

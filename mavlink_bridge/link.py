@@ -6,7 +6,9 @@
   says MAV_STATE_CRITICAL.  If the loop itself stalls, so does the heartbeat -- by design.
 * The autopilot is the first component-1 sender of a HEARTBEAT whose autopilot field is not
   MAV_AUTOPILOT_INVALID; our system id becomes its system id (unless configured).
-* Link up/down from the autopilot's heartbeat; a closed transport (TCP, serial) is reopened.
+* Link up/down from the autopilot's heartbeat; a closed transport (TCP, serial) is reopened,
+  and a TCP peer that refuses the first connection is retried, with back-off.  While no
+  heartbeat comes, "waiting for heartbeat from the autopilot on ..." is logged every 5 s.
 * TIMESYNC requests (tc1 == 0) are answered with our monotonic clock in ns.
 * Incoming bytes beyond a byte budget are dropped unparsed and counted.
 """
@@ -23,7 +25,7 @@ from typing import Any, Literal
 from mavlink_bridge.codec import Codec, MAVLinkMessage, load_signing_key
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.endpoint import Connection, Endpoint, open_connection, parse_endpoint
-from mavlink_bridge.errors import MavlinkBridgeError
+from mavlink_bridge.errors import LinkOpenError, MavlinkBridgeError
 from mavlink_bridge.telemetry import Telemetry, TelemetryHub, convert
 
 log = logging.getLogger(__name__)
@@ -36,6 +38,7 @@ _MAV_STATE = {"starting": 1, "standby": 3, "ok": 4, "degraded": 5, "failed": 6}
 MAV_STATE_CRITICAL = 5
 MAV_SEVERITY_INFO = 6
 REBOOT_BACKSTEP_MS = 500  # time_boot_ms going back this far means a reboot
+WAITING_LOG_S = 5.0  # "waiting for heartbeat" is logged this often while the link is down
 
 
 class MavlinkLink:
@@ -77,11 +80,23 @@ class MavlinkLink:
         self.link_listeners: list[Callable[[bool], None]] = []
         self.rx_listeners: list[Callable[[str, int], None]] = []
         self._msg_listeners: list[Callable[[MAVLinkMessage], None]] = []
+        self._started_ns = clock_ns()
+        self._next_waiting_log_s = WAITING_LOG_S
+        self._open_error = ""
 
     # ----------------------------------------------------------------- lifecycle
     async def start(self) -> None:
-        """Open the endpoint (raises LinkOpenError if the first open fails) and start tasks."""
-        await self._open()
+        """Open the endpoint and start the tasks.  A first open that fails raises
+        LinkOpenError, except for ``tcp``: an autopilot (or SITL) that is not listening yet
+        is retried with back-off, like a TCP peer that went away."""
+        self._started_ns = self.clock_ns()
+        try:
+            await self._open()
+        except LinkOpenError as err:
+            if self.endpoint.kind != "tcp":
+                raise
+            self._open_error = str(err)
+            log.warning("%s; retrying with back-off", err)
         self._tasks = [
             asyncio.create_task(self._supervise(), name="mavlink-supervise"),
             asyncio.create_task(self._heartbeat_loop(), name="mavlink-heartbeat"),
@@ -117,21 +132,27 @@ class MavlinkLink:
         self._opened.set()
 
     async def _supervise(self) -> None:
-        """Reopen a transport that closed (TCP peer gone, serial unplugged), with back-off."""
+        """Reopen a transport that closed (TCP peer gone, serial unplugged) or never opened
+        (TCP refused), with back-off: ``reconnect_backoff_s``, doubled after each failure up
+        to 8 times that."""
         while True:
-            assert self.connection is not None
-            await asyncio.shield(self.connection.closed)
-            self.codec.set_writer(None)
-            self._set_link(False)
+            if self.connection is not None:
+                await asyncio.shield(self.connection.closed)
+                self.codec.set_writer(None)
+                self._set_link(False)
+            backoff_s = self.config.reconnect_backoff_s
             while True:
-                await asyncio.sleep(self.config.reconnect_backoff_s)
+                await asyncio.sleep(backoff_s)
                 try:
                     await self._open()
                     self.counters["reconnects"] += 1
+                    self._open_error = ""
                     break
                 except MavlinkBridgeError as err:
                     self.counters["open_errors"] += 1
+                    self._open_error = str(err)
                     log.debug("reopen %s failed: %s", self.endpoint, err)
+                    backoff_s = min(2 * backoff_s, 8 * self.config.reconnect_backoff_s)
 
     # ----------------------------------------------------------------- health + heartbeat
     def report_health(self, state: HealthState) -> None:
@@ -174,10 +195,24 @@ class MavlinkLink:
             age_s = (self.clock_ns() - self._last_ap_heartbeat_ns) * 1e-9
             if age_s > self.config.link_timeout_s:
                 self._set_link(False)
+        else:
+            self._log_waiting()
+
+    def _log_waiting(self) -> None:
+        """While no autopilot heartbeat comes: a warning every WAITING_LOG_S seconds."""
+        since_ns = max(self._started_ns, self._last_ap_heartbeat_ns)
+        waited_s = (self.clock_ns() - since_ns) * 1e-9
+        if waited_s < self._next_waiting_log_s:
+            return
+        self._next_waiting_log_s = (waited_s // WAITING_LOG_S + 1) * WAITING_LOG_S
+        why = f"; cannot open it: {self._open_error}" if self._open_error else ""
+        log.warning("waiting for heartbeat from the autopilot on %s (%.0f s%s)",
+                    self.endpoint, waited_s, why)
 
     def _set_link(self, up: bool) -> None:
         if up == self.link_up:
             return
+        self._next_waiting_log_s = WAITING_LOG_S
         self.link_up = up
         self.link_changes += 1
         self._link_event.set()

@@ -36,13 +36,13 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp, FrameResult
-from companion.autopilot import AttitudeHistory
-from companion.demo import map_landmarks
+from companion.demo import map_landmarks, nees_3d
 from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception, PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
-from companion.settings import Settings, load_settings
+from companion.sensors import SensorHistory
+from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.effects import EffectSpec
 from companion.sim.scenario import ScenarioConfig, load_scenario
 from companion.sim.simulator import Simulator
@@ -183,6 +183,8 @@ class FrameRecord:
     fix_ned_m: tuple[float, float, float] | None = None
     fix_sigma_m: tuple[float, float, float] | None = None
     fix_landmarks: tuple[str, ...] = ()
+    fix_nees: float | None = None  # e^T P_pos^-1 e against the truth
+    fix_solver: str = ""
     bad_frame: bool = False
     brightness: float = 0.0  # mean grey level of the image
 
@@ -215,7 +217,9 @@ class RecordingPerception(PerceptionWrapper):
             n, e, d = (float(v) for v in result.fix.position_ned_m)
             rec = dataclasses.replace(rec, fix_ned_m=(n, e, d),
                                       fix_sigma_m=result.fix.position_sigma_m,
-                                      fix_landmarks=tuple(result.fix.landmark_ids))
+                                      fix_landmarks=tuple(result.fix.landmark_ids),
+                                      fix_nees=nees_3d(result.fix, rec.truth_ned_m),
+                                      fix_solver=result.fix.solver)
         self.out.append(rec)
         return result
 
@@ -230,7 +234,7 @@ def sitl_settings(tmp: Path, *, profile: str = "ardupilot", monitor: bool = Fals
                   **sections: dict[str, Any]) -> Settings:
     """The default configuration, flight logs in ``tmp``, monitoring off unless asked, and
     ``section={key: value}`` overrides."""
-    s = load_settings(sets=[f"vehicle.profile={profile}"])
+    s = load_settings(sets=[f"vehicle.profile={profile}"], shipped=SIM_LAYERS)
     s = dataclasses.replace(s, flightlog=dataclasses.replace(s.flightlog, dir=str(tmp)),
                             monitor=dataclasses.replace(s.monitor, enabled=monitor))
     for name, values in sections.items():
@@ -284,8 +288,8 @@ class Flight:
                                  origin_lat_deg=o.lat, origin_lon_deg=o.lon,
                                  origin_alt_m=o.alt_m, set_origin=True, **self.bridge_overrides)
 
-        def processor(attitude: AttitudeHistory) -> RecordingPerception:
-            perception = perception_for(self.settings, self.sim.scenario.camera, pmap, attitude)
+        def processor(sensors: SensorHistory) -> RecordingPerception:
+            perception = perception_for(self.settings, self.sim.scenario.camera, pmap, sensors)
             return RecordingPerception(perception, self.camera, self.frames)
 
         tasks: list[asyncio.Task[None]] = []
@@ -296,7 +300,7 @@ class Flight:
                 tasks.append(asyncio.create_task(self._script(script, app), name="sitl-script"))
 
         try:
-            await fly(self.settings, self.camera, self.bridge, processor, landmarks,
+            await fly(self.settings, self.camera, self.bridge, processor, pmap,
                       seconds=self.seconds + 5.0, prefix="sitl", on_start=on_start)
         finally:
             for t in tasks:

@@ -39,8 +39,9 @@ async def companion(*args: str, cwd: Path) -> asyncio.subprocess.Process:
 
 
 async def test_sigterm_mid_flight(tmp_path: Path) -> None:
-    """SIGTERM while fixes are flowing: exit 0 within 10 s, and the flight log holds every
-    fix the autopilot received, ends with the ``stopped`` event and has no torn line."""
+    """SIGTERM while fixes are flowing: exit 143 (128 + SIGTERM) within 10 s, and the flight
+    log holds every fix the autopilot received, ends with the ``stopped`` event and has no
+    torn line."""
     sim = Simulator(load_scenario("hover"))
     async with SitlAutopilot(FakeAutopilotConfig(), truth=sim.truth_fn) as fake:
         proc = await companion("--config", str(run_config(tmp_path, fake.local_port)), "run",
@@ -58,7 +59,7 @@ async def test_sigterm_mid_flight(tmp_path: Path) -> None:
                 proc.kill()
                 await proc.wait()
         await asyncio.sleep(0.2)  # let the last datagrams in
-    assert proc.returncode == 0, err.decode()[-2000:]
+    assert proc.returncode == 143, err.decode()[-2000:]  # stopped by SIGTERM: 128 + 15
     assert b"Traceback" not in err
     logs = list((tmp_path / "logs").glob("run-*.jsonl"))
     assert len(logs) == 1
@@ -69,7 +70,7 @@ async def test_sigterm_mid_flight(tmp_path: Path) -> None:
     assert log.records[-1]["kind"] == "status"
     # nothing lost: every fix that reached the autopilot is in the log, and no more
     assert log.kinds["fix"] == len(fake.vision), (log.kinds["fix"], len(fake.vision))
-    print(f"SIGTERM after {len(fake.vision)} fixes: exit 0, {len(log.records)} log records")
+    print(f"SIGTERM after {len(fake.vision)} fixes: exit 143, {len(log.records)} log records")
 
 
 @pytest.mark.parametrize(("extra", "expected"), [

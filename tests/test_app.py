@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from companion.app import CompanionApp, FrameResult, now_us
-from companion.pipeline.health import HealthInputs, health_state
+from companion.pipeline.health import Blocker, HealthInputs, health_state
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
 
@@ -173,6 +173,12 @@ def inputs(**kw: Any) -> HealthInputs:
     ({"last_fix_s": 8.0}, "lost"),
     ({"last_fix_s": None, "ever_tracked": False}, "searching"),
     ({"last_fix_s": 9.3}, "tracking"),  # 0.7 s ago: not fresh, not yet lost
+    # a known reason no fix can come wins over everything but a fresh fix (issue 24)
+    ({"last_fix_s": None, "ever_tracked": False, "blocker": Blocker("no-references", "")},
+     "blocked"),
+    ({"frames_processed": 0, "last_frame_s": None, "last_fix_s": None,
+      "blocker": Blocker("origin-far", "")}, "blocked"),
+    ({"blocker": Blocker("none-in-view", "")}, "tracking"),  # a fix came: not blocked
 ])
 def test_health_states(kw: dict[str, Any], state: str) -> None:
     assert health_state(inputs(**kw)) == state

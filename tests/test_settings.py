@@ -9,7 +9,7 @@ from typing import Literal
 import pytest
 
 from companion.errors import ConfigError
-from companion.settings import load_settings, parse_set
+from companion.settings import BUILT_IN, SIM_LAYERS, load_settings, parse_set
 from companion.validate import FieldError, build, describe
 
 
@@ -155,3 +155,39 @@ def test_parse_set_reads_toml_values(item: str, key: str, value: object) -> None
 def test_parse_set_rejects_malformed(item: str) -> None:
     with pytest.raises(ConfigError, match=r"expected section\.key=value"):
         parse_set(item)
+
+
+def test_the_deployment_defaults_are_not_the_simulators() -> None:
+    """default.toml is the deployment's: a real camera, the solver library's conservative
+    noise (status "uncalibrated noise"); the simulator's calibrated values are in sim.toml."""
+    deploy = load_settings()
+    assert (deploy.source.kind, deploy.source.spec) == ("camera", "0")
+    assert deploy.pose.pixel_sigma_px == 1.0
+    assert deploy.perception.corner_sigma_exponent == 0.0
+    assert not deploy.noise_measured
+    assert not any("sim" in Path(f).name for f in deploy.config_files)
+    assert deploy.origin_of("camera.fx") == BUILT_IN
+    sim = load_settings(shipped=SIM_LAYERS)
+    assert sim.source.kind == "sim"
+    assert sim.pose.pixel_sigma_px == 0.15
+    assert sim.perception.corner_sigma_exponent == 0.8
+    assert sim.camera.mount_rpy_deg == (0.0, -30.0, 0.0)
+    assert sim.noise_measured
+    assert sim.origin_of("pose.pixel_sigma_px").endswith("config/sim.toml")
+
+
+def test_a_measured_noise_in_the_users_file_is_measured(tmp_path: Path) -> None:
+    noise = tmp_path / "noise.toml"
+    noise.write_text("[pose]\npixel_sigma_px = 0.4\n")
+    settings = load_settings([noise])
+    assert settings.noise_measured
+    assert settings.origin_of("pose.pixel_sigma_px") == str(noise)
+    assert settings.origin_of("vehicle.id").endswith("config/default.toml")
+
+
+def test_the_sitl_configs_fly_the_simulators_layer() -> None:
+    root = Path(__file__).resolve().parents[1] / "config"
+    for name in ("sitl-ardupilot.toml", "sitl-px4.toml"):
+        settings = load_settings([root / name])
+        assert settings.pose.pixel_sigma_px == 0.15, name
+        assert settings.source.kind == "follow", name

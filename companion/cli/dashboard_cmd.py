@@ -8,11 +8,10 @@ import ipaddress
 import logging
 import os
 
-import uvicorn
-
-from companion.dashboard.server import create_app
 from companion.errors import ConfigError
+from companion.extras import require
 from companion.monitoring import MonitorWatcher
+from companion.monitoring.config import LOCAL_ENDPOINT, watcher_endpoints
 from companion.settings import Settings
 
 log = logging.getLogger(__name__)
@@ -30,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--token", help="required for a non-loopback address; requests carry "
                         "it as 'Authorization: Bearer TOKEN' or '?token=TOKEN'")
     parser.add_argument("--connect", action="append", metavar="ENDPOINT",
-                        help="Zenoh endpoint of the vehicle or router (default monitor.connect)")
+                        help="Zenoh endpoint of the vehicle or router (default monitor.connect, "
+                        f"else {LOCAL_ENDPOINT} where companion demo listens)")
     parser.set_defaults(handler=run)
 
 
@@ -50,7 +50,11 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     if not is_loopback(args.host) and not token:
         raise ConfigError(f"dashboard: binding to {args.host} needs --token (or "
                           "LMC_DASHBOARD_TOKEN): the page must not be open to the network")
-    connect = tuple(args.connect or settings.monitor.connect)
+    uvicorn = require("uvicorn", "dashboard", "companion dashboard")
+    require("starlette", "dashboard", "companion dashboard")
+    from companion.dashboard.server import create_app  # the extra is there: load it now
+
+    connect = watcher_endpoints(args.connect, settings.monitor)
     # peer mode keeps retrying an endpoint that is down (client mode gives up at once)
     cfg = dataclasses.replace(settings.monitor, mode="peer", connect=connect)
     watcher = MonitorWatcher(cfg)

@@ -7,8 +7,10 @@ import asyncio
 import json
 import sys
 
+from companion.cli import positive_seconds
+from companion.config_checks import check_flightlog_dir
 from companion.demo import print_summary, run_demo
-from companion.settings import Settings
+from companion.settings import SIM_LAYERS, Settings
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,18 +20,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Fly a simulated scenario over config/landmarks.geojson with the fake "
         "autopilot on UDP loopback and monitoring on Zenoh; print a summary against truth.",
     )
-    parser.add_argument("--seconds", type=float, default=20.0, help="flight time (default 20)")
+    parser.add_argument("--seconds", type=positive_seconds,
+                        default=20.0, help="flight time (default 20)")
     parser.add_argument("--scenario", default="survey",
                         help="scenario name in config/scenarios/ or a TOML file (default survey)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     parser.add_argument("--attitude-error", action="store_true",
                         help="the fake autopilot's attitude drifts as a real estimate does "
                         "(0.2 deg roll/pitch, 1 deg yaw); default: the exact attitude")
-    parser.set_defaults(handler=run)
+    parser.add_argument("--deployment-prior", action="store_true",
+                        help="state the autopilot's attitude to the pose solver with the "
+                        "configured sigmas (pose.attitude_*_sigma_deg, a few degrees); "
+                        "default: the fake autopilot's own accuracy, 0.2 deg / 1 deg")
+    parser.set_defaults(handler=run, shipped=SIM_LAYERS)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Run the demo with a live progress line on a terminal."""
+    check_flightlog_dir(settings)
     live = sys.stderr.isatty() and not args.json
 
     def progress(line: str) -> None:
@@ -37,7 +45,8 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         sys.stderr.flush()
 
     result = asyncio.run(run_demo(settings, args.scenario, args.seconds,
-                                  progress if live else None, args.attitude_error))
+                                  progress if live else None, args.attitude_error,
+                                  args.deployment_prior))
     if live:
         sys.stderr.write("\n")
     if args.json:

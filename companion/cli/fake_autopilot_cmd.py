@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from companion.cli import positive_seconds
 from companion.errors import ConfigError, InputError, LinkError
 from companion.settings import Settings
 from mavlink_bridge.codec import load_signing_key
@@ -37,9 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--profile", choices=("ardupilot", "px4"),
                         help="which autopilot's rules (default: vehicle.profile)")
     parser.add_argument("--endpoint", default="udpin:127.0.0.1:14550", metavar="SPEC",
-                        help="udpin:|udpout:|tcp:|tcpin:HOST:PORT or serial:DEVICE:BAUD "
+                        help="udpin:|udpout:|tcp:|tcpin:HOST:PORT, serial:DEVICE:BAUD or "
+                        "another spelling of docs/mavlink.md "
                         "(default: %(default)s, where the companion's default udpout points)")
-    parser.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds")
+    parser.add_argument("--seconds", type=positive_seconds,
+                        metavar="S", help="stop after S seconds")
     parser.add_argument("--summary", type=Path, metavar="FILE.json",
                         help="write the JSON summary here instead of stdout")
     parser.add_argument("--sysid", type=int, default=1, help="system id (default: 1)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sqlite3
 import sys
 from collections import Counter
 from pathlib import Path
@@ -84,12 +85,21 @@ def _config(settings: Settings) -> LandmarksConfig:
     return config if isinstance(config, LandmarksConfig) else LandmarksConfig()
 
 
+#: The actions that may create the ``--db`` database; every other one needs it to exist.
+_CREATES = frozenset({"import", "sync"})
+
+
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Do one landmarks action."""
     config = _config(settings)
-    repo = open_repository(args.db or config.db_path)
+    location = args.db or config.db_path
+    if args.landmarks_action == "sync":  # a typo in --from must not leave an empty --db
+        open_repository(args.source).close()
+    repo = open_repository(location, create=args.landmarks_action in _CREATES)
     try:
         return _ACTIONS[args.landmarks_action](args, repo, config)
+    except sqlite3.Error as err:  # read-only file, full disk: one line naming the database
+        raise CompanionError(f"{location}: landmark database: {err}") from None
     finally:
         repo.close()
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -12,8 +13,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.errors import InputError
+from companion.cli import positive_seconds
+from companion.errors import InputError, Interrupted, note_stop_signal
 from companion.monitoring import FleetView, MonitorWatcher
+from companion.monitoring.config import LOCAL_ENDPOINT, watcher_endpoints
 from companion.monitoring.render import render_fleet
 from companion.settings import Settings
 
@@ -27,8 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--vehicle", default="*", metavar="ID", help="only this vehicle")
     parser.add_argument("--connect", action="append", metavar="ENDPOINT",
                         help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 "
-                        "(repeatable; default: monitor.connect)")
-    parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+                        f"(repeatable; default: monitor.connect, else {LOCAL_ENDPOINT} where "
+                        "companion demo listens)")
+    parser.add_argument("--seconds", type=positive_seconds, help="stop after this many seconds")
     parser.add_argument("--snapshot", type=Path, metavar="FILE.png",
                         help="save the latest preview as PNG and exit")
     parser.add_argument("--json", action="store_true",
@@ -41,7 +45,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     # peer mode: it keeps retrying an endpoint that is down, so the view shows stale
     # data with its age instead of failing (client mode gives up at once)
     cfg = dataclasses.replace(settings.monitor, mode="peer",
-                              connect=tuple(args.connect or settings.monitor.connect))
+                              connect=watcher_endpoints(args.connect, settings.monitor))
     watcher = MonitorWatcher(cfg, args.vehicle)
     try:
         if args.snapshot:
@@ -65,7 +69,9 @@ def _watch(watcher: MonitorWatcher, seconds: float | None, live: bool) -> FleetV
                 sys.stdout.write("\x1b[H\x1b[2J" + render_fleet(view) + "\n")
                 sys.stdout.flush()
     except KeyboardInterrupt:
-        pass
+        note_stop_signal(signal.SIGINT)  # show the view, then exit 130
+    except Interrupted as stop:
+        note_stop_signal(stop.signum)  # SIGTERM: show the view, then exit 143
     if not live:
         print(render_fleet(view), file=sys.stderr)
     return view

@@ -8,6 +8,7 @@ import dataclasses
 import logging
 from pathlib import Path
 
+from companion.cli import positive_seconds
 from companion.errors import ConfigError
 from companion.settings import Settings
 from companion.sim.source import SimCameraSource
@@ -33,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--source", required=True, metavar="SPEC", help="what to record")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR")
-    parser.add_argument("--seconds", type=float, metavar="S",
+    parser.add_argument("--seconds", type=positive_seconds, metavar="S",
                         help="stop after this much recorded time (default: until the end or "
                         "Ctrl-C)")
     parser.add_argument("--frames", type=int, metavar="N", help="stop after N frames")

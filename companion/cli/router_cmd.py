@@ -9,7 +9,8 @@ import threading
 
 import zenoh
 
-from companion.errors import ConfigError
+from companion.cli import positive_seconds
+from companion.errors import ConfigError, note_stop_signal
 from companion.monitoring.config import zenoh_config
 from companion.settings import Settings
 
@@ -28,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--listen", action="append", metavar="ENDPOINT",
                         help=f"endpoint to listen on (repeatable; default {DEFAULT_ENDPOINT} "
                         "or monitor.listen)")
-    parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--seconds", type=positive_seconds, help="stop after this many seconds")
     parser.set_defaults(handler=run)
 
 
@@ -41,8 +42,13 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     except zenoh.ZError as err:
         raise ConfigError(f"router: cannot listen on {', '.join(listen)}: {err}") from None
     stop = threading.Event()
+
+    def on_signal(signum: int, _frame: object) -> None:
+        note_stop_signal(signum)  # a clean stop; the CLI exits 128 + signum
+        stop.set()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, on_signal)
     log.info("zenoh router listening on %s", ", ".join(listen))
     print(f"router listening on {', '.join(listen)}", flush=True)
     stop.wait(args.seconds)

@@ -4,21 +4,38 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import logging
 import math
 import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
-from companion.autopilot import AttitudeHistory
+from companion.cli import positive_seconds
+from companion.config_checks import preflight
+from companion.errors import EXIT_FAILURE, EXIT_OK, ConfigError, SourceError
+from companion.flightmap import PracticalMap, load_practical_map
+from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
-from companion.runtime import PracticalMap, bridge_for, fly, load_practical_map, perception_for
+from companion.recorded import (
+    RECORDED_KINDS,
+    OnCompanionClock,
+    RecordedTruth,
+    TruthAttitude,
+    recording_camera,
+)
+from companion.runtime import bridge_for, fly, perception_for
+from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.square import FlightAbortedError, SquareFlight
 from companion.sources.factory import open_source, resolve
+from companion.sources.files import RecordedStreamSource
 from mavlink_bridge.bridge import VisionBridge
+from tracker.camera import CameraModel
 
 log = logging.getLogger(__name__)
 
@@ -28,10 +45,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "run", help="fly: camera -> trackers -> pose -> MAVLink to the autopilot",
         description="Run the companion with the configured source ([source]), landmark map "
-        "([landmarks] map_path), autopilot link ([mavlink]) and monitoring ([monitor]) until "
-        "SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md has a systemd unit.",
+        "(the practical map of [landmarks] db_path about the EKF origin, or the file "
+        "[landmarks] map_path when set), autopilot link ([mavlink]) and monitoring "
+        "([monitor]) until SIGINT/SIGTERM or the end of a finite source.  docs/deploy.md "
+        "has a systemd unit.",
     )
-    parser.add_argument("--seconds", type=float, help="stop after this many seconds")
+    parser.add_argument("--seconds", type=positive_seconds, help="stop after this many seconds")
+    parser.add_argument("--truth-attitude", action="store_true",
+                        help="a recorded stream with truth_pose.csv: take the attitude from "
+                        "it (with an autopilot's typical error) instead of the autopilot's "
+                        "ATTITUDE, to check a recording offline (docs/formats.md)")
     parser.add_argument("--fly", action="store_true",
                         help="SITL only: arm (GUIDED / OFFBOARD) and fly a small square with "
                         "position targets so the loop runs while moving (docs/sitl.md)")
@@ -53,22 +76,27 @@ def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
                 if lm.quad.texture is not None}
     refs = {**{k: v for k, v in textures.items() if k not in pmap.references},
             **pmap.references}
-    return PracticalMap(pmap.landmarks, refs, pmap.origin)
+    unusable = {k: v for k, v in pmap.unusable.items() if k not in refs}
+    return dataclasses.replace(pmap, references=refs, unusable=unusable)
+
+
+#: The true position (flight NED, m) of the vehicle when a frame was taken, or None.
+TruthOf = Callable[[Frame], Sequence[float] | None]
 
 
 class TruthTagger(PerceptionWrapper):
-    """Follow mode: each pose message also carries the true position the frame showed
-    (``truth_position_ned_m``) and the fix's distance from it (``truth_error_m``)."""
+    """Follow mode and recordings with truth: each pose message also carries the true
+    position the frame showed (``truth_position_ned_m``) and the fix's distance from it
+    (``truth_error_m``)."""
 
-    def __init__(self, perception: Perception, source: FollowCameraSource) -> None:
+    def __init__(self, perception: Perception, truth_of: TruthOf) -> None:
         super().__init__(perception)
-        self.source = source
+        self.truth_of = truth_of
 
     def process(self, frame: Frame) -> FrameResult:
         result = self.perception.process(frame)
-        state = self.source.rendered_state(frame.index)
-        if result.fix is not None and result.pose_json is not None and state is not None:
-            truth = state.position_ned_m
+        truth = self.truth_of(frame) if result.fix is not None else None
+        if result.fix is not None and result.pose_json is not None and truth is not None:
             result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
             result.pose_json["truth_error_m"] = round(
                 math.dist(result.fix.position_ned_m, truth), 4)
@@ -80,31 +108,65 @@ def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
     """``source.kind = "follow"``: the scenario's world with the flight's landmark map about
     the EKF origin, seen from the pose the autopilot simulator reports (docs/sitl.md)."""
     c = resolve(settings.source)
+    if not settings.landmarks.map_path:
+        raise ConfigError("source.kind = \"follow\": the simulated camera renders the landmarks "
+                          "of landmarks.map_path: set it to the map the autopilot simulator's "
+                          "world uses (docs/sitl.md)")
     sim = follow_simulator(load_scenario(c.spec), settings.landmarks.map_path, pmap.origin)
     return FollowCameraSource(sim, bridge, pmap.origin, settings.vehicle.profile, c.follow,
                               request=command_sender(bridge))
 
 
-async def _run(settings: Settings, seconds: float | None, fly_square: bool = False
-               ) -> CompanionApp:
+@dataclass(frozen=True)
+class RunSource:
+    """The frames of a run, the camera that took them, where their attitude comes from
+    (None: the autopilot's ATTITUDE) and their true position when known."""
+
+    source: FrameSource
+    camera: CameraModel
+    attitude: AttitudeSource | None = None
+    truth_of: TruthOf | None = None
+
+
+async def open_run_source(settings: Settings, bridge: VisionBridge, pmap: PracticalMap,
+                          truth_attitude: bool = False) -> RunSource:
+    """The configured source; a recording is put on the companion's clock, solved with its
+    own camera and, with truth, scored against it (:mod:`companion.recorded`)."""
+    c = resolve(settings.source)
+    log.info("source %s:%s", c.kind, c.spec)
+    if truth_attitude and c.kind != "stream":
+        raise ConfigError(f"--truth-attitude: source {c.spec!r} is a {c.kind}, not a recorded "
+                          "stream with truth_pose.csv")
+    if c.kind == "follow":
+        follow = open_follow(settings, bridge, pmap)
+        state = follow.rendered_state
+        return RunSource(follow, follow.sim.scenario.camera,
+                         truth_of=lambda f: getattr(state(f.index), "position_ned_m", None))
+    source = await open_source(settings.source)
+    sim = simulator_of(source)
+    if c.kind not in RECORDED_KINDS:
+        return RunSource(source, sim.scenario.camera if sim is not None else settings.camera)
+    clocked = OnCompanionClock(source)
+    camera = recording_camera(settings.camera, source, c.spec)
+    if not isinstance(source, RecordedStreamSource):
+        return RunSource(clocked, camera)
+    truth = RecordedTruth(clocked, source, pmap.origin)
+    return RunSource(clocked, camera, TruthAttitude(truth) if truth_attitude else None,
+                     (lambda f: truth.position(f.t_us)) if truth else None)
+
+
+async def _run(settings: Settings, seconds: float | None, fly_square: bool = False,
+               truth_attitude: bool = False) -> CompanionApp:
     pmap = load_practical_map(settings)
     bridge = bridge_for(settings)
-    source: FrameSource
-    if resolve(settings.source).kind == "follow":
-        source = open_follow(settings, bridge, pmap)
-    else:
-        source = await open_source(settings.source)
+    run_source = await open_run_source(settings, bridge, pmap, truth_attitude)
+    source = run_source.source
     pmap = with_sim_references(pmap, source)
-    sim = simulator_of(source)
-    camera = sim.scenario.camera if sim is not None else settings.camera
-    log.info("flying with %d landmarks (%d with a reference image), source %s:%s",
-             len(pmap.landmarks), len(pmap.references), settings.source.kind,
-             settings.source.spec)
 
-    def processor(attitude: AttitudeHistory) -> Perception | PerceptionWrapper:
-        perception = perception_for(settings, camera, pmap, attitude)
-        if isinstance(source, FollowCameraSource):
-            return TruthTagger(perception, source)
+    def processor(sensors: SensorHistory) -> Perception | PerceptionWrapper:
+        perception = perception_for(settings, run_source.camera, pmap, sensors)
+        if run_source.truth_of is not None:
+            return TruthTagger(perception, run_source.truth_of)
         return perception
 
     flights: list[asyncio.Task[None]] = []
@@ -119,8 +181,9 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
         flights[0].add_done_callback(lambda task: _flight_ended(task, app))
 
     try:
-        app = await fly(settings, source, bridge, processor, pmap.landmarks, seconds=seconds,
-                        prefix="run", on_start=start_flying if fly_square else None)
+        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds,
+                        prefix="run", on_start=start_flying if fly_square else None,
+                        attitude=run_source.attitude)
     finally:
         for task in flights:
             task.cancel()
@@ -144,12 +207,20 @@ def _flight_ended(task: asyncio.Task[None], app: CompanionApp) -> None:
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
-    """Fly until stopped; exit status 0 on a clean stop."""
-    app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False)))
+    """Fly until stopped: 0 at the end of a finite source or ``--seconds``, 128 + N when
+    signal N stopped it (the CLI's root), 1 when the frame source failed for good (so
+    systemd's ``Restart=on-failure`` restarts it), 2 for what :func:`preflight` refuses."""
+    preflight(settings)
+    app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False),
+                           getattr(args, "truth_attitude", False)))
     c = app.counters
     log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
              app.dropped_frames)
+    if app.blocker is not None:
+        log.warning("no fix could come: %s: %s", app.blocker.cause, app.blocker.detail)
     if c.worker_errors:  # a bug, logged with its traceback: not a clean stop
         print("companion: frame processing failed (see the log above)", file=sys.stderr)
-        return 1
-    return 0
+        return EXIT_FAILURE
+    if app.source_failure is not None:
+        raise SourceError(f"frame source failed: {app.source_failure}")
+    return EXIT_OK

@@ -7,8 +7,9 @@ import dataclasses
 import logging
 from pathlib import Path
 
+from companion.cli import positive_seconds
 from companion.errors import ConfigError
-from companion.settings import Settings
+from companion.settings import SIM_LAYERS, Settings
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.synth import synth_stream
@@ -30,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="a built-in scenario name or a scenario TOML file")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR",
                         help="the stream folder to create")
-    parser.add_argument("--seconds", type=float, metavar="S", help="duration (default: scenario)")
+    parser.add_argument("--seconds", type=positive_seconds,
+                        metavar="S", help="duration (default: scenario)")
     parser.add_argument("--fps", type=float, metavar="F", help="frame rate (default: scenario)")
     parser.add_argument("--seed", type=int, metavar="N", help="random seed (default: scenario)")
     parser.add_argument("--format", choices=IMAGE_FORMATS, default="png",
@@ -38,16 +40,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "FFV1 video (ffv1)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace a stream already in --out")
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, shipped=SIM_LAYERS)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """Render and write; print a one-line summary."""
     scenario = load_scenario(args.scenario)
-    for name in ("seconds", "fps"):
-        value = getattr(args, name)
-        if value is not None and value <= 0:
-            raise ConfigError(f"--{name}: expected a number > 0, got {value:g}")
+    if args.fps is not None and not 0 < args.fps < float("inf"):
+        raise ConfigError(f"--fps: expected a finite number > 0, got {args.fps:g}")
     if args.seed is not None and args.seed < 0:
         raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
     scenario = dataclasses.replace(

@@ -42,8 +42,16 @@ class LandmarksConfig:
 
     #: The on-board SQLite database (created on first use; relative to the working directory).
     db_path: str = field(default="landmarks.sqlite", metadata={"min_len": 1})
-    #: A GeoJSON landmark map to use when the database is empty ("" = none).
+    #: A GeoJSON landmark map that ``companion run`` flies instead of the database's
+    #: practical map ("" = fly the database's); the landmarks commands also fill an empty
+    #: database from it.
     map_path: str = field(default="", metadata={"path": True})
+    #: The area whose practical map ``run`` flies: ``bbox:MIN_LON,MIN_LAT,MAX_LON,MAX_LAT``
+    #: or ``circle:LAT,LON,RADIUS_M``; "" = within ``area_radius_m`` of the EKF origin.
+    area: str = ""
+    area_radius_m: float = field(default=2000.0, metadata={"gt": 0.0})
+    #: An EKF origin farther than this from every landmark is reported (``origin-far``).
+    max_origin_distance_m: float = field(default=5000.0, metadata={"gt": 0.0})
     #: Variance ratio at which distinctiveness is 0.5: d = VR / (VR + vr_half).
     vr_half: float = field(default=1.0, metadata={"gt": 0.0})
     #: RMS distance from the best-fit plane at which flatness is 0.5.

@@ -24,7 +24,9 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass(frozen=True)
 class LocalFrame:
-    """Local NED frame whose origin is a WGS84 point (degrees, metres above the ellipsoid)."""
+    """Local NED frame whose origin is a WGS84 point (degrees; heights in metres AMSL, the
+    datum of the EKF origin and of landmark ``alt_m``: pymap3d treats them as ellipsoidal,
+    which only the difference of two heights reaches, docs/landmarks.md "Heights")."""
 
     lat_deg: float
     lon_deg: float

@@ -139,7 +139,9 @@ def _eligible(status: str, reason: str, include_candidates: bool) -> str | None:
     if status == "rejected":
         return "status rejected" + (f" ({reason})" if reason else "")
     if status == "candidate" and not include_candidates:
-        return "status candidate: not admitted yet (run 'companion landmarks score')"
+        why = f"{reason}; " if reason else ""
+        return (f"status candidate: not admitted yet ({why}'companion landmarks score "
+                "--restatus' admits it when its scores pass; include_candidates takes it)")
     return None
 
 

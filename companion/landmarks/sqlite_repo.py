@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from companion.errors import InputError
+from companion.errors import CompanionError, InputError
 from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
 from companion.landmarks.repository import (
     APPEARANCE_COLUMNS,
@@ -178,11 +178,19 @@ def migrate(conn: sqlite3.Connection, target: int = SCHEMA_VERSION) -> int:
         conn.execute(f"PRAGMA user_version = {int(max(version, target))}")
         conn.execute("COMMIT")
     except BaseException:
-        conn.execute("ROLLBACK")
+        _rollback(conn)
         raise
     finally:
         conn.execute(f"PRAGMA foreign_keys = {int(foreign_keys)}")
     return version
+
+
+def _rollback(conn: sqlite3.Connection) -> None:
+    """Roll back the open transaction, if SQLite has not already done so: after a full disk
+    (SQLITE_FULL) or an I/O error it rolls back itself, and a second ROLLBACK would raise
+    "no transaction is active" in place of the real cause."""
+    if conn.in_transaction:
+        conn.execute("ROLLBACK")
 
 
 class SqliteLandmarkRepository:
@@ -198,7 +206,9 @@ class SqliteLandmarkRepository:
             self._conn.execute("PRAGMA foreign_keys = ON")
             self._conn.execute(f"PRAGMA cache_size = {-CACHE_KIB}")
             migrate(self._conn)
-        except sqlite3.DatabaseError as err:
+        except sqlite3.OperationalError as err:  # full disk, read-only, no such directory
+            raise CompanionError(f"{self.path}: cannot open landmark database ({err})") from None
+        except sqlite3.DatabaseError as err:  # not a database, corrupt: the input is bad
             raise InputError(f"{self.path}: cannot open landmark database ({err})") from None
 
     def __enter__(self) -> SqliteLandmarkRepository:
@@ -251,11 +261,11 @@ class SqliteLandmarkRepository:
                 conn.execute(_NAME_INDEX)
             conn.execute("COMMIT")
         except sqlite3.IntegrityError as err:
-            conn.execute("ROLLBACK")
+            _rollback(conn)
             check_new_ids(batch.ids(), lambda ids: set(), source)  # names a repeated id
             raise InputError(f"{source}: rejected by the database ({err})") from None
         except BaseException:
-            conn.execute("ROLLBACK")
+            _rollback(conn)
             raise
         return len(batch)
 
@@ -349,6 +359,6 @@ class SqliteLandmarkRepository:
                 "status = ?, status_reason = ? WHERE id = ?", rows)
             conn.execute("COMMIT")
         except BaseException:
-            conn.execute("ROLLBACK")
+            _rollback(conn)
             raise
         return len(rows)

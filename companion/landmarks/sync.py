@@ -7,6 +7,8 @@ import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
+from companion.errors import InputError
+from companion.extras import require
 from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.geojson_io import import_map
 from companion.landmarks.record import Area
@@ -17,13 +19,21 @@ from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 POSTGRES_SCHEMES = ("postgresql://", "postgres://")
 
 
-def open_repository(location: str | Path) -> LandmarkRepository:
-    """A PostGIS repository for a ``postgresql://`` URL, else a SQLite file."""
+def open_repository(location: str | Path, *, create: bool = False) -> LandmarkRepository:
+    """A PostGIS repository for a ``postgresql://`` URL, else a SQLite file.
+
+    A SQLite file that does not exist is an :class:`InputError` unless ``create`` (sqlite
+    would otherwise create an empty database, and a typo would read as "0 landmarks").
+    """
     text = str(location)
     if text.startswith(POSTGRES_SCHEMES):
+        require("psycopg", "postgis", "a PostGIS landmark repository")
         from companion.landmarks.postgis_repo import PostgisLandmarkRepository
 
         return PostgisLandmarkRepository(text)
+    if not create and not Path(text).exists():
+        raise InputError(f"{text}: no such landmark database (companion landmarks import "
+                         "creates one)")
     return SqliteLandmarkRepository(text)
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import socket
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -11,6 +13,11 @@ import zenoh
 from companion.errors import LinkError
 
 ZenohMode = Literal["peer", "client", "router"]
+
+#: Where ``companion demo`` and the monitors meet on one machine when no endpoint is
+#: configured (docs/monitoring.md): the demo listens here (or, when the port is taken,
+#: e.g. by ``companion router``, connects to it); ``monitor`` and ``dashboard`` connect here.
+LOCAL_ENDPOINT = "tcp/127.0.0.1:7447"
 
 
 @dataclass(frozen=True)
@@ -58,3 +65,29 @@ def open_session(cfg: MonitorConfig) -> zenoh.Session:
         where = ", ".join(cfg.listen + cfg.connect) or "no endpoints"
         reason = str(err).split("  at ", 1)[0].rstrip(". ")
         raise LinkError(f"zenoh ({cfg.mode}, {where}): {reason}") from None
+
+
+def _port_free(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+def local_meeting(cfg: MonitorConfig) -> MonitorConfig:
+    """``cfg`` for a process that publishes (the demo): unchanged when it names endpoints,
+    else listening on :data:`LOCAL_ENDPOINT`, or connected to it when the port is taken."""
+    if cfg.listen or cfg.connect:
+        return cfg
+    host, _, port = LOCAL_ENDPOINT.removeprefix("tcp/").rpartition(":")
+    if _port_free(host, int(port)):
+        return dataclasses.replace(cfg, listen=(LOCAL_ENDPOINT,))
+    return dataclasses.replace(cfg, connect=(LOCAL_ENDPOINT,))
+
+
+def watcher_endpoints(given: list[str] | None, cfg: MonitorConfig) -> tuple[str, ...]:
+    """Where ``monitor`` and ``dashboard`` connect: ``--connect``, else
+    ``monitor.connect``, else :data:`LOCAL_ENDPOINT` (the demo on this machine)."""
+    return tuple(given or cfg.connect or (LOCAL_ENDPOINT,))

@@ -39,6 +39,9 @@ def render_vehicle(view: VehicleView) -> list[str]:
             " Hz" for name, s in sorted(streams.items())))
     for warning in status.get("warnings", []):
         lines.append(f"  WARNING {warning}")
+    cause = status.get("no_fix_cause")
+    if isinstance(cause, dict):
+        lines.append(f"  no fix can come: {cause.get('cause')}: {cause.get('detail')}")
     counters = status.get("counters", {})
     if counters:
         lines.append("  " + "  ".join(f"{k} {v}" for k, v in sorted(counters.items())))

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from companion.errors import ConfigError
+from companion.resources import scenario_dir
 from companion.sim.effects import EffectSpec
 from companion.sim.rangefinder import RangeFinderConfig
 from companion.sim.trajectory import TrajectoryConfig
@@ -21,7 +22,8 @@ from companion.sources.stream_format import Origin
 from companion.validate import FieldError, build
 from tracker.camera import CameraModel
 
-SCENARIO_DIR = Path(__file__).resolve().parents[2] / "config" / "scenarios"
+#: The built-in scenarios: shipped configuration, found through importlib.resources.
+SCENARIO_DIR = scenario_dir()
 
 
 @dataclass(frozen=True)

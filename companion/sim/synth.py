@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
+import cv2
+
+from companion.landmarks.geojson_io import read_map, write_map
+from companion.landmarks.record import Appearance
+from companion.sim.scenario import landmarks_path
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
 from companion.sources.stream_io import StreamWriter
@@ -20,7 +26,10 @@ def synth_stream(
 ) -> int:
     """Render every frame of the scenario (``seconds * fps``) into ``out``; frame count.
 
-    Times are the scenario clock: frame k has ``t_us = round(k * 1e6 / fps)``.
+    Times are the scenario clock: frame k has ``t_us = round(k * 1e6 / fps)``.  Beside the
+    frames goes ``landmarks.geojson``: the world's landmark map with the very textures
+    the frames show as appearance images (:data:`MAP_NAME`), so that ``companion
+    landmarks import`` and ``companion run`` can use the recording like a real one.
     """
     s = simulator.scenario
     total = max(1, round(s.seconds * s.fps))
@@ -31,4 +40,27 @@ def synth_stream(
             writer.write(frame, truth)
             if progress is not None:
                 progress(index + 1, total)
+    write_world_map(simulator, out)
     return total
+
+
+#: The landmark map written beside a synthesised stream's frames.
+MAP_NAME = "landmarks.geojson"
+
+
+def write_world_map(simulator: Simulator, out: Path) -> int:
+    """``out/landmarks.geojson``: the scenario's map, each landmark with the texture the
+    simulator renders as its appearance image (PNG, the whole image is the face)."""
+    textures = {lm.landmark_id: lm.quad.texture for lm in simulator.world.landmarks
+                if lm.quad.texture is not None}
+    records = []
+    for lm in read_map(landmarks_path(simulator.scenario)):
+        texture = textures.get(lm.id)
+        if texture is not None:
+            ok, png = cv2.imencode(".png", texture)
+            if ok:
+                h, w = texture.shape[:2]
+                lm = dataclasses.replace(lm, appearance=Appearance("image/png", png.tobytes(),
+                                                                   (0, 0, w, h)))
+        records.append(lm)
+    return write_map(Path(out) / MAP_NAME, records)

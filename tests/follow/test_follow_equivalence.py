@@ -29,7 +29,7 @@ import numpy as np
 from companion.demo import map_landmarks
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception
-from companion.settings import load_settings
+from companion.settings import SIM_LAYERS, load_settings
 from companion.sim.follow import FollowCameraSource
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
@@ -82,7 +82,7 @@ async def follow_frames(sim: Simulator) -> tuple[list[tuple[Frame, float]], list
 
 def fix_errors(sim: Simulator, frames: list[tuple[Frame, float]]) -> list[float]:
     """Distances of every fix from the scripted truth, by a fresh perception."""
-    settings = load_settings()
+    settings = load_settings(shipped=SIM_LAYERS)
     landmarks, references = map_landmarks(sim)
     perception = Perception(sim.scenario.camera, landmarks, references,
                             config=settings.perception, tracker_config=settings.tracker,

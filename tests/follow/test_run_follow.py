@@ -108,6 +108,9 @@ def test_companion_run_with_the_sitl_config_closes_the_loop(
     poses = [r for log in tmp_path.glob("run-*.jsonl")
              for r in map(json.loads, log.read_text().splitlines()) if "truth_error_m" in r]
     assert poses, "pose records carry no truth in follow mode"
+    statuses = [r for log in tmp_path.glob("run-*.jsonl")
+                for r in map(json.loads, log.read_text().splitlines()) if r["kind"] == "status"]
+    assert statuses and {r["noise"] for r in statuses} == {"measured"}  # config/sim.toml's
     assert float(np.median([r["truth_error_m"] for r in poses])) < 0.3
 
 

@@ -48,7 +48,7 @@ def test_endpoint_strings_parse(spec: str, kind: str, where: str, num: int) -> N
     assert str(ep) == spec
 
 
-@pytest.mark.parametrize("spec", ["udp:1.2.3.4:5", "tcp:host", "udpin:host:99999",
+@pytest.mark.parametrize("spec", ["garbage:1.2.3.4:5", "tcp:host", "udpin:host:99999",
                                   "serial:/dev/x:0", "14550", "tcpin::x"])
 def test_bad_endpoint_strings_are_refused_with_the_string(spec: str) -> None:
     with pytest.raises(EndpointError, match="endpoint"):

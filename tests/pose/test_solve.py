@@ -15,6 +15,7 @@ from tracker.pose import (
     MapLandmark,
     NoFix,
     Observation,
+    PoseConfig,
     PoseFix,
     RangeSample,
     solve_pose,
@@ -25,7 +26,9 @@ from tracker.pose.simulate import SensorNoise, cast_laser
 from .conftest import TRUE_P, TRUE_RPY, assert_exact, see, wall
 
 T_US = 1_000_000
-ATT = AttitudeSample(T_US, *TRUE_RPY)
+#: an autopilot attitude stated as good to 0.2 deg roll/pitch and 1 deg yaw (the default, a
+#: few degrees, is too loose for the consensus to name an 80 px outlier among four centres)
+ATT = AttitudeSample(T_US, *TRUE_RPY, float(np.deg2rad(0.2)), float(np.deg2rad(1.0)))
 
 
 def _fix(result: PoseFix | NoFix) -> PoseFix:
@@ -246,10 +249,27 @@ def test_a_landmark_behind_the_camera_gives_no_fix(camera: CameraModel) -> None:
 def test_one_centre_and_nothing_else_is_unobservable(camera: CameraModel) -> None:
     lms = wall()[:1]
     obs = _centres_only(see(lms, camera))
-    result = solve_pose(obs, lms, camera, T_US, attitude=ATT)
+    no_size = PoseConfig(box_size_sigma_rel=0.0)
+    result = solve_pose(obs, lms, camera, T_US, attitude=ATT, config=no_size)
     assert isinstance(result, NoFix) and "unobservable" in result.reason
     result = solve_pose(obs, lms, camera, T_US)
     assert isinstance(result, NoFix) and "unobservable" in result.reason
+
+
+def test_one_centre_with_attitude_gives_a_weak_fix_from_its_box_size() -> None:
+    """The box of a plate seen head-on has its size: f * size / pixels is the distance,
+    trusted to a fifth; the fix says so (sigma along the line of sight ~ 20 % of it)."""
+    cam = CameraModel()
+    lm = MapLandmark("S", (20.0, 0.0, -5.0), 2.0, 1.5, 180.0)
+    p, rpy = np.array([0.0, 0.0, -5.0]), (0.0, 0.0, 0.0)
+    obs = _centres_only(see((lm,), cam, p, rpy))
+    fix = _fix(solve_pose(obs, [lm], cam, T_US, attitude=AttitudeSample(T_US, *rpy)))
+    assert fix.solver == "size_bearing"
+    sigma = np.sqrt(np.diag(fix.covariance))
+    assert sigma[0] == pytest.approx(0.2 * 20.0, rel=0.05)  # along the line of sight (north)
+    assert abs(fix.position_ned_m[0] - p[0]) < 0.05 * sigma[0]  # exact box: no error
+    assert abs(fix.position_ned_m[1] - p[1]) < 0.5  # across: the attitude's 5 deg propagated
+    assert sigma[1] == pytest.approx(20.0 * np.deg2rad(5.0), rel=0.1)
 
 
 def test_a_stale_attitude_is_ignored(camera: CameraModel) -> None:

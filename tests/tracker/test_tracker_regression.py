@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
-from companion.evaluation.regression import BASELINE_PATH, TOLERANCE_AUC, regression_scores
+from companion.evaluation.regression import TOLERANCE_AUC, regression_scores
+
+#: Written by benchmarks/tracker_regression_baseline.py.
+BASELINE_PATH = Path(__file__).with_name("regression_baseline.json")
 
 
 @pytest.fixture(scope="module")

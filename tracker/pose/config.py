@@ -42,10 +42,33 @@ class PoseConfig:
     min_confidence: float = field(default=0.3, metadata={"ge": 0, "le": 1})
     #: Image points spanning less than this (px) are degenerate.
     min_point_spread_px: float = field(default=3.0, metadata={"gt": 0})
-    #: A range finder (DISTANCE_SENSOR) is fitted: the companion asks the autopilot for it.
-    rangefinder: bool = False
     #: Attitude, altitude and range samples older than this (vs the frame) are ignored.
     max_sample_age_s: float = field(default=0.1, metadata={"gt": 0})
+    #: 1-sigma of the autopilot's roll and pitch, and of its yaw, when it does not report
+    #: its own (ArduPilot never does; docs/decisions.md, "An honest attitude prior").  The
+    #: autopilot's attitude is itself estimated from our fixes: a few degrees, not tenths.
+    attitude_roll_pitch_sigma_deg: float = field(default=2.5, metadata={"gt": 0})
+    attitude_yaw_sigma_deg: float = field(default=5.0, metadata={"gt": 0})
+    #: Check the autopilot's attitude against the landmarks' own whenever they fix the pose
+    #: without it, and drop it for the fix when they disagree (off: trusted as stated).
+    check_attitude: bool = True
+    #: ... they disagree when adding the attitude prior raises the fix's chi-square by more
+    #: than this (3 DOF, 99.9 %).
+    attitude_gate_chi2: float = field(default=16.27, metadata={"gt": 0})
+    #: 1-sigma of the autopilot's height (LOCAL_POSITION_NED down) as a prior.
+    altitude_sigma_m: float = field(default=0.5, metadata={"gt": 0})
+    #: Use the autopilot's height (LOCAL_POSITION_NED down) as a prior.
+    use_altitude: bool = True
+    #: Use the autopilot's range finder (DISTANCE_SENSOR): a laser that meets a landmark's
+    #: face gives the distance to it.
+    rangefinder: bool = False
+    #: 1-sigma of a range finder reading.
+    rangefinder_sigma_m: float = field(default=0.05, metadata={"gt": 0})
+    #: One landmark seen without corners: its box's size on screen gives the distance to
+    #: it (``f * size / pixels``, the less foreshortened side), with this 1-sigma relative
+    #: to the distance (0: not used).  A tracker's box is not the plate's outline (its
+    #: centre is off by 1.5-4.4 px, docs/pose.md): a fifth, cautious.
+    box_size_sigma_rel: float = field(default=0.2, metadata={"ge": 0})
     #: Gauss-Newton iterations of the final refinement.
     max_iterations: int = field(default=10, metadata={"ge": 1})
     #: Largest accepted condition number of the normal matrix (degenerate geometry).

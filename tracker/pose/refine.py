@@ -7,6 +7,7 @@ NED and the body attitude (ZYX Euler).  Residuals, each whitened by its 1-sigma:
 * attitude: ``r = wrap(rpy - rpy_0) / sigma``                         (autopilot prior)
 * altitude: ``r = (p_d - d_0) / sigma``
 * range:    ``r = (n.(c - p) / n.(R_nb a_b) - d) / sigma``           (beam meets the face plane)
+* distance: ``r = (|L - p| - d) / sigma``                             (a box's size on screen)
 
 Gauss-Newton ``dx = -(J^T J)^-1 J^T r``; at convergence the covariance is the inverse of the
 whitened normal matrix ``P = (J^T J)^-1`` (first order, Cramer-Rao for Gaussian noise).
@@ -59,14 +60,24 @@ class RangePrior:
 
 
 @dataclass(frozen=True)
+class DistancePrior:
+    """The distance from the camera to a landmark's centre, e.g. from its size on screen."""
+
+    point_ned: FloatArray
+    distance_m: float
+    sigma_m: float
+
+
+@dataclass(frozen=True)
 class Priors:
-    """Optional prior information from the autopilot and the rangefinder."""
+    """Optional prior information from the autopilot, the rangefinder and a box's size."""
 
     attitude_rpy_rad: FloatArray | None = None
     attitude_sigma_rad: FloatArray | None = None
     altitude_down_m: float | None = None
     altitude_sigma_m: float = 0.1
     range: RangePrior | None = None
+    distance: DistancePrior | None = None
 
 
 @dataclass(frozen=True)
@@ -183,6 +194,12 @@ def _prior_rows(
     if priors.altitude_down_m is not None:
         rows_r.append(np.array([(x[2] - priors.altitude_down_m) / priors.altitude_sigma_m]))
         rows_j.append(np.array([[0.0, 0.0, 1.0 / priors.altitude_sigma_m, 0.0, 0.0, 0.0]]))
+    dp = priors.distance
+    if dp is not None:  # r = (|L - p| - d) / sigma
+        rel = dp.point_ned - x[:3]
+        dist = max(float(np.linalg.norm(rel)), _MIN_DEPTH_M)
+        rows_r.append(np.array([(dist - dp.distance_m) / dp.sigma_m]))
+        rows_j.append(np.concatenate([-rel / dist, np.zeros(3)])[None, :] / dp.sigma_m)
     rp = priors.range
     if rp is not None:
         n = rp.plane_normal

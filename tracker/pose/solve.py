@@ -10,7 +10,11 @@ four or more points, two+ landmarks       absent                  ``pnp`` / ``pn
 two or more landmarks (centres/corners)   present                 ``bearing_ls``
 one landmark centre + laser range         present                 ``range_bearing``
 one landmark centre + altitude            present                 ``altitude_bearing``
+one landmark centre + its box's size      present                 ``size_bearing``
 ========================================  =====================  ==================
+
+With the attitude, whenever the landmarks fix the pose without it, the attitude is checked
+against theirs and dropped for the fix when they disagree (``PoseFix.attitude_prior``).
 
 Every initial estimate is refined by the same MAP Gauss-Newton (:mod:`tracker.pose.refine`)
 that also yields the 6x6 covariance.  Without attitude, PnP RANSAC runs first and names a
@@ -24,30 +28,40 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from functools import lru_cache
 
-import cv2
 import numpy as np
 
 from tracker.camera import CameraModel
 from tracker.geometry import FloatArray, rotation_from_rpy
 from tracker.pose.association import associate
 from tracker.pose.config import PoseConfig
+from tracker.pose.inputs import (
+    CLAIM_CONFLICT,
+    Context,
+    Group,
+    camera_arrays,
+    laser_for,
+    laser_hits,
+    make_groups,
+    make_priors,
+    point_set,
+    range_prior,
+    size_if_needed,
+)
 from tracker.pose.landmarks import (
     face_corners,
     face_rotation,
-    landmark_corners_ned,
     landmark_normal_ned,
 )
 from tracker.pose.refine import (
     PointSet,
     Priors,
-    RangePrior,
     Refined,
     arc_correction,
     initial_cost,
     point_errors_px,
     refine_pose,
+    wrap_angle,
 )
 from tracker.pose.solvers import (
     bearing_consensus,
@@ -77,37 +91,6 @@ _MIN_TO_DROP = 4
 _SKIP_CHI2 = 25.0
 #: Why the pair consensus (attitude known) drops a landmark.
 _CONSENSUS = "disagrees with the other landmarks' consensus"
-
-
-@dataclass(frozen=True)
-class _Group:
-    """One landmark in view with its observation and its image points."""
-
-    landmark: MapLandmark
-    observation: Observation
-    points_ned: FloatArray
-    pixels_distorted: FloatArray
-    pixels_ideal: FloatArray
-    sigma_px: float
-    #: the unit offsets of the points from their centre (k x 2) and beta of the plate's
-    #: common scale error (see refine.PointSet); beta 0: none
-    scale_dir: FloatArray | None = None
-    scale_beta: float = 0.0
-
-
-@dataclass(frozen=True)
-class _Context:
-    """Everything that stays fixed while landmarks are dropped."""
-
-    camera: CameraModel
-    k: FloatArray
-    dist: FloatArray
-    r_body_cam: FloatArray
-    config: PoseConfig
-    attitude: AttitudeSample | None
-    altitude: AltitudeSample | None
-    laser: RangeSample | None
-    distorted: bool  # does the camera have any distortion to undo?
 
 
 @dataclass(frozen=True)
@@ -154,10 +137,10 @@ def solve_pose(
     assoc = associate(observations, landmarks, camera, prior, cfg)
     notes += list(assoc.notes)
     notes += [f"observation {a.observation_index} ambiguous: {a.reason}" for a in assoc.ambiguities]
-    k, dist, r_body_cam = _camera_arrays(camera)
-    ctx = _Context(camera, k, dist, r_body_cam, cfg, attitude, altitude, laser, dist.size > 0)
+    k, dist, r_body_cam = camera_arrays(camera)
+    ctx = Context(camera, k, dist, r_body_cam, cfg, attitude, altitude, laser, dist.size > 0)
     by_id = {lm.landmark_id: lm for lm in landmarks}
-    groups = _make_groups(
+    groups = make_groups(
         ctx,
         observations,
         [(m.observation_index, by_id[m.landmark_id]) for m in assoc.matches],
@@ -170,88 +153,76 @@ def solve_pose(
         # misnamed one, and alone it cannot be cross-checked
         return NoFix(time_us, "after a landmark claimed twice only one is left: not trusted",
                      tuple(notes))
-    return _solve_robust(ctx, groups, time_us, reset_counter, notes)
+    before = list(notes)
+    fix = _solve_robust(ctx, groups, time_us, reset_counter, notes)
+    if attitude is None:
+        return fix
+    if not cfg.check_attitude:
+        return replace(fix, attitude_prior="used") if isinstance(fix, PoseFix) else fix
+    return _check_attitude(ctx, groups, fix, time_us, reset_counter, before)
 
 
-@lru_cache(maxsize=16)
-def _camera_arrays(camera: CameraModel) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """K, distortion and R_body_cam of a camera (computed once per camera model).
-
-    No distortion at all gives an empty array: OpenCV then skips undistorting.
-    """
-    dist = camera.dist_coeffs
-    arrays = (camera.matrix, dist if np.any(dist) else np.empty(0), camera.r_body_cam)
-    for a in arrays:
-        a.setflags(write=False)
-    return arrays
-
-
-#: The end of the note on a landmark that several observations claimed (all left out).
-CLAIM_CONFLICT = "not used"
-
-
-def _make_groups(
-    ctx: _Context,
-    observations: Sequence[Observation],
-    named: list[tuple[int, MapLandmark]],
+def _check_attitude(
+    ctx: Context,
+    groups: list[Group],
+    fix: PoseFix | NoFix,
+    time_us: int,
+    reset_counter: int,
     notes: list[str],
-) -> list[_Group]:
-    """Image points per landmark (corners when known, else the centre); one per landmark."""
-    claims: dict[str, list[int]] = {}
-    for i, lm in named:
-        claims.setdefault(lm.landmark_id, []).append(i)
-    best: dict[str, tuple[int, MapLandmark]] = {}
-    for i, lm in named:
-        who = claims[lm.landmark_id]
-        if len(who) == 1:
-            best[lm.landmark_id] = (i, lm)
-        elif i == who[0]:  # one landmark, several detections: at least one is misnamed
-            notes.append(f"landmark {lm.landmark_id!r} claimed by observations {who}: "
-                         f"{CLAIM_CONFLICT}")
-    cfg = ctx.config
-    centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
-    groups = []
-    for i, lm in best.values():
-        obs = observations[i]
-        if obs.corners_px is not None:
-            pts = landmark_corners_ned(lm)
-            sig = cfg.pixel_sigma_px if obs.corner_sigma_px is None else obs.corner_sigma_px
-            px = np.array(obs.corners_px, dtype=np.float64)
-        else:
-            pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma
-            px = np.array([obs.centre_px], dtype=np.float64)
-        ideal = _undistort(ctx, px) if ctx.distorted else px
-        scale = obs.corner_scale_sigma_px if obs.corners_px is not None else None
-        groups.append(_Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale)))
-    return groups
+) -> PoseFix | NoFix:
+    """``fix`` (solved with the autopilot's attitude; ``notes``: those before it was solved)
+    unless the landmarks alone disagree
+    with that attitude: then their own fix, saying that the prior was rejected.
+
+    Whenever the view fixes the pose without the attitude (corners of one plate, four or
+    more points of two or more landmarks) and every landmark agrees with that pose, the
+    two solutions are compared as hypotheses: the attitude prior is consistent when adding
+    it raises the cost by no more than ``attitude_gate_chi2`` (``chi2_with - chi2_alone``
+    is chi-square with 3 DOF when it is; a likelihood-ratio test over the whole cost, not
+    only its linearisation, so that a flat valley -- a far, head-on wall -- does not call a
+    prior wrong that the pixels hardly mind).  When it is not, or when with the prior a
+    landmark no longer fits, the prior is dropped for this fix: the autopilot's attitude is
+    itself estimated from our fixes, and a fix that follows it would feed its error back.
+    """
+    if isinstance(fix, PoseFix) and _consistent_near(ctx, groups, fix):
+        return replace(fix, attitude_prior="used")
+    alone = _solve_robust(replace(ctx, attitude=None), groups, time_us, reset_counter, notes)
+    if not isinstance(alone, PoseFix) or len(alone.landmark_ids) < len(groups):
+        # not observable without the attitude: cannot check; or the landmarks disagree among
+        # themselves and the subset they chose alone may be the wrong one: the attitude
+        # (and its consensus) decides, as it must when one is misnamed
+        return replace(fix, attitude_prior="used") if isinstance(fix, PoseFix) else fix
+    if isinstance(fix, PoseFix) and set(fix.landmark_ids) == set(alone.landmark_ids):
+        rise = fix.chi2 - alone.chi2
+        if rise <= ctx.config.attitude_gate_chi2:
+            return replace(fix, attitude_prior="used")
+        why = f"adding it raises the chi-square by {rise:.1f} > {ctx.config.attitude_gate_chi2:g}"
+    else:
+        why = "with it the landmarks do not fit" if isinstance(fix, NoFix) else \
+            "with it a landmark is dropped that fits without it"
+    assert ctx.attitude is not None
+    a = ctx.attitude
+    d = wrap_angle(np.asarray(alone.attitude_rpy_rad) - (a.roll_rad, a.pitch_rad, a.yaw_rad))
+    off = ", ".join(f"{math.degrees(v):+.1f}" for v in d)
+    note = f"attitude prior rejected: the landmarks' roll, pitch, yaw differ by ({off}) deg; {why}"
+    return replace(alone, notes=(*alone.notes, note), attitude_prior="rejected")
 
 
-def _scale_error(
-    corners: FloatArray, sigma: float, width_sigma: float | None
-) -> tuple[FloatArray | None, float]:
-    """Unit offsets of the corners from their centre and ``beta`` for a common scale error
-    of ``width_sigma`` px in the plate's width (``Sigma = sigma^2 I + (s / w)^2 u u^T``)."""
-    if not width_sigma:
-        return None, 0.0
-    c = corners.tolist()
-    cu, cv = sum(p[0] for p in c) / len(c), sum(p[1] for p in c) / len(c)
-    norm = math.sqrt(sum((p[0] - cu) ** 2 + (p[1] - cv) ** 2 for p in c))
-    width = 0.5 * (math.dist(c[1], c[0]) + math.dist(c[2], c[3]))
-    if norm <= 0.0 or width <= 0.0:
-        return None, 0.0
-    a_uu = (width_sigma / width) ** 2 * norm**2
-    u = (corners - (cu, cv)) / norm
-    return u, 1.0 - sigma / math.sqrt(sigma**2 + a_uu)
-
-
-def _undistort(ctx: _Context, px: FloatArray) -> FloatArray:
-    """Distorted -> ideal pinhole pixels (same K)."""
-    out = cv2.undistortPoints(px.reshape(-1, 1, 2), ctx.k, ctx.dist, P=ctx.k)
-    return np.asarray(out.reshape(-1, 2), dtype=np.float64)
+def _consistent_near(ctx: Context, groups: list[Group], fix: PoseFix) -> bool:
+    """The cheap first test (no search): every landmark kept with the prior, and freed of
+    it, refined from the fix, their cost falls by no more than the gate.  A refinement
+    that fails (e.g. unobservable without the attitude) decides nothing: the full check
+    solves without the attitude from scratch."""
+    if len(fix.landmark_ids) < len(groups):
+        return False
+    free = replace(ctx, attitude=None)
+    x0 = np.concatenate([fix.position_ned_m, fix.attitude_rpy_rad])
+    ref = _refine(free, point_set(groups), make_priors(free, laser_for(free, groups, x0)), x0)
+    return not ref.reason and fix.chi2 - ref.cost <= ctx.config.attitude_gate_chi2
 
 
 def _solve_robust(
-    ctx: _Context, groups: list[_Group], time_us: int, reset_counter: int, notes: list[str]
+    ctx: Context, groups: list[Group], time_us: int, reset_counter: int, notes: list[str]
 ) -> PoseFix | NoFix:
     """Solve; while a landmark does not fit, drop it and solve again.
 
@@ -281,7 +252,7 @@ def _solve_robust(
         dropped += 1
 
 
-def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int, str]:
+def _worst_group(ctx: Context, groups: list[Group], ref: Refined) -> tuple[int, str]:
     """Index of the landmark to drop with the reason, or (-1, "") when all fit."""
     normals = np.array([landmark_normal_ned(g.landmark) for g in groups])
     centres = np.array([g.landmark.position_ned_m for g in groups])
@@ -300,78 +271,7 @@ def _worst_group(ctx: _Context, groups: list[_Group], ref: Refined) -> tuple[int
     return -1, ""
 
 
-def _point_set(groups: list[_Group]) -> PointSet:
-    """Stack every landmark's points for the refinement."""
-    counts = [g.points_ned.shape[0] for g in groups]
-    scale_dir = scale_beta = None
-    if any(g.scale_beta > 0.0 for g in groups):
-        scale_dir = np.vstack([np.zeros((n, 2)) if g.scale_dir is None else g.scale_dir
-                               for g, n in zip(groups, counts, strict=True)])
-        scale_beta = np.repeat([g.scale_beta for g in groups], counts)
-    return PointSet(
-        np.vstack([g.points_ned for g in groups]),
-        np.vstack([g.pixels_ideal for g in groups]),
-        np.repeat([g.sigma_px for g in groups], counts),
-        np.repeat(np.arange(len(groups), dtype=np.int64), counts),
-        scale_dir,
-        scale_beta,
-    )
-
-
-def _priors(ctx: _Context, laser: RangePrior | None) -> Priors:
-    """Autopilot attitude and altitude (when fresh) and the laser, as refinement priors."""
-    att_rpy = att_sig = None
-    if ctx.attitude is not None:
-        a = ctx.attitude
-        att_rpy = np.array([a.roll_rad, a.pitch_rad, a.yaw_rad])
-        att_sig = np.array([a.roll_pitch_sigma_rad, a.roll_pitch_sigma_rad, a.yaw_sigma_rad])
-    alt = ctx.altitude
-    return Priors(
-        att_rpy,
-        att_sig,
-        None if alt is None else alt.down_m,
-        0.1 if alt is None else alt.sigma_m,
-        laser,
-    )
-
-
-def _range_prior(ctx: _Context, lm: MapLandmark) -> RangePrior | None:
-    """The laser as meeting the plane of ``lm``."""
-    if ctx.laser is None:
-        return None
-    axis = np.asarray(ctx.laser.axis_body, dtype=np.float64)
-    return RangePrior(
-        ctx.laser.distance_m,
-        ctx.laser.sigma_m,
-        axis / np.linalg.norm(axis),
-        np.asarray(lm.position_ned_m, dtype=np.float64),
-        landmark_normal_ned(lm),
-    )
-
-
-def _laser_hits(rp: RangePrior, lm: MapLandmark, x: FloatArray) -> bool:
-    """Does the beam from pose ``x`` meet the face of ``lm`` (half-size x 1.5 margin)?"""
-    a = rotation_from_rpy(*x[3:]) @ rp.axis_body
-    na = float(rp.plane_normal @ a)
-    if abs(na) < 1e-6:
-        return False
-    t = float(rp.plane_normal @ (rp.plane_point - x[:3])) / na
-    if t <= 0:
-        return False
-    hit_face = face_rotation(lm.facing_deg).T @ (x[:3] + t * a - rp.plane_point)
-    return abs(hit_face[0]) <= 0.75 * lm.width_m and abs(hit_face[1]) <= 0.75 * lm.height_m
-
-
-def _laser_for(ctx: _Context, groups: list[_Group], x0: FloatArray) -> RangePrior | None:
-    """The laser prior on the first landmark whose face the beam meets at ``x0``."""
-    for g in groups:
-        rp = _range_prior(ctx, g.landmark)
-        if rp is not None and _laser_hits(rp, g.landmark, x0):
-            return rp
-    return None
-
-
-def _refine(ctx: _Context, pts: PointSet, priors: Priors, x0: FloatArray) -> Refined:
+def _refine(ctx: Context, pts: PointSet, priors: Priors, x0: FloatArray) -> Refined:
     cfg = ctx.config
     return refine_pose(
         ctx.k, ctx.r_body_cam, pts, priors, x0, cfg.max_iterations, cfg.max_condition
@@ -379,7 +279,7 @@ def _refine(ctx: _Context, pts: PointSet, priors: Priors, x0: FloatArray) -> Ref
 
 
 def _as_outcome(
-    solver: str, ref: Refined, pts: PointSet, groups: list[_Group]
+    solver: str, ref: Refined, pts: PointSet, groups: list[Group]
 ) -> _Solved | _Failure:
     """Map a failed refinement (e.g. a point behind the camera) to the landmark to drop."""
     if not ref.reason:
@@ -392,13 +292,13 @@ def _as_outcome(
 
 
 def _solve_once(
-    ctx: _Context, groups: list[_Group], hint: FloatArray | None = None
+    ctx: Context, groups: list[Group], hint: FloatArray | None = None
 ) -> _Solved | _Failure:
     """One solve over ``groups`` with the solver their geometry and priors call for.
 
     ``hint``: a pose the landmarks were found to agree on before one was dropped.
     """
-    pts = _point_set(groups)
+    pts = point_set(groups)
     spread = float(np.max(np.ptp(pts.pixels, axis=0)))
     if pts.pixels.shape[0] > 1 and spread < ctx.config.min_point_spread_px:
         return _Failure(f"degenerate geometry: all image points within {spread:.1f} px")
@@ -409,20 +309,23 @@ def _solve_once(
     return _solve_without_attitude(ctx, groups, pts, hint)
 
 
-def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> _Solved | _Failure:
+def _solve_with_attitude(ctx: Context, groups: list[Group], pts: PointSet) -> _Solved | _Failure:
     """Bearing least squares (known rotation), then MAP refinement with the priors."""
     assert ctx.attitude is not None
     rpy = np.array([ctx.attitude.roll_rad, ctx.attitude.pitch_rad, ctx.attitude.yaw_rad])
     r_nb = rotation_from_rpy(*rpy)
     single = len(groups) == 1
-    rng = _range_prior(ctx, groups[0].landmark) if single else None
+    rng = range_prior(ctx, groups[0].landmark) if single else None
     b = bearings_ned(pts.pixels, ctx.k, r_nb @ ctx.r_body_cam)
+    size = size_if_needed(ctx, groups[0], b[0], rng) if single else None
     alt = None if ctx.altitude is None else ctx.altitude.down_m
     p0 = bearing_least_squares(pts.points_ned, b, r_nb, alt, rng)
+    if size is not None:
+        p0 = size.point_ned - size.distance_m * b[0]
     if p0 is None:
         return _Failure(
             "one landmark centre: its distance is unobservable without corners, "
-            "a laser range or the altitude"
+            "a laser range, the altitude or its size"
             if single
             else "degenerate geometry: bearings do not fix the position"
         )
@@ -439,14 +342,18 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
         lid = groups[gi].landmark.landmark_id
         return _Failure(f"landmark {lid!r} would be behind the camera", gi)
     x0 = np.concatenate([p0, rpy])
-    if single and rng is not None and not _laser_hits(rng, groups[0].landmark, x0):
+    if single and rng is not None and not laser_hits(rng, groups[0].landmark, x0):
         rng = None
-        if ctx.altitude is None:
+        size = size_if_needed(ctx, groups[0], b[0], None)
+        if ctx.altitude is None and size is None:
             return _Failure(f"the laser beam misses landmark {groups[0].landmark.landmark_id!r}")
+        if size is not None:
+            x0[:3] = size.point_ned - size.distance_m * b[0]
     if not single:
-        rng = _laser_for(ctx, groups, x0)
-    solver = "bearing_ls" if not single else ("range_bearing" if rng else "altitude_bearing")
-    out = _as_outcome(solver, _refine(ctx, pts, _priors(ctx, rng), x0), pts, groups)
+        rng = laser_for(ctx, groups, x0)
+    solver = "bearing_ls" if not single else (
+        "range_bearing" if rng else "altitude_bearing" if ctx.altitude else "size_bearing")
+    out = _as_outcome(solver, _refine(ctx, pts, make_priors(ctx, rng, size), x0), pts, groups)
     if single:
         return out
     if isinstance(out, _Solved) and _worst_group(ctx, groups, out.refined)[0] < 0:
@@ -455,7 +362,7 @@ def _solve_with_attitude(ctx: _Context, groups: list[_Group], pts: PointSet) -> 
     return _outlier(groups, suspect, _CONSENSUS) if suspect >= 0 else out
 
 
-def _consensus_threshold(ctx: _Context) -> float:
+def _consensus_threshold(ctx: Context) -> float:
     """Angular inlier gate: the RANSAC pixel gate plus 3 sigma of the attitude prior."""
     assert ctx.attitude is not None
     a = ctx.attitude
@@ -463,7 +370,7 @@ def _consensus_threshold(ctx: _Context) -> float:
     return ctx.config.ransac_threshold_px / float(ctx.k[0, 0]) + 3.0 * sigma
 
 
-def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray) -> int:
+def _consensus_outlier(ctx: Context, pts: PointSet, b: FloatArray) -> int:
     """The landmark the best pair of landmarks disagrees with most, or -1 (attitude known)."""
     thr = _consensus_threshold(ctx)
     per_group = bearing_consensus(pts.points_ned, b, pts.landmark_index, thr)
@@ -474,14 +381,14 @@ def _consensus_outlier(ctx: _Context, pts: PointSet, b: FloatArray) -> int:
 
 
 def _outlier(
-    groups: list[_Group], gi: int, why: str, hint: FloatArray | None = None
+    groups: list[Group], gi: int, why: str, hint: FloatArray | None = None
 ) -> _Failure:
     """Drop landmark ``gi`` for ``why`` (``hint``: a pose every other landmark fits)."""
     return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: {why}", gi, hint)
 
 
 def _solve_without_attitude(
-    ctx: _Context, groups: list[_Group], pts: PointSet, hint: FloatArray | None
+    ctx: Context, groups: list[Group], pts: PointSet, hint: FloatArray | None
 ) -> _Solved | _Failure:
     """PnP in RANSAC over every point, refined; a landmark RANSAC rejects is named to drop.
 
@@ -534,13 +441,13 @@ def _solve_without_attitude(
 
 
 def _refine_pnp(
-    ctx: _Context, groups: list[_Group], pts: PointSet, solver: str, x0: FloatArray
+    ctx: Context, groups: list[Group], pts: PointSet, solver: str, x0: FloatArray
 ) -> _Solved | _Failure:
-    priors = _priors(ctx, _laser_for(ctx, groups, x0))
+    priors = make_priors(ctx, laser_for(ctx, groups, x0))
     return _as_outcome(solver, _refine(ctx, pts, priors, x0), pts, groups)
 
 
-def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
+def _solve_ippe(ctx: Context, g: Group, pts: PointSet) -> _Solved | _Failure:
     """Both IPPE solutions refined with the priors; refuse an unresolved planar flip."""
     lm = g.landmark
     square = abs(lm.width_m - lm.height_m) <= 1e-9 * max(lm.width_m, lm.height_m)
@@ -556,7 +463,7 @@ def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
     )
     refined: list[Refined] = []
     for c in cands:
-        priors = _priors(ctx, _laser_for(ctx, [g], c.x0))
+        priors = make_priors(ctx, laser_for(ctx, [g], c.x0))
         best = min((r.cost for r in refined if not r.reason), default=None)
         if best is not None and initial_cost(ctx.k, ctx.r_body_cam, pts, priors, c.x0) > (
             best + _SKIP_CHI2
@@ -579,8 +486,8 @@ def _solve_ippe(ctx: _Context, g: _Group, pts: PointSet) -> _Solved | _Failure:
 
 
 def _make_fix(
-    ctx: _Context,
-    groups: list[_Group],
+    ctx: Context,
+    groups: list[Group],
     out: _Solved,
     time_us: int,
     reset_counter: int,
@@ -616,4 +523,5 @@ def _make_fix(
         reset_counter=reset_counter,
         reprojection_rms_px=rms,
         notes=tuple(notes),
+        chi2=ref.cost,
     )

@@ -21,6 +21,7 @@ SOLVERS = (
     "bearing_ls",
     "range_bearing",
     "altitude_bearing",
+    "size_bearing",
 )
 
 
@@ -73,14 +74,18 @@ class MapLandmark:
 
 @dataclass(frozen=True)
 class AttitudeSample:
-    """Vehicle attitude from the autopilot (ZYX Euler, body FRD in NED) with its 1-sigma."""
+    """Vehicle attitude from the autopilot (ZYX Euler, body FRD in NED) with its 1-sigma.
+
+    The defaults are ``PoseConfig``'s (2.5 deg roll/pitch, 5 deg yaw): the autopilot's
+    estimate, itself fed by our fixes, is a prior to check, not a truth.
+    """
 
     time_us: int
     roll_rad: float
     pitch_rad: float
     yaw_rad: float
-    roll_pitch_sigma_rad: float = float(np.deg2rad(0.2))
-    yaw_sigma_rad: float = float(np.deg2rad(1.0))
+    roll_pitch_sigma_rad: float = float(np.deg2rad(2.5))
+    yaw_sigma_rad: float = float(np.deg2rad(5.0))
 
 
 @dataclass(frozen=True)
@@ -156,6 +161,11 @@ class PoseFix:
     reset_counter: int = 0
     reprojection_rms_px: float = 0.0
     notes: tuple[str, ...] = field(default=())
+    #: how the autopilot's attitude was used: "none" (no fresh sample), "used", or
+    #: "rejected" (it disagreed with the landmarks' own attitude; the fix ignores it)
+    attitude_prior: str = "none"
+    #: whitened residual sum of squares at the solution (pixels and priors), chi-square
+    chi2: float = 0.0
 
     @property
     def covariance_urt(self) -> tuple[float, ...]:

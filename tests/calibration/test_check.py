@@ -1,0 +1,124 @@
+"""``companion check`` against the fake autopilot and a recorded stream: one line per check,
+exit status 1 on any failure, and each failure on its own line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from companion.cli import main
+from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
+from tests.calibration.still import StillScene, camera_toml, still_scene, vehicle_toml
+from tests.follow.test_run_follow import fake_in_thread
+from tracker.camera import CameraModel
+
+#: What a 1280x720 camera's file says: the wrong file for this 640x480 stream.
+WRONG = CameraModel(1280, 720, 1050.0, 1050.0, 639.5, 359.5)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> StillScene:
+    return still_scene(tmp_path_factory.mktemp("still"), jitter_px=0.2, frames=40)
+
+
+@pytest.fixture(scope="module")
+def plain_scene(tmp_path_factory: pytest.TempPathFactory) -> StillScene:
+    return still_scene(tmp_path_factory.mktemp("plain"), 0.0, frames=5, plain_signs=True)
+
+
+def check(tmp_path: Path, scene: StillScene, capsys: pytest.CaptureFixture[str], port: int,
+          camera: CameraModel | None = None, *extra: str) -> tuple[int, dict[str, str]]:
+    (tmp_path / "cam.toml").write_text(camera_toml(camera or scene.camera))
+    vehicle = tmp_path / "vehicle.toml"
+    vehicle.write_text(vehicle_toml(scene, "cam.toml", endpoint=f"udpout:127.0.0.1:{port}"))
+    status = main(["--config", str(vehicle), "check", "--link-timeout", "3", *extra])
+    out = capsys.readouterr().out
+    lines = {line.split(":", 1)[0].split(None, 1)[1]: line for line in out.splitlines()[:-1]}
+    return status, lines
+
+
+def test_a_good_set_up_passes(tmp_path: Path, scene: StillScene,
+                              capsys: pytest.CaptureFixture[str]) -> None:
+    with fake_in_thread(FakeAutopilotConfig(profile="ardupilot")) as fake:
+        status, lines = check(tmp_path, scene, capsys, fake.local_port)
+    assert status == 0, lines
+    assert list(lines) == ["noise", "camera file", "camera", "landmarks", "link"]
+    assert lines["noise"].startswith("warn  noise: uncalibrated noise")
+    assert lines["camera"].startswith("pass  camera: ") and "640x480 at 30.0 fps" in lines["camera"]
+    assert lines["landmarks"] == ("pass  landmarks: 4 in the map, each with a reference image "
+                                  "the matcher accepts")
+    assert lines["link"].startswith("pass  link: ") and "ArduPilot heartbeat" in lines["link"]
+
+
+def test_a_wrong_camera_file_fails_on_that_line(tmp_path: Path, scene: StillScene,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    with fake_in_thread(FakeAutopilotConfig(profile="ardupilot")) as fake:
+        status, lines = check(tmp_path, scene, capsys, fake.local_port, WRONG)
+    assert status == 1
+    assert lines["camera"].startswith("FAIL  camera: ")
+    assert "frames are 640x480, the camera file" in lines["camera"]
+    assert "says 1280x720" in lines["camera"]
+    assert [n for n, line in lines.items() if line.startswith("FAIL")] == ["camera"]
+
+
+def test_no_autopilot_and_the_wrong_autopilot_fail_the_link(
+        tmp_path: Path, scene: StillScene, capsys: pytest.CaptureFixture[str]) -> None:
+    status, lines = check(tmp_path, scene, capsys, 9)  # nobody answers on port 9
+    assert status == 1
+    assert lines["link"] == "FAIL  link: udpout:127.0.0.1:9: no autopilot heartbeat in 3 s"
+    with fake_in_thread(FakeAutopilotConfig(profile="px4")) as fake:
+        status, lines = check(tmp_path, scene, capsys, fake.local_port)
+    assert status == 1
+    assert lines["link"].endswith("the autopilot is PX4, vehicle.profile = ardupilot")
+
+
+def test_intrinsics_of_another_resolution_fail(tmp_path: Path, scene: StillScene,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A 1280x720 calibration with only the size edited to 640x480."""
+    edited = CameraModel(640, 480, 1050.0, 1050.0, 639.5, 359.5)
+    status, lines = check(tmp_path, scene, capsys, 9, edited, "--link-timeout", "0.5")
+    assert status == 1
+    assert "far from the centre of a 640x480 image" in lines["camera file"]
+
+
+def test_landmarks_the_matcher_cannot_find_fail(
+        tmp_path: Path, plain_scene: StillScene, capsys: pytest.CaptureFixture[str]) -> None:
+    status, lines = check(tmp_path, plain_scene, capsys, 9, None, "--link-timeout", "0.5")
+    assert status == 1
+    assert lines["landmarks"].startswith("FAIL  landmarks: sign-01's image has ")
+    assert "sign-02's image has" in lines["landmarks"]
+
+
+def test_a_flight_with_the_shipped_noise_says_uncalibrated(
+        tmp_path: Path, scene: StillScene, capsys: pytest.CaptureFixture[str]) -> None:
+    """companion run on the recorded stream: every status record of the flight log carries
+    the noise's state, and the log warns while the shipped conservative value is in force."""
+    (tmp_path / "cam.toml").write_text(camera_toml(scene.camera))
+    vehicle = tmp_path / "vehicle.toml"
+    with fake_in_thread(FakeAutopilotConfig(profile="ardupilot")) as fake:
+        vehicle.write_text(vehicle_toml(scene, "cam.toml",
+                                        endpoint=f"udpout:127.0.0.1:{fake.local_port}"))
+        status = main(["--config", str(vehicle), "--set", f'flightlog.dir="{tmp_path}"',
+                       "run", "--seconds", "2"])
+    err = capsys.readouterr().err
+    assert status == 0, err
+    records = [json.loads(line) for log in tmp_path.glob("run-*.jsonl")
+               for line in log.read_text().splitlines()]
+    noise = {r.get("noise") for r in records if r["kind"] == "status"}
+    assert noise == {"uncalibrated"}
+    assert "uncalibrated noise: pose.pixel_sigma_px = 1 is the conservative default" in err
+
+
+def test_the_shipped_defaults_fail_every_line_without_a_traceback(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """No camera file, no camera 0 here, no EKF origin, nobody on the link: each is a line."""
+    status = main(["--set", "source.spec=/dev/no-such-camera", "check", "--link-timeout", "0.5"])
+    out, err = capsys.readouterr()
+    assert status == 1 and "Traceback" not in err
+    names = [line.split(":", 1)[0] for line in out.splitlines()[:-1]]
+    assert names == ["warn  noise", "FAIL  camera file", "FAIL  camera", "FAIL  landmarks",
+                     "FAIL  link"]
+    assert out.splitlines()[-1] == ("1 of 5 checks passed; failed: camera file, camera, "
+                                    "landmarks, link")

@@ -1,0 +1,243 @@
+"""What the pose solver works with: landmarks in view as point groups, and the priors.
+
+:func:`make_groups` turns the named observations into one :class:`Group` of image points per
+landmark (its four corners when known, else its centre); :func:`make_priors` gathers the
+autopilot's attitude and altitude, the laser meeting a landmark's face (:func:`laser_for`)
+and, for one landmark seen without corners, the distance its box's size gives
+(:func:`size_if_needed`).  Used by :mod:`tracker.pose.solve`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from tracker.camera import CameraModel
+from tracker.geometry import FloatArray, rotation_from_rpy
+from tracker.pose.config import PoseConfig
+from tracker.pose.landmarks import face_rotation, landmark_corners_ned, landmark_normal_ned
+from tracker.pose.refine import DistancePrior, PointSet, Priors, RangePrior
+from tracker.pose.types import (
+    AltitudeSample,
+    AttitudeSample,
+    MapLandmark,
+    Observation,
+    RangeSample,
+)
+
+
+@dataclass(frozen=True)
+class Group:
+    """One landmark in view with its observation and its image points."""
+
+    landmark: MapLandmark
+    observation: Observation
+    points_ned: FloatArray
+    pixels_distorted: FloatArray
+    pixels_ideal: FloatArray
+    sigma_px: float
+    #: the unit offsets of the points from their centre (k x 2) and beta of the plate's
+    #: common scale error (see refine.PointSet); beta 0: none
+    scale_dir: FloatArray | None = None
+    scale_beta: float = 0.0
+
+
+@dataclass(frozen=True)
+class Context:
+    """Everything that stays fixed while landmarks are dropped."""
+
+    camera: CameraModel
+    k: FloatArray
+    dist: FloatArray
+    r_body_cam: FloatArray
+    config: PoseConfig
+    attitude: AttitudeSample | None
+    altitude: AltitudeSample | None
+    laser: RangeSample | None
+    distorted: bool  # does the camera have any distortion to undo?
+
+
+@lru_cache(maxsize=16)
+def camera_arrays(camera: CameraModel) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """K, distortion and R_body_cam of a camera (computed once per camera model).
+
+    No distortion at all gives an empty array: OpenCV then skips undistorting.
+    """
+    dist = camera.dist_coeffs
+    arrays = (camera.matrix, dist if np.any(dist) else np.empty(0), camera.r_body_cam)
+    for a in arrays:
+        a.setflags(write=False)
+    return arrays
+
+
+#: The end of the note on a landmark that several observations claimed (all left out).
+CLAIM_CONFLICT = "not used"
+
+
+def make_groups(
+    ctx: Context,
+    observations: Sequence[Observation],
+    named: list[tuple[int, MapLandmark]],
+    notes: list[str],
+) -> list[Group]:
+    """Image points per landmark (corners when known, else the centre); one per landmark."""
+    claims: dict[str, list[int]] = {}
+    for i, lm in named:
+        claims.setdefault(lm.landmark_id, []).append(i)
+    best: dict[str, tuple[int, MapLandmark]] = {}
+    for i, lm in named:
+        who = claims[lm.landmark_id]
+        if len(who) == 1:
+            best[lm.landmark_id] = (i, lm)
+        elif i == who[0]:  # one landmark, several detections: at least one is misnamed
+            notes.append(f"landmark {lm.landmark_id!r} claimed by observations {who}: "
+                         f"{CLAIM_CONFLICT}")
+    cfg = ctx.config
+    centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
+    groups = []
+    for i, lm in best.values():
+        obs = observations[i]
+        if obs.corners_px is not None:
+            pts = landmark_corners_ned(lm)
+            sig = cfg.pixel_sigma_px if obs.corner_sigma_px is None else obs.corner_sigma_px
+            px = np.array(obs.corners_px, dtype=np.float64)
+        else:
+            pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma
+            px = np.array([obs.centre_px], dtype=np.float64)
+        ideal = _undistort(ctx, px) if ctx.distorted else px
+        scale = obs.corner_scale_sigma_px if obs.corners_px is not None else None
+        groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale)))
+    return groups
+
+
+def _scale_error(
+    corners: FloatArray, sigma: float, width_sigma: float | None
+) -> tuple[FloatArray | None, float]:
+    """Unit offsets of the corners from their centre and ``beta`` for a common scale error
+    of ``width_sigma`` px in the plate's width (``Sigma = sigma^2 I + (s / w)^2 u u^T``)."""
+    if not width_sigma:
+        return None, 0.0
+    c = corners.tolist()
+    cu, cv = sum(p[0] for p in c) / len(c), sum(p[1] for p in c) / len(c)
+    norm = math.sqrt(sum((p[0] - cu) ** 2 + (p[1] - cv) ** 2 for p in c))
+    width = 0.5 * (math.dist(c[1], c[0]) + math.dist(c[2], c[3]))
+    if norm <= 0.0 or width <= 0.0:
+        return None, 0.0
+    a_uu = (width_sigma / width) ** 2 * norm**2
+    u = (corners - (cu, cv)) / norm
+    return u, 1.0 - sigma / math.sqrt(sigma**2 + a_uu)
+
+
+def _undistort(ctx: Context, px: FloatArray) -> FloatArray:
+    """Distorted -> ideal pinhole pixels (same K)."""
+    out = cv2.undistortPoints(px.reshape(-1, 1, 2), ctx.k, ctx.dist, P=ctx.k)
+    return np.asarray(out.reshape(-1, 2), dtype=np.float64)
+
+
+def point_set(groups: list[Group]) -> PointSet:
+    """Stack every landmark's points for the refinement."""
+    counts = [g.points_ned.shape[0] for g in groups]
+    scale_dir = scale_beta = None
+    if any(g.scale_beta > 0.0 for g in groups):
+        scale_dir = np.vstack([np.zeros((n, 2)) if g.scale_dir is None else g.scale_dir
+                               for g, n in zip(groups, counts, strict=True)])
+        scale_beta = np.repeat([g.scale_beta for g in groups], counts)
+    return PointSet(
+        np.vstack([g.points_ned for g in groups]),
+        np.vstack([g.pixels_ideal for g in groups]),
+        np.repeat([g.sigma_px for g in groups], counts),
+        np.repeat(np.arange(len(groups), dtype=np.int64), counts),
+        scale_dir,
+        scale_beta,
+    )
+
+
+def make_priors(
+    ctx: Context, laser: RangePrior | None, distance: DistancePrior | None = None
+) -> Priors:
+    """Autopilot attitude and altitude (when fresh), the laser and a box's size, as
+    refinement priors."""
+    att_rpy = att_sig = None
+    if ctx.attitude is not None:
+        a = ctx.attitude
+        att_rpy = np.array([a.roll_rad, a.pitch_rad, a.yaw_rad])
+        att_sig = np.array([a.roll_pitch_sigma_rad, a.roll_pitch_sigma_rad, a.yaw_sigma_rad])
+    alt = ctx.altitude
+    return Priors(
+        att_rpy,
+        att_sig,
+        None if alt is None else alt.down_m,
+        0.1 if alt is None else alt.sigma_m,
+        laser,
+        distance,
+    )
+
+
+def size_if_needed(
+    ctx: Context, g: Group, bearing: FloatArray, laser: RangePrior | None
+) -> DistancePrior | None:
+    """The box-size distance to the one landmark in view when neither the laser nor the
+    altitude fixes its distance better: the altitude fixes it to ``sigma / |b_down|``,
+    poorly for a landmark near the camera's height (a nearly level bearing ``b``).  The
+    size is a coarse measure (a box is not the plate's outline), used only where needed."""
+    size = _size_distance(ctx, g)
+    if size is None or laser is not None:
+        return None
+    alt = ctx.altitude
+    if alt is not None and alt.sigma_m <= size.sigma_m * abs(float(bearing[2])):
+        return None
+    return size
+
+
+def _size_distance(ctx: Context, g: Group) -> DistancePrior | None:
+    """The distance to a landmark from its box's size on screen: ``f * size / pixels`` for
+    the side foreshortened least (the larger pixels per metre), 1-sigma
+    ``box_size_sigma_rel`` of it; None when not configured or the box has no size."""
+    rel = ctx.config.box_size_sigma_rel
+    lm, (w_px, h_px) = g.landmark, g.observation.box_wh_px
+    px_per_m = max(w_px / lm.width_m, h_px / lm.height_m)
+    if rel <= 0.0 or px_per_m <= 0.0:
+        return None
+    d = float(ctx.k[0, 0]) / px_per_m
+    return DistancePrior(np.asarray(lm.position_ned_m, dtype=np.float64), d, rel * d)
+
+
+def range_prior(ctx: Context, lm: MapLandmark) -> RangePrior | None:
+    """The laser as meeting the plane of ``lm``."""
+    if ctx.laser is None:
+        return None
+    axis = np.asarray(ctx.laser.axis_body, dtype=np.float64)
+    return RangePrior(
+        ctx.laser.distance_m,
+        ctx.laser.sigma_m,
+        axis / np.linalg.norm(axis),
+        np.asarray(lm.position_ned_m, dtype=np.float64),
+        landmark_normal_ned(lm),
+    )
+
+
+def laser_hits(rp: RangePrior, lm: MapLandmark, x: FloatArray) -> bool:
+    """Does the beam from pose ``x`` meet the face of ``lm`` (half-size x 1.5 margin)?"""
+    a = rotation_from_rpy(*x[3:]) @ rp.axis_body
+    na = float(rp.plane_normal @ a)
+    if abs(na) < 1e-6:
+        return False
+    t = float(rp.plane_normal @ (rp.plane_point - x[:3])) / na
+    if t <= 0:
+        return False
+    hit_face = face_rotation(lm.facing_deg).T @ (x[:3] + t * a - rp.plane_point)
+    return abs(hit_face[0]) <= 0.75 * lm.width_m and abs(hit_face[1]) <= 0.75 * lm.height_m
+
+
+def laser_for(ctx: Context, groups: list[Group], x0: FloatArray) -> RangePrior | None:
+    """The laser prior on the first landmark whose face the beam meets at ``x0``."""
+    for g in groups:
+        rp = range_prior(ctx, g.landmark)
+        if rp is not None and laser_hits(rp, g.landmark, x0):
+            return rp
+    return None
