@@ -144,7 +144,8 @@ class StreamWatch:
     def rate_hz(self, name: str, now_ns: int) -> float:
         """Arrivals per second over the last ``window_s`` (0 with fewer than two)."""
         s = self._streams[name]
-        start = now_ns - int(self.window_s * 1e9)
+        window_s = max(self.window_s, 6.0 / s.spec.rate_hz)  # >= 6 periods of a slow stream
+        start = now_ns - int(window_s * 1e9)
         recent = [t for t in s.arrivals if t >= start]
         if len(recent) < 2:
             return 0.0
@@ -175,7 +176,7 @@ class StreamWatch:
             return "missing"
         if last is None:
             return "asked"
-        if (now_ns - s.since_ns) * 1e-9 < self.window_s:
+        if (now_ns - s.since_ns) * 1e-9 < max(self.window_s, 6.0 / s.spec.rate_hz):
             return "arriving"  # too early to judge the rate
         rate = self.rate_hz(s.spec.name, now_ns)
         return "arriving" if rate >= SLOW_SHARE * s.spec.rate_hz else "slow"
