@@ -10,8 +10,10 @@ attitude as near-certain feeds it back into the fixes the autopilot fuses.
 * With today's trust (0.2 deg roll/pitch, 1 deg yaw, no check against the landmarks) the
   same flight must fail: :func:`test_trusting_the_attitude_runs_away` asserts that it does.
 
-Real time, 5 minutes each: ``slow``.  Needs the pose side of issue 19 (the attitude prior's
-configuration keys); skipped with the reason printed until it is merged.
+Real time, 5 minutes and 90 s: ``slow``.  Measured after merging issue 19's pose side:
+honest prior 6250 fixes fused, the fake's estimate 0.017 m median / 0.062 m max off truth
+over 269 s; trusted attitude: no fix fused at all (the 5 deg error makes every pose
+inconsistent).
 """
 
 from __future__ import annotations
