@@ -358,6 +358,8 @@ class CompanionApp:
         source_status = getattr(self.source, "status", None)
         as_dict = getattr(source_status, "as_dict", None)
         source: dict[str, Any] = as_dict() if callable(as_dict) else {}
+        streams = getattr(self.sink, "autopilot_streams", None)
+        warnings = getattr(self.sink, "warnings", None)
         return {
             "vehicle": self.vehicle_id,
             "state": self.state,
@@ -368,6 +370,8 @@ class CompanionApp:
             "counters": self.counters.as_dict(),
             "dropped_frames": self.dropped_frames + int(source.get("skipped", 0)),
             "source": source,
+            "autopilot_streams": streams() if callable(streams) else {},
+            "warnings": warnings() if callable(warnings) else [],
             **self.facts,
         }
 

@@ -96,6 +96,14 @@ class BridgeSink:
     async def statustext(self, text: str) -> None:
         self.bridge.statustext(text)
 
+    def autopilot_streams(self) -> dict[str, Any]:
+        """Per needed stream from the autopilot: asked rate, measured rate, state."""
+        return self.bridge.stream_report()
+
+    def warnings(self) -> list[str]:
+        """Health warnings: each needed autopilot stream that is missing or slow."""
+        return [f"autopilot stream {name} not arriving" for name in self.bridge.stream_warnings()]
+
     def autopilot_position_ned(self) -> list[float] | None:
         """The autopilot's own estimate (LOCAL_POSITION_NED), for plots; None if unknown."""
         item = self.bridge.latest("LOCAL_POSITION_NED")

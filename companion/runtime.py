@@ -35,6 +35,7 @@ from companion.settings import Settings
 from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
 from mavlink_bridge.errors import BackendError
+from mavlink_bridge.streams import needed_streams
 from tracker.camera import CameraModel
 from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
@@ -150,6 +151,20 @@ async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
     return app
 
 
+def stream_rates(settings: Settings) -> tuple[tuple[str, float], ...]:
+    """The messages this configuration needs from the autopilot, as (name, Hz)
+    (:func:`mavlink_bridge.streams.needed_streams` decides; docs/mavlink.md)."""
+    from companion.sources.factory import resolve
+
+    try:
+        source = resolve(settings.source)
+    except InputError:  # the source's own open says what is wrong with it
+        source = settings.source
+    follow = source.kind == "follow"
+    fps = (source.follow.fps or source.fps) if follow else source.fps
+    specs = needed_streams(fps, profile=settings.vehicle.profile,
+                           rangefinder=settings.pose.rangefinder, follow=follow)
+    return tuple((s.name, s.rate_hz) for s in specs)
 def preview_for(mon: MonitorConfig) -> Callable[[Frame, FrameResult], bytes]:
     """Draws a frame's preview (boxes, particles, the fix or why there is none)."""
     def preview(frame: Frame, result: FrameResult) -> bytes:
@@ -198,9 +213,11 @@ def _stop_by_signal(app: CompanionApp, signum: int) -> None:
 
 
 def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
-    """The configured MAVLink backend, its profile following ``vehicle.profile``."""
+    """The configured MAVLink backend, its profile following ``vehicle.profile``, asking for
+    the streams the configuration needs."""
     import dataclasses
 
+    overrides.setdefault("streams", stream_rates(settings))
     cfg = dataclasses.replace(settings.mavlink, profile=settings.vehicle.profile, **overrides)
     try:
         return create_bridge(cfg)

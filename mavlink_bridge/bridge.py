@@ -23,6 +23,7 @@ from mavlink_bridge.messages import (
     vpe_fields,
 )
 from mavlink_bridge.output import OutputGate, SendResult
+from mavlink_bridge.streams import StreamWatch, interval_command, keep_streams, parse_streams
 from mavlink_bridge.telemetry import GlobalPosition, Telemetry
 
 MAV_CMD_DO_SET_GLOBAL_ORIGIN = 611
@@ -48,6 +49,8 @@ class VisionBridge(Protocol):
     def origin_confirmed(self) -> bool: ...
     async def wait_link(self, up: bool = True, timeout_s: float = 5.0) -> bool: ...
     def stats(self) -> dict[str, Any]: ...
+    def stream_report(self) -> dict[str, dict[str, Any]]: ...
+    def stream_warnings(self) -> list[str]: ...
 
 
 def origin_seen(item: Telemetry | None) -> bool:
@@ -75,10 +78,17 @@ class PymavlinkBridge:
         self._origin_ok = False
         self._tasks: list[asyncio.Task[None]] = []
         self.link.reboot_listeners.append(self._on_reboot)
+        self.streams = StreamWatch(parse_streams(config.streams), self._request_interval,
+                                   self.link.statustext)
+        self.link.rx_listeners.append(self.streams.on_message)
+        self.link.link_listeners.append(self._on_link)
 
     async def start(self) -> None:
         await self.link.start()
-        self._tasks = [asyncio.create_task(self._watch_origin(), name="mavlink-origin-watch")]
+        self._tasks = [asyncio.create_task(self._watch_origin(), name="mavlink-origin-watch"),
+                       asyncio.create_task(keep_streams(
+                           self.streams, lambda: self.link.link_up, self.clock_ns,
+                           self.config.stream_check_s), name="mavlink-streams")]
         if self.config.set_origin:
             self._tasks.append(asyncio.create_task(self._origin_loop(), name="mavlink-origin"))
 
@@ -128,7 +138,26 @@ class PymavlinkBridge:
         out["landing_target"] = dict(self.target_gate.counts)
         out["origin_attempts"] = self.origin_attempts
         out["origin_confirmed"] = self._origin_ok
+        out["streams"] = self.stream_report()
         return out
+
+    # ------------------------------------------------------------ streams
+    def stream_report(self) -> dict[str, dict[str, Any]]:
+        """Per needed stream: asked rate, measured rate, state (mavlink_bridge.streams)."""
+        return self.streams.report(self.clock_ns())
+
+    def stream_warnings(self) -> list[str]:
+        """The needed streams that are missing or slow now."""
+        return self.streams.missing()
+
+    def _request_interval(self, name: str, interval_us: int) -> None:
+        target = self.link.autopilot_sysid or 1
+        self.link.send("COMMAND_LONG", target_system=target, target_component=1,
+                       confirmation=0, **interval_command(name, interval_us))
+
+    def _on_link(self, up: bool) -> None:
+        if up:
+            self.streams.ask_all(self.clock_ns())
 
     # ------------------------------------------------------------ vision output
     def send_fix_now(self, fix: VisionFix) -> SendResult:
@@ -199,6 +228,7 @@ class PymavlinkBridge:
 
     def _on_reboot(self) -> None:
         self._origin_ok = False
+        self.streams.ask_all(self.clock_ns())  # a reboot forgets every interval
         self.vision_gate.reset()
         self.target_gate.reset()
 

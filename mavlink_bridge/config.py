@@ -55,6 +55,11 @@ class MavlinkConfig:
     # Incoming budget: datagrams beyond this many bytes per second are dropped unparsed
     # (counted), so a flooding peer cannot starve the heartbeat.
     rx_budget_bytes_per_s: int = field(default=2_000_000, metadata={"ge": 1000})
+    # The messages asked of the autopilot with SET_MESSAGE_INTERVAL on link-up and after a
+    # reboot, as (name, rate_hz); the application derives them from its configuration
+    # (mavlink_bridge.streams.needed_streams).  Empty: ask for nothing.
+    streams: tuple[tuple[str, float], ...] = ()
+    stream_check_s: float = field(default=0.25, metadata={"gt": 0.0})
 
     def check(self) -> None:
         """Raise ``ValueError`` naming the field when a cross-field rule is broken."""

@@ -1,12 +1,22 @@
-"""A scripted fake autopilot (ArduPilot or PX4 flavour) that enforces the autopilots' rules.
+"""A scripted fake autopilot (ArduPilot or PX4 flavour) as strict as the real ones.
 
 It is first-class code: tests, ``companion demo`` and ``companion fake-autopilot`` use it.
 
-* Flies ``truth(time_s) -> VehicleState`` (default: :func:`hover_then_circle`) and streams
-  HEARTBEAT (component 1), ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT (0, 0 until the
-  origin is set, like ArduPilot), SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT,
-  HOME_POSITION (once the origin is set), STATUSTEXT on events, and in PX4 mode TIMESYNC
-  requests at 10 Hz.
+* Flies ``truth(time_s) -> VehicleState`` (default: :func:`hover_then_circle`), or with
+  ``vehicle="guided"`` a copter it flies itself from the companion's commands
+  (:mod:`mavlink_bridge.fake_vehicle`).
+* Streams (:mod:`mavlink_bridge.fake_streams`): by default (``streams="strict"``) only
+  HEARTBEAT and PX4's TIMESYNC requests until asked with SET_MESSAGE_INTERVAL or
+  REQUEST_MESSAGE; a reboot forgets the intervals.  Available: ATTITUDE,
+  LOCAL_POSITION_NED, GLOBAL_POSITION_INT (0, 0 until the origin is set, like ArduPilot),
+  SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT, HOME_POSITION (once the origin is set).
+* Its own estimator (:mod:`mavlink_bridge.fake_ekf`): LOCAL_POSITION_NED, GLOBAL_POSITION_INT,
+  ATTITUDE and EKF_STATUS_REPORT report the estimate; fixes are gated against it, never
+  against the truth.  Without fixes: "VisOdom: not healthy", flags 0x25, EKF failsafe LAND.
+* Parameters (:mod:`mavlink_bridge.fake_params`): PARAM_REQUEST_READ / _LIST / PARAM_SET
+  with the real autopilot's defaults.
+* The old permissive fake -- every stream unasked, fixes judged against the truth -- only
+  with ``FakeAutopilotConfig.permissive()`` (``streams="all", judge="truth"``).
 * Like a simulator, streams the *true* pose (``send_truth``): SIMSTATE and SIM_STATE in
   ArduPilot mode (SITL), HIL_STATE_QUATERNION in PX4 mode, at 50 Hz, as WGS84 about
   ``home`` (default: the EKF origin once set).  ``send_truth=False`` is a real vehicle.
@@ -35,16 +45,33 @@ import pymap3d
 from mavlink_bridge.codec import Codec, MAVLinkMessage
 from mavlink_bridge.endpoint import Connection, open_connection, parse_endpoint
 from mavlink_bridge.fake_drift import AttitudeDrift, AttitudeErrorConfig
+from mavlink_bridge.fake_ekf import EstimatorConfig, FakeEstimator, estimator_defaults
 from mavlink_bridge.fake_faults import FaultInjector
-from mavlink_bridge.fake_rules import FakeRules, VisionJudge, VisionRecord, judge_landing_target
+from mavlink_bridge.fake_params import FakeParams
+from mavlink_bridge.fake_report import fake_summary
+from mavlink_bridge.fake_rules import (
+    FakeRules,
+    VisionJudge,
+    VisionRecord,
+    judge_landing_target,
+    position_variances,
+)
+from mavlink_bridge.fake_streams import FakeStreams, StreamMode
+from mavlink_bridge.fake_vehicle import (
+    ARDUCOPTER_GUIDED,
+    PX4_OFFBOARD,
+    FlightState,
+    GuidedVehicle,
+)
 from mavlink_bridge.telemetry import quaternion_from_rpy
 from mavlink_bridge.vehicle import TruthFn, VehicleState, hover_then_circle
 
 Profile = Literal["ardupilot", "px4"]
 _EARTH_RADIUS_M = 6_378_137.0
 MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED = 0, 4, 3
-_ALWAYS_ACCEPTED = {511, 512, 520}  # SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAP.
-_FLIGHT_COMMANDS = {22, 176, 400}  # NAV_TAKEOFF, DO_SET_MODE, COMPONENT_ARM_DISARM: recorded
+_ALWAYS_ACCEPTED = {520}  # REQUEST_AUTOPILOT_CAPABILITIES
+MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE = 511, 512
+MAV_CMD_NAV_TAKEOFF, MAV_CMD_DO_SET_MODE, MAV_CMD_COMPONENT_ARM_DISARM = 22, 176, 400
 
 
 @dataclass(frozen=True)
@@ -71,12 +98,36 @@ class FakeAutopilotConfig:
     send_truth: bool = True
     # where truth NED (0, 0, 0) is (lat_deg, lon_deg, alt_m); None: the EKF origin once set
     home: tuple[float, float, float] | None = None
-    # the EKF's attitude error on ATTITUDE (and the heading of GLOBAL_POSITION_INT), slowly
-    # varying; None: the true attitude.  Truth streams (SIM_STATE ...) stay exact.
+    # an extra slowly varying error on ATTITUDE (and the heading of GLOBAL_POSITION_INT) on
+    # top of the estimator's; None: none.  Truth streams (SIM_STATE ...) stay exact.
     attitude_error: AttitudeErrorConfig | None = None
     # DISTANCE_SENSOR's orientation (MAV_SENSOR_ORIENTATION): 25 (PITCH_270) a downward
     # range finder, ArduPilot's RNGFND1_ORIENT default; 0 (NONE) a forward one
     rangefinder_orientation: int = 25
+    # "strict": nothing but HEARTBEAT (PX4: and TIMESYNC) until asked; "all": the old fake
+    streams: StreamMode = "strict"
+    # messages accepted for SET_MESSAGE_INTERVAL but never sent (a sensor not fitted)
+    absent: tuple[str, ...] = ()
+    # "estimate": the fake's own EKF gates the fixes; "truth": the old gate against truth
+    judge: Literal["estimate", "truth"] = "estimate"
+    # None: the profile's real defaults (fake_ekf.estimator_defaults)
+    estimator: EstimatorConfig | None = None
+    # "scripted": flies ``truth``, armed from the start (the flight is under way);
+    # "guided": on the ground, disarmed, flown by the companion's commands
+    vehicle: Literal["scripted", "guided"] = "scripted"
+    # where the guided vehicle stands (north, east, down m, yaw deg): on the ground where its
+    # camera sees two landmarks of the sample street, as a user points the camera at them
+    # before arming (no fix, no arming: "PreArm: VisOdom: not healthy")
+    guided_start: tuple[float, float, float, float] = (3.0, 0.0, 0.0, 60.0)
+    # > 0: the guided vehicle starts hovering this high above its start, armed, in GUIDED /
+    # OFFBOARD (as after a manual take-off): the sample street seen from the ground gives no
+    # fix (docs/sitl.md), so the square-flight proofs start in the air
+    guided_airborne_m: float = 0.0
+
+    @classmethod
+    def permissive(cls, **kw: Any) -> FakeAutopilotConfig:
+        """The old fake: every stream without asking, fixes judged against the truth."""
+        return cls(**{"streams": "all", "judge": "truth", **kw})
 
 
 _TRUTH_BY_PROFILE: dict[str, tuple[str, ...]] = {
@@ -101,9 +152,25 @@ class FakeAutopilot:
     def __init__(self, config: FakeAutopilotConfig, truth: TruthFn | None = None,
                  clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
         self.config = config
-        self.truth = truth or hover_then_circle()
+        self.truth: TruthFn = truth or hover_then_circle()
+        if config.vehicle == "guided":
+            n, e, d, yaw = config.guided_start
+            vehicle = GuidedVehicle((n, e, d), math.radians(yaw))
+            if config.guided_airborne_m > 0:
+                vehicle.hover(config.guided_airborne_m)
+            self.truth = vehicle
         self.clock_ns = clock_ns
         self.faults = FaultInjector(np.random.default_rng(config.seed), clock_ns)
+        self.guided = self.truth if isinstance(self.truth, GuidedVehicle) else None
+        airborne = self.guided is not None and config.guided_airborne_m > 0
+        self.flight = FlightState(config.profile, armed=self.guided is None or airborne,
+                                  custom_mode=self._guided_mode_number() if airborne else 0)
+        self.params = FakeParams(config.profile)
+        self.estimator_config = config.estimator or estimator_defaults(config.profile)
+        self.streams = FakeStreams(config.streams, config.profile, config.periods_s,
+                                   self._sendable(), config.absent)
+        self.track: list[tuple[float, tuple[float, float, float],
+                               tuple[float, float, float]]] = []  # (t, estimate, truth)
         self.attitude_drift = None if config.attitude_error is None else AttitudeDrift(
             config.attitude_error, config.seed)
         self.judge = VisionJudge(config.profile, config.rules)
@@ -113,10 +180,12 @@ class FakeAutopilot:
         self.position_targets: list[dict[str, Any]] = []  # SET_POSITION_TARGET_LOCAL_NED
         self.heartbeats: list[CompanionHeartbeat] = []
         self.statustexts: list[str] = []
+        self.statustexts_sent: list[str] = []  # what this autopilot said
         self.counters: dict[str, int] = {"sysid_rejected": 0, "reboots": 0,
                                          "deprecated_origin_ignored": 0}
         self.connection: Connection | None = None
         self._start_ns = clock_ns()
+        self._blind_until_ns = 0
         self._task: asyncio.Task[None] | None = None
         self._boot()
 
@@ -132,8 +201,19 @@ class FakeAutopilot:
         self.origin_attempts = 0
         self.timesync_offset_ns = 0.0
         self.timesync_samples = 0
-        self._next_due: dict[str, float] = {}
         self.judge.reset()
+        self.streams.reset()  # a reboot forgets every asked interval
+        self.ekf = FakeEstimator(self.estimator_config, self.config.seed)
+        self._last_track_s = -1.0
+        self._prev_velocity: tuple[float, np.ndarray] | None = None
+
+    def _sendable(self) -> frozenset[str]:
+        names = {n for n, _ in self.config.periods_s if n not in _TRUTH_STREAMS}
+        if self.config.send_truth:
+            names |= set(_TRUTH_BY_PROFILE[self.config.profile])
+        if self.config.profile != "px4":
+            names.discard("TIMESYNC")
+        return frozenset(names)
 
     # ------------------------------------------------------------ lifecycle
     async def start(self) -> None:
@@ -182,9 +262,15 @@ class FakeAutopilot:
         """Nothing passes in either direction for ``seconds``."""
         self.faults.state.drop_until_ns = self.clock_ns() + int(seconds * 1e9)
 
+    def blind(self, seconds: float) -> None:
+        """A vision outage: for ``seconds`` every incoming vision message is dropped
+        (counted as ``vision_blinded``), as if the companion's fixes stopped."""
+        self._blind_until_ns = self.clock_ns() + int(seconds * 1e9)
+
     def reboot(self, silent_s: float = 1.0) -> None:
         """Reboot: silent for ``silent_s``, then sequence 0, boot time 0, no origin."""
         self.counters["reboots"] += 1
+        self.params.reboot_done()
         self.drop_link(silent_s)
         self._boot()
         self.boot_ns += int(silent_s * 1e9)
@@ -196,21 +282,44 @@ class FakeAutopilot:
 
     async def _stream_loop(self) -> None:
         while True:
+            t = self.flight_s()
+            state = self._advance(t)
             if not self.faults.link_down():
-                now = self.boot_s()
-                for name, period in self.config.periods_s:
-                    if name == "TIMESYNC" and self.config.profile != "px4":
+                for name in self.streams.due(self.boot_s()):
+                    if name in _TRUTH_STREAMS and (self.config.home or self.origin) is None:
                         continue
-                    if name in _TRUTH_STREAMS and not self._sends_truth(name):
-                        continue
-                    if now >= self._next_due.get(name, 0.0):
-                        self._next_due[name] = now + period
-                        self._send_stream(name, self.truth(self.flight_s()))
+                    self._send_stream(name, state)
             await asyncio.sleep(0.01)
 
-    def _sends_truth(self, name: str) -> bool:
-        return (self.config.send_truth and name in _TRUTH_BY_PROFILE[self.config.profile]
-                and (self.config.home or self.origin) is not None)
+    def _advance(self, t: float) -> VehicleState:
+        """Fly, propagate the estimator with the IMU, run the EKF failsafe; -> the truth."""
+        if self.guided is not None:
+            self.guided.step_to(t)
+            if self.flight.landing and self.guided.on_ground() and self.flight.armed:
+                self.flight.arm(t, False, True, self._text)
+            accel = self.guided.acceleration()
+        state = self.truth(t)
+        if self.guided is None:  # the IMU of a scripted flight: d(velocity)/dt of the truth
+            v, prev = np.asarray(state.velocity_ned_m_s), self._prev_velocity
+            accel = np.zeros(3) if prev is None or t - prev[0] < 1e-3 \
+                else (v - prev[1]) / (t - prev[0])
+            self._prev_velocity = (t, v)
+        self.ekf.predict(t, accel)
+        if self.config.judge == "estimate":
+            # a vehicle flying from the start (scripted, or guided airborne) had its position
+            # before this fake began: the failsafe watches outages after the first fix
+            ok = self.ekf.horizontal_ok(t) or not self.ekf.initialised
+            self.flight.check_ekf(t, ok, self._text)
+        if self.guided is not None:
+            self.guided.landing = self.flight.landing
+        if self.ekf.initialised and t - self._last_track_s >= 0.1:
+            self._last_track_s = t
+            self.track.append((t, self.ekf.position(), state.position_ned_m))
+        return state
+
+    def _text(self, text: str) -> None:
+        self.statustexts_sent.append(text)
+        self.codec.mav.statustext_send(4, text.encode()[:50])
 
     def _send_truth(self, name: str, s: VehicleState) -> None:
         """The simulator's true pose as WGS84 (pymap3d, the same geodesy as the companion)."""
@@ -238,13 +347,19 @@ class FakeAutopilot:
             return
         mav = self.codec.mav
         boot_ms = int(self.boot_s() * 1000) & 0xFFFFFFFF
-        n, e, d = s.position_ned_m
-        vn, ve, vd = s.velocity_ned_m_s
-        r, p, y = s.attitude_rpy_rad if self.attitude_drift is None \
-            else self.attitude_drift.attitude(s)
+        own = self.config.judge == "estimate"
+        if own and self.origin is None and name == "LOCAL_POSITION_NED":
+            return  # no origin, no local position (ArduPilot: get_relative_position_NED_origin)
+        n, e, d = self.ekf.position() if own else s.position_ned_m
+        vn, ve, vd = self.ekf.velocity() if own else s.velocity_ned_m_s
+        r, p, y = self.ekf.attitude(s.attitude_rpy_rad) if own else s.attitude_rpy_rad
+        if self.attitude_drift is not None:
+            er, ep, ey = self.attitude_drift.error(s.time_s)
+            r, p, y = r + er, p + ep, math.remainder(y + ey, math.tau)
         if name == "HEARTBEAT":
             ap = 3 if self.config.profile == "ardupilot" else 12  # ARDUPILOTMEGA / PX4
-            mav.heartbeat_send(2, ap, 0x81, 0, 4)  # QUADROTOR, armed|custom, ACTIVE
+            base, custom, status = self.flight.heartbeat()
+            mav.heartbeat_send(2, ap, base, custom, status)  # QUADROTOR
         elif name == "ATTITUDE":
             mav.attitude_send(boot_ms, r, p, y, 0.0, 0.0, 0.0)
         elif name == "LOCAL_POSITION_NED":
@@ -260,7 +375,8 @@ class FakeAutopilot:
             mav.distance_sensor_send(boot_ms, 20, 4000, round(s.range_m * 100), 0, 0,
                                      self.config.rangefinder_orientation, 0)
         elif name == "EKF_STATUS_REPORT" and self.config.profile == "ardupilot":
-            flags = 0x1FF if self.origin is not None else 0x07
+            flags = self.ekf.flags(self.flight_s(), self.origin is not None) if own \
+                else (0x33F if self.origin is not None else 0x07)
             mav.ekf_status_report_send(flags, 0.1, 0.1, 0.1, 0.1, 0.0)
         elif name == "TIMESYNC":
             mav.timesync_send(0, self._local_ns())
@@ -300,6 +416,9 @@ class FakeAutopilot:
     def _handle(self, msg: MAVLinkMessage) -> None:
         name = msg.get_type()
         if name in ("VISION_POSITION_ESTIMATE", "ODOMETRY"):
+            if self.clock_ns() < self._blind_until_ns:
+                self.counters["vision_blinded"] = self.counters.get("vision_blinded", 0) + 1
+                return
             self._on_vision(name, msg)
         elif name == "LANDING_TARGET":
             ok, why = judge_landing_target(self.config.profile, msg.to_dict())
@@ -313,6 +432,10 @@ class FakeAutopilot:
             self._on_command(name, msg)
         elif name == "SET_POSITION_TARGET_LOCAL_NED":
             self.position_targets.append({**msg.to_dict(), "arrival_s": self.boot_s()})
+            if self.guided is not None and self.flight.armed and self._guided_mode():
+                self.guided.goto((msg.x, msg.y, msg.z), msg.yaw)
+        elif name.startswith("PARAM_"):
+            self.params.handle(name, msg, self.codec.mav)
         elif name == "SET_GPS_GLOBAL_ORIGIN":
             if self.config.profile == "px4":
                 self._set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
@@ -348,29 +471,69 @@ class FakeAutopilot:
         f = msg.to_dict()
         stamp = int(f["time_usec"] if name == "ODOMETRY" else f["usec"])
         age_ms = self._stamp_age_ms(stamp)
-        truth_t = self.flight_s() - self.config.rules.delay_ms / 1000 - max(age_ms, 0) / 1000
-        ok, why, innov = self.judge.judge(name, f, self.truth(truth_t), age_ms)
+        delay_s = self.estimator_config.delay_ms / 1000 if self.config.judge == "estimate" \
+            else self.config.rules.delay_ms / 1000
+        truth = self.truth(self.flight_s() - delay_s - max(age_ms, 0) / 1000)
+        pos = (float(f["x"]), float(f["y"]), float(f["z"]))
+        if self.config.judge == "truth":
+            ok, why, innov = self.judge.judge(name, f, truth, age_ms)
+        else:
+            ok, why, innov = self._fuse(name, f, pos, age_ms)
         self.vision.append(VisionRecord(
-            name=name, arrival_s=self.boot_s(), time_usec=stamp,
-            position_ned_m=(float(f["x"]), float(f["y"]), float(f["z"])),
+            name=name, arrival_s=self.boot_s(), time_usec=stamp, position_ned_m=pos,
             frame_id=int(f.get("frame_id", 1)), child_frame_id=int(f.get("child_frame_id", 0)),
             estimator_type=int(f.get("estimator_type", 0)), quality=int(f.get("quality", 0)),
             reset_counter=int(f.get("reset_counter", 0)), accepted=ok, reason=why,
-            innovation_m=innov, stamp_age_ms=age_ms if self.timesync_synced else math.nan))
+            innovation_m=innov, stamp_age_ms=age_ms if self.timesync_synced else math.nan,
+            truth_error_m=math.dist(pos, truth.position_ned_m)))
+
+    def _fuse(self, name: str, f: dict[str, Any], pos: tuple[float, float, float],
+              age_ms: float) -> tuple[bool, str, float]:
+        """The real rules, then the estimator's gate against its own estimate."""
+        reason, reset = self.judge.screen(name, f, age_ms)
+        if reason is not None:
+            return False, reason, math.nan
+        verdict = self.ekf.fuse(self.flight_s() - max(age_ms, 0) / 1000, pos,
+                                position_variances(name, f), reset)
+        return verdict.accepted, verdict.reason, verdict.innovation_m
 
     def _on_command(self, name: str, msg: MAVLinkMessage) -> None:
         cmd = int(msg.command)
         if cmd == 611 and name == "COMMAND_INT" and self.config.profile == "ardupilot":
             result = self._origin_command(msg)
-        elif cmd in _ALWAYS_ACCEPTED or cmd in _FLIGHT_COMMANDS:
-            result = MAV_RESULT_ACCEPTED
         else:
-            result = MAV_RESULT_UNSUPPORTED
+            result = self._command(cmd, float(msg.param1), float(msg.param2),
+                                   float(msg.param3), float(getattr(msg, "param7", 0.0)))
         self.commands.append({"kind": name, "command": cmd, "result": result,
                               "arrival_s": self.boot_s(), "param1": float(msg.param1),
                               "param2": float(msg.param2)})
         self.codec.mav.command_ack_send(cmd, result, 0, 0, msg.get_srcSystem(),
                                         msg.get_srcComponent())
+
+    def _command(self, cmd: int, p1: float, p2: float, p3: float, p7: float) -> int:
+        t = self.flight_s()
+        if cmd == MAV_CMD_SET_MESSAGE_INTERVAL:
+            return self.streams.set_interval(int(p1), p2)
+        if cmd == MAV_CMD_REQUEST_MESSAGE:
+            return self.streams.request_once(int(p1))
+        if cmd == MAV_CMD_DO_SET_MODE:
+            return self.flight.set_mode(t, p2, p3)
+        if cmd == MAV_CMD_COMPONENT_ARM_DISARM:
+            ok = self.config.judge == "truth" or (self.ekf.initialised
+                                                  and self.ekf.horizontal_ok(t))
+            return self.flight.arm(t, p1 == 1.0, ok, self._text)
+        if cmd == MAV_CMD_NAV_TAKEOFF:
+            if self.guided is not None and self.flight.armed and self._guided_mode():
+                self.guided.takeoff(p7)
+            return MAV_RESULT_ACCEPTED
+        return MAV_RESULT_ACCEPTED if cmd in _ALWAYS_ACCEPTED else MAV_RESULT_UNSUPPORTED
+
+    def _guided_mode_number(self) -> int:
+        return ARDUCOPTER_GUIDED if self.config.profile == "ardupilot" else PX4_OFFBOARD
+
+    def _guided_mode(self) -> bool:
+        return (self.flight.custom_mode == self._guided_mode_number()
+                and self.flight.failsafe is None)
 
     def _origin_command(self, msg: MAVLinkMessage) -> int:
         if self.origin is not None:
@@ -395,37 +558,4 @@ class FakeAutopilot:
 
     def summary(self) -> dict[str, Any]:
         """Everything a test or a user wants to know, JSON-serialisable."""
-        reasons: dict[str, int] = {}
-        for r in self.vision:
-            reasons[r.reason] = reasons.get(r.reason, 0) + 1
-        periods = np.diff([h.arrival_s for h in self.heartbeats])
-        return {
-            "profile": self.config.profile,
-            "flight_s": self.flight_s(),
-            "vision_received": len(self.vision),
-            "vision_accepted": len(self.accepted()),
-            "vision_reasons": reasons,
-            "vision": [r.as_dict() for r in self.vision],
-            "landing_targets": self.landing_targets,
-            "commands": self.commands,
-            "origin": self.origin,
-            "timesync_samples": self.timesync_samples,
-            "timesync_synced": self.timesync_synced,
-            "companion_heartbeats": len(self.heartbeats),
-            "heartbeat_period_s": _period_stats(periods),
-            "statustexts": self.statustexts,
-            "rx": self.codec.rx.as_dict(),
-            "faults": vars(self.faults.counters),
-            "counters": dict(self.counters),
-        }
-
-
-def _period_stats(periods: np.ndarray) -> dict[str, float | None]:
-    """Median/min/max of the companion's heartbeat periods and the jitter |period - median|."""
-    if periods.size == 0:
-        return {"median": None, "min": None, "max": None, "jitter_p99": None,
-                "jitter_max": None}
-    med = float(np.median(periods))
-    dev = np.abs(periods - med)
-    return {"median": med, "min": float(periods.min()), "max": float(periods.max()),
-            "jitter_p99": float(np.percentile(dev, 99)), "jitter_max": float(dev.max())}
+        return fake_summary(self)

@@ -8,8 +8,9 @@ below VISO_QUAL_MIN is rejected; a new ``reset_counter`` resets instead of fusin
 PX4: ODOMETRY frame_id LOCAL_NED/ENU/FRD/FLU; estimator_type MOCAP is published to a topic EKF2
 never reads (ignored); quality below EKF2_EV_QMIN rejected; stamps are converted with the
 TIMESYNC offset once synced, else replaced by the arrival time.
-Both: non-finite pose -> rejected; a simple innovation gate against the true state (the fake's
-stand-in for the EKF's prediction) with the message's variance floored by a noise parameter.
+Both: non-finite pose -> rejected.  The innovation gate is the fake's estimator's
+(:mod:`mavlink_bridge.fake_ekf`, against its own estimate); the old gate against the true
+state (:meth:`VisionJudge.judge`) stays for the permissive fake only.
 """
 
 from __future__ import annotations
@@ -57,10 +58,11 @@ class VisionRecord:
     reason: str
     innovation_m: float = math.nan
     stamp_age_ms: float = math.nan
+    truth_error_m: float = math.nan  # for scoring only: never used to accept a fix
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
-        for k in ("innovation_m", "stamp_age_ms"):
+        for k in ("innovation_m", "stamp_age_ms", "truth_error_m"):
             if not math.isfinite(d[k]):
                 d[k] = None
         return d
@@ -79,26 +81,35 @@ class VisionJudge:
         self.last_stamp_us = None
         self.last_reset_counter = None
 
-    def judge(self, name: str, f: Mapping[str, Any], truth: VehicleState,
-              stamp_age_ms: float) -> tuple[bool, str, float]:
-        """-> (accepted, reason, innovation_m) for one VISION_POSITION_ESTIMATE or ODOMETRY."""
+    def screen(self, name: str, f: Mapping[str, Any], stamp_age_ms: float
+               ) -> tuple[str | None, bool]:
+        """-> (reason to reject or None, reset_counter changed) -- every rule but the gate."""
         reason = self._static_checks(name, f)
         if reason is not None:
-            return False, reason, math.nan
+            return reason, False
         if not (-10.0 <= stamp_age_ms <= self.rules.max_stamp_age_ms):
-            return False, "stamp_out_of_range", math.nan
+            return "stamp_out_of_range", False
         stamp = int(f["time_usec"] if name == "ODOMETRY" else f["usec"])
         if self.profile == "ardupilot" and self.last_stamp_us is not None:
             if stamp - self.last_stamp_us < _EV_MIN_SPACING_US:
-                return False, "under_20ms_apart", math.nan
-        pos = (float(f["x"]), float(f["y"]), float(f["z"]))
-        innovation = math.dist(pos, truth.position_ned_m)
+                return "under_20ms_apart", False
         reset = int(f.get("reset_counter", 0))
         self.last_stamp_us = stamp
-        if self.last_reset_counter is not None and reset != self.last_reset_counter:
-            self.last_reset_counter = reset
-            return True, "reset", innovation
+        changed = self.last_reset_counter is not None and reset != self.last_reset_counter
         self.last_reset_counter = reset
+        return None, changed
+
+    def judge(self, name: str, f: Mapping[str, Any], truth: VehicleState,
+              stamp_age_ms: float) -> tuple[bool, str, float]:
+        """The permissive fake (``FakeAutopilotConfig(judge="truth")``): the gate against the
+        true state.  -> (accepted, reason, innovation_m)."""
+        reason, reset = self.screen(name, f, stamp_age_ms)
+        if reason is not None:
+            return False, reason, math.nan
+        pos = (float(f["x"]), float(f["y"]), float(f["z"]))
+        innovation = math.dist(pos, truth.position_ned_m)
+        if reset:
+            return True, "reset", innovation
         if not self._inside_gate(pos, truth, f, name):
             return False, "innovation_gate", innovation
         return True, "fused", innovation
@@ -130,14 +141,22 @@ class VisionJudge:
     def _inside_gate(self, pos: tuple[float, float, float], truth: VehicleState,
                      f: Mapping[str, Any], name: str) -> bool:
         """Per-axis test |innovation| <= gate * sigma, sigma^2 = max(var, floor^2)."""
-        cov = list(f["pose_covariance"] if name == "ODOMETRY" else f["covariance"])
-        diag = [cov[0], cov[6], cov[11]] if len(cov) >= 12 else [math.nan] * 3
+        diag = position_variances(name, f)
         floor2 = self.rules.position_noise_floor_m ** 2
         for p, t, var in zip(pos, truth.position_ned_m, diag, strict=True):
             v = floor2 if not math.isfinite(var) else max(var, floor2)
             if abs(p - t) > self.rules.gate_sigma * math.sqrt(v):
                 return False
         return True
+
+
+def position_variances(name: str, f: Mapping[str, Any]) -> tuple[float, float, float]:
+    """The N, E, D position variances of a VISION_POSITION_ESTIMATE or ODOMETRY (NaN when
+    the message carries none)."""
+    cov = list(f["pose_covariance"] if name == "ODOMETRY" else f["covariance"])
+    if len(cov) < 12:
+        return math.nan, math.nan, math.nan
+    return float(cov[0]), float(cov[6]), float(cov[11])
 
 
 def judge_landing_target(profile: Profile, f: Mapping[str, Any]) -> tuple[bool, str]:

@@ -75,6 +75,11 @@ class MavlinkLink:
         self._budget = float(config.rx_budget_bytes_per_s)
         self._budget_ns = clock_ns()
         self.reboot_listeners: list[Callable[[], None]] = []
+        #: called with (up) on every link change, and (name, arrival_ns) for every message
+        #: from the autopilot (the stream watch measures rates with it)
+        self.link_listeners: list[Callable[[bool], None]] = []
+        self.rx_listeners: list[Callable[[str, int], None]] = []
+        self._msg_listeners: list[Callable[[MAVLinkMessage], None]] = []
         self._started_ns = clock_ns()
         self._next_waiting_log_s = WAITING_LOG_S
         self._open_error = ""
@@ -215,6 +220,8 @@ class MavlinkLink:
         log.info("autopilot link %s", "up" if up else "down")
         if up:
             self.statustext("link up")
+        for listener in self.link_listeners:
+            listener(up)
 
     async def wait_link(self, up: bool = True, timeout_s: float = 5.0) -> bool:
         """Wait until the link is ``up`` (or down); False on timeout."""
@@ -271,6 +278,10 @@ class MavlinkLink:
             return
         if name == "TIMESYNC":
             self._answer_timesync(msg, sysid, compid, now_ns)
+        for rx in self.rx_listeners:
+            rx(name, now_ns)
+        for fn in list(self._msg_listeners):
+            fn(msg)
         boot_ms = getattr(msg, "time_boot_ms", None)
         if boot_ms is not None and compid == 1:
             self._check_reboot(int(boot_ms))
@@ -308,6 +319,14 @@ class MavlinkLink:
             for listener in self.reboot_listeners:
                 listener()
         self._last_boot_ms = boot_ms
+
+    def add_msg_listener(self, fn: Callable[[MAVLinkMessage], None]) -> None:
+        """Call ``fn`` with every message from the autopilot (e.g. PARAM_VALUE)."""
+        self._msg_listeners.append(fn)
+
+    def remove_msg_listener(self, fn: Callable[[MAVLinkMessage], None]) -> None:
+        with contextlib.suppress(ValueError):
+            self._msg_listeners.remove(fn)
 
     # ----------------------------------------------------------------- telemetry API
     def latest(self, name: str) -> Telemetry | None:

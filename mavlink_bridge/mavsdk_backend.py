@@ -14,6 +14,10 @@ What MAVSDK does and what we add:
   unaligned frame), so this backend sends VISION_POSITION_ESTIMATE, which PX4 reads as NED.
 * TIMESYNC answers, STATUSTEXT, LANDING_TARGET, the EKF origin and all telemetry go through
   the MavlinkDirect plugin (MAVSDK itself does not answer PX4's TIMESYNC requests).
+* The streams the companion needs are asked with SET_MESSAGE_INTERVAL (COMMAND_LONG through
+  MavlinkDirect) and watched exactly as in the pymavlink backend (mavlink_bridge.streams).
+  MAVSDK's own plugins may ask the autopilot for other rates of the same messages; the last
+  request wins on the autopilot, so the watch asks again when a stream slows down.
 """
 
 from __future__ import annotations
@@ -56,6 +60,7 @@ from mavlink_bridge.messages import (
     vpe_fields,
 )
 from mavlink_bridge.output import OutputGate, SendResult
+from mavlink_bridge.streams import StreamWatch, interval_command, keep_streams, parse_streams
 from mavlink_bridge.telemetry import Telemetry, TelemetryHub, convert
 
 log = logging.getLogger(__name__)
@@ -93,6 +98,8 @@ class MavsdkBridge:
         self.reboots = 0
         self._hub = TelemetryHub(self.config.rx_queue_len, self.counters)
         self._tasks: list[asyncio.Task[Any]] = []
+        self.streams = StreamWatch(parse_streams(config.streams), self._request_interval,
+                                   self.statustext)
 
     # ------------------------------------------------------------ lifecycle
     async def start(self, timeout_s: float = 10.0) -> None:
@@ -107,7 +114,11 @@ class MavsdkBridge:
         self._mocap = MocapAsync(system)
         self._connected = True
         self._tasks = [asyncio.create_task(self._receive(), name="mavsdk-receive"),
-                       asyncio.create_task(self._watch_connection(system), name="mavsdk-conn")]
+                       asyncio.create_task(self._watch_connection(system), name="mavsdk-conn"),
+                       asyncio.create_task(keep_streams(
+                           self.streams, lambda: self._connected, self.clock_ns,
+                           self.config.stream_check_s), name="mavsdk-streams")]
+        self.streams.ask_all(self.clock_ns())
         if self.config.set_origin:
             self._tasks.append(asyncio.create_task(self._origin_loop(), name="mavsdk-origin"))
 
@@ -158,6 +169,7 @@ class MavsdkBridge:
                 self._connected = bool(connected)
                 if connected:
                     self.statustext("link up")
+                    self.streams.ask_all(self.clock_ns())
 
     # ------------------------------------------------------------ sending
     async def _send(self, name: str, fields: dict[str, Any],
@@ -174,6 +186,14 @@ class MavsdkBridge:
             log.debug("mavsdk send %s failed: %s", name, err)
             return False
         return True
+
+    def _request_interval(self, name: str, interval_us: int) -> None:
+        fields: dict[str, Any] = {"target_system": self.system_id, "target_component": 1,
+                                  "confirmation": 0, **interval_command(name, interval_us)}
+        task = asyncio.get_running_loop().create_task(
+            self._send("COMMAND_LONG", fields, (self.system_id, 1)))
+        self._tasks.append(task)
+        task.add_done_callback(self._forget)
 
     def statustext(self, text: str, severity: int = 6) -> None:
         full = (self.config.statustext_prefix + text)[:50]
@@ -271,6 +291,7 @@ class MavsdkBridge:
 
     def _store(self, name: str, sysid: int, compid: int, now: int,
                fields: dict[str, Any]) -> None:
+        self.streams.on_message(name, now)
         if compid == 1 and "time_boot_ms" in fields:
             self._check_reboot(int(fields["time_boot_ms"]))
         value = convert(name, fields)
@@ -290,6 +311,7 @@ class MavsdkBridge:
             self.vision_gate.reset()
             self.target_gate.reset()
             self.statustext("autopilot reboot detected")
+            self.streams.ask_all(self.clock_ns())
         self._last_boot_ms = boot_ms
 
     def latest(self, name: str) -> Telemetry | None:
@@ -319,7 +341,14 @@ class MavsdkBridge:
         return {**self.counters, "link_up": self._connected, "origin_confirmed": self._origin_ok,
                 "reboots": self.reboots,
                 "vision": dict(self.vision_gate.counts),
-                "landing_target": dict(self.target_gate.counts)}
+                "landing_target": dict(self.target_gate.counts),
+                "streams": self.stream_report()}
+
+    def stream_report(self) -> dict[str, dict[str, Any]]:
+        return self.streams.report(self.clock_ns())
+
+    def stream_warnings(self) -> list[str]:
+        return self.streams.missing()
 
 
 def _cov(values: list[float]) -> Covariance:

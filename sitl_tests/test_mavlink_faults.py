@@ -139,7 +139,8 @@ async def test_corrupted_bytes_from_autopilot(settings: Settings) -> None:
     flight = await Flight("hover", 10.0, settings).run(script)
     rx = flight.bridge.stats()["rx"]
     corrupted = flight.fake.faults.counters.corrupted
-    assert corrupted >= 50, corrupted
+    # the strict fake sends only what was asked (about 50 datagrams/s): >= 30 in 5 s at 20 %
+    assert corrupted >= 30, corrupted
     rejected = rx["bad_crc"] + rx["bad_framing"] + rx["unknown_id"] + rx["truncated"]
     assert rejected >= 0.5 * corrupted, rx
     t0, t1 = flight.stimuli[0][0], flight.stimuli[1][0]

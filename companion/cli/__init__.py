@@ -48,6 +48,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "synth_cmd",
     "record_cmd",
     "fake_autopilot_cmd",
+    "autopilot_cmd",
     "landmarks_cmd",
     "eval_cmd",
 )

@@ -1,8 +1,10 @@
 """``companion fake-autopilot``: run the scripted fake autopilot (ArduPilot or PX4 rules).
 
-It flies the default hover-then-circle trajectory, streams telemetry, answers commands,
-judges every vision message like the real autopilot would, and on exit prints (or writes) a
-JSON summary of what it received.  Point ``companion run`` (``mavlink.endpoint``) at it.
+It flies the default hover-then-circle trajectory (or, with ``--vehicle guided``, whatever
+the companion commands), streams what it is asked for, answers commands and parameters,
+fuses every vision message in its own estimator like the real autopilot would, and on exit
+prints (or writes) a JSON summary of what it received.  Point ``companion run``
+(``mavlink.endpoint``) at it.  ``--streams all --judge truth`` is the old permissive fake.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import json
 import signal
 import sys
@@ -22,6 +25,7 @@ from companion.settings import Settings
 from mavlink_bridge.codec import load_signing_key
 from mavlink_bridge.errors import EndpointError, LinkOpenError, SigningKeyError
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.fake_ekf import AttitudeModel, estimator_defaults
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,6 +52,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="enforce MAVLink signing with this key file")
     parser.add_argument("--timesync-samples", type=int, default=500, metavar="N",
                         help="PX4: good TIMESYNC round trips before stamps are converted")
+    parser.add_argument("--streams", choices=("strict", "all"), default="strict",
+                        help="strict: nothing but HEARTBEAT until asked with "
+                        "SET_MESSAGE_INTERVAL, like a real port (default); all: every stream")
+    parser.add_argument("--judge", choices=("estimate", "truth"), default="estimate",
+                        help="gate fixes against the fake's own EKF estimate (default) or, "
+                        "permissive, against the true state")
+    parser.add_argument("--vehicle", choices=("scripted", "guided"), default="scripted",
+                        help="scripted: fly the built-in trajectory, armed; guided: on the "
+                        "ground, flown by GUIDED/OFFBOARD commands (companion run --fly)")
+    parser.add_argument("--start", type=float, nargs=4, metavar=("N", "E", "D", "YAW"),
+                        help="guided: where the vehicle stands (m, m, m, deg)")
+    parser.add_argument("--airborne", type=float, default=0.0, metavar="M",
+                        help="guided: start hovering M metres up, armed, in GUIDED/OFFBOARD")
+    parser.add_argument("--attitude-deg", type=float, nargs=3, default=(0.0, 0.0, 0.0),
+                        metavar=("ROLL", "PITCH", "YAW"),
+                        help="the estimated attitude's initial error (degrees)")
+    parser.add_argument("--yaw-drift", type=float, default=0.0, metavar="DEG_PER_MIN",
+                        help="the estimated yaw's drift")
+    parser.add_argument("--coupled", action="store_true",
+                        help="the attitude error leaks into the estimate and fused fixes pull "
+                        "the attitude (a real EKF's cross-covariance)")
+    parser.add_argument("--absent", action="append", default=[], metavar="MESSAGE",
+                        help="accept SET_MESSAGE_INTERVAL for MESSAGE but never send it "
+                        "(a sensor not fitted); repeatable")
     parser.set_defaults(handler=run)
 
 
@@ -60,10 +88,20 @@ def _config(args: argparse.Namespace, settings: Settings) -> FakeAutopilotConfig
         key = load_signing_key(args.signing_key) if args.signing_key else None
     except SigningKeyError as err:
         raise InputError(str(err)) from err
+    r, p, y = (float(v) for v in args.attitude_deg)
+    profile = args.profile or settings.vehicle.profile
+    estimator = dataclasses.replace(estimator_defaults(profile), attitude=AttitudeModel(
+        initial_deg=(r, p, y), yaw_drift_deg_min=args.yaw_drift, coupled=args.coupled))
+    start = FakeAutopilotConfig().guided_start
+    if args.start:
+        n, e, d, yaw = (float(v) for v in args.start)
+        start = (n, e, d, yaw)
     return FakeAutopilotConfig(
-        profile=args.profile or settings.vehicle.profile, endpoint=args.endpoint,
+        profile=profile, endpoint=args.endpoint,
         system_id=args.sysid, signing_key=key, origin_fail_first=max(0, args.origin_fail_first),
-        timesync_samples_required=max(1, args.timesync_samples))
+        timesync_samples_required=max(1, args.timesync_samples), streams=args.streams,
+        judge=args.judge, vehicle=args.vehicle, absent=tuple(args.absent),
+        guided_airborne_m=max(0.0, args.airborne), guided_start=start, estimator=estimator)
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:

@@ -31,7 +31,7 @@ from companion.settings import Settings
 from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
-from companion.sim.square import SquareFlight
+from companion.sim.square import FlightAbortedError, SquareFlight
 from companion.sources.factory import open_source, resolve
 from companion.sources.files import RecordedStreamSource
 from mavlink_bridge.bridge import VisionBridge
@@ -171,14 +171,14 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
 
     flights: list[asyncio.Task[None]] = []
 
-    def start_flying(_app: CompanionApp) -> None:
+    def start_flying(app: CompanionApp) -> None:
         link = getattr(bridge, "link", None)
         if link is None:
             log.error("--fly needs mavlink.backend = \"pymavlink\"; not flying")
             return
         square = SquareFlight(link, bridge.latest, settings.vehicle.profile)
         flights.append(asyncio.create_task(square.run(), name="fly-square"))
-        flights[0].add_done_callback(_report_flight)
+        flights[0].add_done_callback(lambda task: _flight_ended(task, app))
 
     try:
         app = await fly(settings, source, bridge, processor, pmap, seconds=seconds,
@@ -187,16 +187,23 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
     finally:
         for task in flights:
             task.cancel()
-        await asyncio.gather(*flights, return_exceptions=True)
+        outcomes = await asyncio.gather(*flights, return_exceptions=True)
     failure = getattr(source, "failure", None)
     if failure is not None:  # e.g. follow mode without the simulator's truth: one line
         raise failure
+    aborted = [o for o in outcomes if isinstance(o, FlightAbortedError)]
+    if aborted:  # the vehicle left the square's control: say why, exit non-zero
+        raise aborted[0]
     return app
 
 
-def _report_flight(task: asyncio.Task[None]) -> None:
-    if not task.cancelled() and task.exception() is not None:
-        log.error("%s", task.exception())
+def _flight_ended(task: asyncio.Task[None], app: CompanionApp) -> None:
+    """--fly ended by itself: a disarm, mode change or failsafe stops the companion too."""
+    if task.cancelled() or task.exception() is None:
+        return
+    log.error("%s", task.exception())
+    if isinstance(task.exception(), FlightAbortedError):
+        app.request_stop()
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:

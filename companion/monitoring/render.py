@@ -32,6 +32,13 @@ def render_vehicle(view: VehicleView) -> list[str]:
         f"p99 {_num(latency.get('p99'))} ms  link {status.get('link', '-')}  "
         f"dropped frames {status.get('dropped_frames', '-')}",
     ]
+    streams = status.get("autopilot_streams", {})
+    if streams:
+        lines.append("  streams " + "  ".join(
+            f"{name} {s.get('state', '?')} {_num(s.get('rate_hz'))}/{_num(s.get('asked_hz'), 'g')}"
+            " Hz" for name, s in sorted(streams.items())))
+    for warning in status.get("warnings", []):
+        lines.append(f"  WARNING {warning}")
     cause = status.get("no_fix_cause")
     if isinstance(cause, dict):
         lines.append(f"  no fix can come: {cause.get('cause')}: {cause.get('detail')}")

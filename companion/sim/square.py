@@ -5,6 +5,12 @@ ArduPilot: GUIDED (custom mode 4), arm, NAV_TAKEOFF, then SET_POSITION_TARGET_LO
 to each corner.  PX4: setpoints streamed first (offboard needs them), OFFBOARD (main
 mode 6), arm; the first corner is straight above home at the altitude.  Only for a
 simulator: it arms motors.
+
+Once armed the vehicle is watched on every setpoint: a disarm, a mode other than the one it
+set (an EKF failsafe switches ArduCopter to LAND, PX4 to AUTO.LAND) or a HEARTBEAT saying
+MAV_STATE_CRITICAL / EMERGENCY (a failsafe) stops the commands at once, and
+:meth:`SquareFlight.run` raises :class:`FlightAbortedError` naming why (with the autopilot's last
+STATUSTEXT), so ``companion run --fly`` stops and exits non-zero.
 """
 
 from __future__ import annotations
@@ -17,6 +23,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from companion.errors import CompanionError
+
 log = logging.getLogger(__name__)
 
 MAV_CMD_NAV_TAKEOFF = 22
@@ -27,6 +35,29 @@ MAV_MODE_FLAG_SAFETY_ARMED = 0x80
 MAV_FRAME_LOCAL_NED = 1
 ARDUCOPTER_GUIDED = 4
 PX4_MAIN_MODE_OFFBOARD = 6
+MAV_STATE_CRITICAL = 5
+#: ArduCopter's custom modes (ArduCopter/mode.h) for the messages
+ARDUCOPTER_MODES = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER",
+                    6: "RTL", 9: "LAND", 16: "POSHOLD", 17: "BRAKE", 21: "SMART_RTL"}
+#: PX4 main modes (src/modules/commander/px4_custom_mode.h); AUTO (4) sub-modes
+PX4_MAIN_MODES = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 4: "AUTO", 5: "ACRO", 6: "OFFBOARD",
+                  7: "STABILIZED"}
+PX4_AUTO_SUB = {2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND"}
+
+
+class FlightAbortedError(CompanionError):
+    """``--fly`` stopped commanding: the vehicle disarmed, changed mode or is in failsafe."""
+
+    exit_status = 3
+
+
+def mode_name(profile: str, custom_mode: int) -> str:
+    """A HEARTBEAT custom_mode as the autopilot's name for it."""
+    if profile != "px4":
+        return ARDUCOPTER_MODES.get(custom_mode, f"mode {custom_mode}")
+    main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+    name = PX4_MAIN_MODES.get(main, f"main mode {main}")
+    return f"{name}.{PX4_AUTO_SUB.get(sub, sub)}" if main == 4 else name
 #: position and yaw used; velocity, acceleration, force and yaw rate ignored (bits 3-9, 11)
 TYPE_MASK_POSITION_YAW = 0b1011_1111_1000
 
@@ -81,6 +112,8 @@ class SquareFlight:
         self.arm_timeout_s = arm_timeout_s
         self.arm_retry_s = arm_retry_s
         self._t0 = time.monotonic()
+        self.flying_mode: int | None = None  # the custom mode the vehicle flies the square in
+        self.aborted: str | None = None
 
     @property
     def target(self) -> int:
@@ -121,7 +154,34 @@ class SquareFlight:
                              ARDUCOPTER_GUIDED)
             self.command(MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
             await asyncio.sleep(self.arm_retry_s)
-        log.info("--fly: armed")
+        hb = self.latest("HEARTBEAT")
+        self.flying_mode = None if hb is None else int(hb.value.custom_mode)
+        log.info("--fly: armed in %s", "?" if self.flying_mode is None
+                 else mode_name(self.profile, self.flying_mode))
+
+    def problem(self) -> str | None:
+        """Why the square must stop now (disarmed, mode changed, failsafe), else None."""
+        hb = self.latest("HEARTBEAT")
+        if hb is None:
+            return None
+        v = hb.value
+        if not v.base_mode & MAV_MODE_FLAG_SAFETY_ARMED:
+            return "the vehicle disarmed"
+        if self.flying_mode is not None and int(v.custom_mode) != self.flying_mode:
+            return (f"the autopilot changed mode to {mode_name(self.profile, v.custom_mode)} "
+                    f"(was {mode_name(self.profile, self.flying_mode)})")
+        if v.system_status >= MAV_STATE_CRITICAL:
+            return "the autopilot reports a failsafe (MAV_STATE_CRITICAL)"
+        return None
+
+    def _check(self) -> None:
+        why = self.problem()
+        if why is None:
+            return
+        text = self.latest("STATUSTEXT")
+        said = f"; autopilot: \"{text.value.text}\"" if text is not None else ""
+        self.aborted = why
+        raise FlightAbortedError(f"--fly stopped commanding: {why}{said}")
 
     async def run(self) -> None:
         """Arm, take off and fly the square ``loops`` times, then hold the first corner."""
@@ -129,14 +189,21 @@ class SquareFlight:
         corners = square_corners(self.plan)
         if self.profile != "px4":
             self.command(MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, self.plan.altitude_m)
-            await asyncio.sleep(self.plan.altitude_m / self.plan.climb_m_s + self.plan.settle_s)
+            climb_end = time.monotonic() + self.plan.altitude_m / self.plan.climb_m_s \
+                + self.plan.settle_s
+            while time.monotonic() < climb_end:
+                self._check()
+                await asyncio.sleep(0.1)
         period_s = 1.0 / self.plan.setpoint_rate_hz
         for lap in range(self.plan.loops):
             for corner in [*corners[1:], corners[0]]:
                 log.info("--fly: lap %d to N %.1f E %.1f", lap + 1, corner[0], corner[1])
                 for _ in range(max(1, round(self.plan.leg_s / period_s))):
+                    self._check()
                     self.setpoint(corner)
                     await asyncio.sleep(period_s)
+        log.info("--fly: %d laps done; holding the first corner", self.plan.loops)
         while True:  # hold: PX4 leaves offboard without a setpoint stream
+            self._check()
             self.setpoint(corners[0])
             await asyncio.sleep(period_s)

@@ -57,7 +57,8 @@ async def follow_frames(sim: Simulator) -> tuple[list[tuple[Frame, float]], list
 
     out: list[tuple[Frame, float]] = []
     pose_err: list[float] = []
-    async with FakeAutopilot(FakeAutopilotConfig(), truth=truth) as fake:
+    # no request sender here: the permissive fake streams the truth unasked
+    async with FakeAutopilot(FakeAutopilotConfig(streams="all"), truth=truth) as fake:
         bridge = PymavlinkBridge(MavlinkConfig(
             endpoint=f"udpout:127.0.0.1:{fake.local_port}", origin_lat_deg=o.lat,
             origin_lon_deg=o.lon, origin_alt_m=o.alt_m, origin_retry_s=0.05))

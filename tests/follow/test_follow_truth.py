@@ -173,6 +173,9 @@ def sim() -> Simulator:
 async def _wired(sim: Simulator, profile: str = "ardupilot", **fake_kw: Any
                  ) -> AsyncIterator[tuple[FakeAutopilot, PymavlinkBridge]]:
     o = sim.scenario.origin
+    # the follow camera's own behaviour: the fake streams everything unasked unless a test
+    # asks for the strict fake (which sends the truth only when asked)
+    fake_kw.setdefault("streams", "all")
     cfg = replace(FakeAutopilotConfig(profile=profile), **fake_kw)  # type: ignore[arg-type]
     async with FakeAutopilot(cfg, truth=sim.truth_fn) as ap:
         bridge = PymavlinkBridge(MavlinkConfig(
@@ -190,8 +193,9 @@ def flight_time_s(ap: FakeAutopilot, t_us: int) -> float:
 
 @pytest.mark.parametrize("profile", ["ardupilot", "px4"])
 async def test_rendered_pose_follows_the_simulators_truth(sim: Simulator, profile: str) -> None:
-    """Frames show the world from the true pose at their stamp (degE7 lat/lon: ~1 cm)."""
-    async for ap, bridge in _wired(sim, profile):
+    """Frames show the world from the true pose at their stamp (degE7 lat/lon: ~1 cm); the
+    strict fake sends the truth only because the camera asks for it."""
+    async for ap, bridge in _wired(sim, profile, streams="strict"):
         src = FollowCameraSource(sim, bridge, ORIGIN, profile, FAST,
                                  request=command_sender(bridge))
         try:

@@ -13,12 +13,15 @@ from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.messages import VisionFix
+from mavlink_bridge.streams import needed_streams
 
 FAST_PERIODS = (
     ("HEARTBEAT", 0.1), ("ATTITUDE", 0.05), ("LOCAL_POSITION_NED", 0.1),
     ("GLOBAL_POSITION_INT", 0.1), ("SYSTEM_TIME", 0.5), ("DISTANCE_SENSOR", 0.1),
     ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.05), ("HOME_POSITION", 0.2),
 )
+# what a companion with a range finder asks for (the strict fake sends nothing unasked)
+ASKED = tuple((s.name, s.rate_hz) for s in needed_streams(30.0, rangefinder=True))
 DIAG_COV = tuple(0.01 if k in (0, 6, 11) else (0.001 if k in (15, 18, 20) else 0.0)
                  for k in range(21))
 
@@ -30,7 +33,8 @@ def fake_config(**kw: Any) -> FakeAutopilotConfig:
 def bridge_config(port: int, **kw: Any) -> MavlinkConfig:
     base = MavlinkConfig(endpoint=f"udpout:127.0.0.1:{port}", origin_lat_deg=47.39,
                          origin_lon_deg=8.54, origin_alt_m=400.0, origin_retry_s=0.05,
-                         heartbeat_rate_hz=5.0, link_timeout_s=0.6, rate_hz=30.0)
+                         heartbeat_rate_hz=5.0, link_timeout_s=0.6, rate_hz=30.0,
+                         streams=ASKED)
     return replace(base, **kw)
 
 

@@ -31,7 +31,7 @@ async def test_cli_fake_autopilot_judges_and_summarises(tmp_path: Path) -> None:
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "companion", "fake-autopilot", "--profile", "ardupilot",
         "--endpoint", f"udpin:127.0.0.1:{port}", "--seconds", "6", "--origin-fail-first", "2",
-        "--summary", str(summary), cwd=ROOT, env=env,
+        "--summary", str(summary), "--streams", "all", "--judge", "truth", cwd=ROOT, env=env,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
     bridge = PymavlinkBridge(bridge_config(port, heartbeat_rate_hz=2.0, link_timeout_s=3.0))
     try:
@@ -59,6 +59,6 @@ async def test_cli_fake_autopilot_judges_and_summarises(tmp_path: Path) -> None:
     data = json.loads(summary.read_text())
     assert data["profile"] == "ardupilot"
     assert data["vision_received"] == sent and data["vision_accepted"] == sent
-    assert [c["result"] for c in data["commands"]][:3] == [4, 4, 0]
+    assert [c["result"] for c in data["commands"] if c["command"] == 611][:3] == [4, 4, 0]
     assert data["origin"] == [47.39, 8.54, 400.0]
     assert data["companion_heartbeats"] >= 2

@@ -12,7 +12,7 @@ from mavlink_bridge.fake_drift import AttitudeDrift, AttitudeErrorConfig
 from mavlink_bridge.telemetry import Attitude, SimTruth
 from mavlink_bridge.vehicle import VehicleState
 
-from .conftest import FAST_PERIODS, bridge_config, fake_config, wait_for
+from .conftest import ASKED, FAST_PERIODS, bridge_config, fake_config, wait_for
 
 
 def test_error_has_the_stated_sigma_and_correlation_time() -> None:
@@ -65,7 +65,8 @@ async def test_attitude_stream_carries_the_error_and_truth_streams_do_not() -> N
                       home=(47.39, 8.54, 400.0), periods_s=(*FAST_PERIODS, ("SIM_STATE", 0.05)))
     async with FakeAutopilot(cfg, truth=hover) as ap:
         assert ap.attitude_drift is not None
-        async with PymavlinkBridge(bridge_config(ap.local_port)) as bridge:
+        async with PymavlinkBridge(bridge_config(
+                ap.local_port, streams=(*ASKED, ("SIM_STATE", 20.0)))) as bridge:
             bridge.report_health("ok")
             assert await wait_for(lambda: bridge.latest("ATTITUDE") is not None)
             item = bridge.latest("ATTITUDE")

@@ -55,7 +55,8 @@ async def test_heartbeat_status_follows_application_health() -> None:
 
 
 async def test_telemetry_cache_and_generator_follow_the_vehicle() -> None:
-    async with wired() as (_ap, bridge):
+    # the permissive fake streams everything, truth included: this is about the cache
+    async with wired({"streams": "all", "judge": "truth"}) as (_ap, bridge):
         assert await wait_for(lambda: all(bridge.latest(n) is not None for n in (
             "ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME",
             "DISTANCE_SENSOR", "EKF_STATUS_REPORT")))
@@ -78,7 +79,7 @@ async def test_telemetry_cache_and_generator_follow_the_vehicle() -> None:
 
 async def test_origin_is_retried_through_failures_until_the_position_shows_it() -> None:
     """ArduPilot SITL answers FAILED while its EKF is not ready; we must keep trying."""
-    async with wired({"origin_fail_first": 5}) as (ap, bridge):
+    async with wired({"origin_fail_first": 5, "streams": "all"}) as (ap, bridge):
         assert await wait_for(lambda: bridge.origin_confirmed, 3.0)
         results = [c["result"] for c in ap.commands if c["command"] == 611]
         assert results[:5] == [4] * 5 and 0 in results

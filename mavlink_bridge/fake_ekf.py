@@ -1,0 +1,216 @@
+"""The fake autopilot's own estimator: what a real EKF does with vision fixes.
+
+Per axis (north, east, down) a two-state Kalman filter, position and velocity, is propagated
+with the simulated IMU -- the true acceleration plus an accelerometer bias and white noise --
+and corrected by the vision fixes it accepts.  Every rule copies the real autopilots:
+
+* Delay: a fix is compared with the estimate ``delay_ms`` before its arrival (ArduPilot
+  ``VISO_DELAY_MS``, default 10, libraries/AP_VisualOdom/AP_VisualOdom.cpp; PX4
+  ``EKF2_EV_DELAY``, default 0 ms, src/modules/ekf2/params_external_vision.yaml).
+* Noise: the fix's variance floored by ``noise_floor_m`` squared (ArduPilot
+  ``VISO_POS_M_NSE`` default 0.2 m; PX4 ``EKF2_EVP_NOISE`` default 0.1 m with
+  ``EKF2_EV_NOISE_MD`` 0).
+* Gate: the horizontal innovation test against **this estimate** (never the truth):
+  ``nu_N^2/S_N + nu_E^2/S_E <= gate^2``, S = P + R (ArduPilot EKF3 ``FuseVelPosNED``,
+  ``EK3_POS_I_GATE`` default 500 = 5 sigma; PX4 ``EKF2_EVP_GATE`` default 5).
+  The vertical axis has its own test.
+* Process noise of the filter: ``EK3_ACC_P_NSE`` / PX4 ``EKF2_ACC_NOISE``, both 0.35 m/s^2.
+* Health: ArduPilot's EKF_STATUS_REPORT flags are 0x33f with external navigation fused; the
+  horizontal position flags drop (0x25) about ``outage_flags_s`` = 6 s into a vision outage
+  (../shared/MAVLINK.md "What a real ArduCopter did"); PX4 declares the horizontal position
+  invalid after ``EKF2_NOAID_TOUT`` (default 5 s) without aiding.
+
+The reported attitude is the estimate: the truth plus an error that starts at
+``attitude.initial_deg`` and drifts in yaw at ``attitude.yaw_drift_deg_min``.  In the
+``coupled`` mode the attitude error also leaks gravity into the propagated acceleration (a
+tilt error of d rad is an acceleration error of g d) and every fused fix pulls the attitude
+in proportion to its innovation, as a real EKF's position-attitude cross-covariance does:
+fixes that follow the reported attitude then drag the attitude with them.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+GRAVITY_M_S2 = 9.80665
+EKF_FLAGS_HEALTHY = 0x33F  # attitude, velocities, positions, pred pos horiz rel/abs (ArduPilot)
+EKF_FLAGS_NO_HORIZ = 0x25  # attitude, vertical velocity, vertical position only
+EKF_FLAGS_NO_ORIGIN = 0x07
+
+
+@dataclass(frozen=True)
+class AttitudeModel:
+    """The estimated attitude's error: initial (roll, pitch, yaw) in degrees, yaw drift in
+    degrees per minute, and the coupling of ``coupled`` mode (rad of tilt per metre of
+    innovation of one fused fix)."""
+
+    initial_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    yaw_drift_deg_min: float = 0.0
+    coupled: bool = False
+    coupling_rad_per_m: float = field(default=0.005, metadata={"ge": 0})
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """The fake EKF's parameters; :func:`estimator_defaults` gives each profile's."""
+
+    delay_ms: float = 10.0
+    noise_floor_m: float = 0.2
+    gate_sigma: float = 5.0
+    filter_accel_noise_m_s2: float = 0.35
+    # the simulated IMU: bias (1-sigma per axis, constant) and white noise density
+    accel_bias_m_s2: float = 0.03
+    accel_noise_m_s2_rthz: float = 0.02
+    outage_flags_s: float = 6.0
+    attitude: AttitudeModel = field(default_factory=AttitudeModel)
+
+
+def estimator_defaults(profile: str) -> EstimatorConfig:
+    """The real autopilot's defaults (module doc has the sources)."""
+    if profile == "px4":
+        return EstimatorConfig(delay_ms=0.0, noise_floor_m=0.1, outage_flags_s=5.0)
+    return EstimatorConfig()
+
+
+@dataclass(frozen=True)
+class Verdict:
+    accepted: bool
+    reason: str
+    innovation_m: float  # horizontal+vertical innovation norm against the estimate
+
+
+class FakeEstimator:
+    """See module doc.  Times are the autopilot's flight clock in seconds."""
+
+    def __init__(self, config: EstimatorConfig, seed: int = 0) -> None:
+        self.config = config
+        self._rng = np.random.default_rng(seed + 1009)
+        self.bias = self._rng.normal(0.0, config.accel_bias_m_s2, 3)
+        self.x = np.zeros((3, 2))
+        self.P = np.tile(np.diag([100.0, 1.0]), (3, 1, 1))
+        self.initialised = False
+        self.t_s: float | None = None
+        self.t0_s = 0.0  # the first propagation (boot): outages count from it until a fix
+        self.last_fused_s: float | None = None
+        self.fused = 0
+        self.rejected = 0
+        a = config.attitude
+        self.tilt_err = np.radians([a.initial_deg[0], a.initial_deg[1]])  # about N, E axes
+        self.yaw_err = math.radians(a.initial_deg[2])
+        self._history: collections.deque[tuple[float, np.ndarray]] = collections.deque(
+            maxlen=200)
+
+    # ------------------------------------------------------------ propagation
+    def predict(self, t_s: float, true_accel_ned: np.ndarray) -> None:
+        """Propagate to ``t_s`` with the IMU's acceleration (truth + bias + noise)."""
+        if self.t_s is None:
+            self.t_s = self.t0_s = t_s
+            return
+        dt = t_s - self.t_s
+        if dt <= 0:
+            return
+        self.t_s = t_s
+        a = self.config.attitude
+        self.yaw_err += math.radians(a.yaw_drift_deg_min) / 60.0 * dt
+        accel = np.asarray(true_accel_ned, float) + self.bias
+        accel += self._rng.normal(0.0, self.config.accel_noise_m_s2_rthz / math.sqrt(dt), 3)
+        if a.coupled:
+            accel += self._attitude_accel_error(np.asarray(true_accel_ned, float))
+        if not self.initialised:
+            return  # no position source yet: constant-position mode at the origin
+        f = np.array([[1.0, dt], [0.0, 1.0]])
+        q = self.config.filter_accel_noise_m_s2 ** 2
+        qm = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+        for k in range(3):
+            self.x[k] = f @ self.x[k] + np.array([0.5 * dt * dt, dt]) * accel[k]
+            self.P[k] = f @ self.P[k] @ f.T + qm
+        self._history.append((t_s, self.x[:, 0].copy()))
+
+    def _attitude_accel_error(self, accel_ned: np.ndarray) -> np.ndarray:
+        """A tilt error leaks gravity (g d); a yaw error rotates the horizontal acceleration."""
+        tn, te = self.tilt_err
+        err = np.array([-GRAVITY_M_S2 * te, GRAVITY_M_S2 * tn, 0.0])
+        err[0] += -self.yaw_err * accel_ned[1]
+        err[1] += self.yaw_err * accel_ned[0]
+        return err
+
+    # ------------------------------------------------------------ fusion
+    def position_at(self, t_s: float) -> np.ndarray:
+        """The estimated position at ``t_s`` (from the recent history; now if newer)."""
+        for t, pos in reversed(self._history):
+            if t <= t_s:
+                return pos
+        return self.x[:, 0].copy()
+
+    def fuse(self, t_s: float, z_ned: tuple[float, float, float],
+             var_ned: tuple[float, float, float], reset: bool = False) -> Verdict:
+        """One vision position measured ``delay_ms`` before ``t_s``."""
+        z = np.asarray(z_ned, float)
+        floor2 = self.config.noise_floor_m ** 2
+        r = np.array([v if math.isfinite(v) and v > floor2 else floor2 for v in var_ned])
+        if not self.initialised or reset:
+            self.x[:, 0], self.x[:, 1] = z, 0.0 if not self.initialised else self.x[:, 1]
+            for k in range(3):
+                self.P[k] = np.diag([r[k], self.P[k][1, 1] if self.initialised else 1.0])
+            self.initialised = True
+            self._history.clear()
+            self.last_fused_s = t_s
+            return Verdict(True, "reset" if reset else "fused", 0.0)  # the first sets it
+        nu = z - self.position_at(t_s - self.config.delay_ms / 1000.0)
+        s = np.array([self.P[k][0, 0] + r[k] for k in range(3)])
+        gate2 = self.config.gate_sigma ** 2
+        innovation = float(np.linalg.norm(nu))
+        if (nu[0] ** 2 / s[0] + nu[1] ** 2 / s[1]) > gate2:
+            self.rejected += 1
+            return Verdict(False, "innovation_gate", innovation)
+        axes = range(3) if nu[2] ** 2 / s[2] <= gate2 else range(2)
+        for k in axes:
+            gain = self.P[k][:, 0] / s[k]
+            self.x[k] += gain * nu[k]
+            self.P[k] = self.P[k] - np.outer(gain, self.P[k][0, :])
+        if self.config.attitude.coupled:
+            self._pull_attitude(nu)
+        self.fused += 1
+        self.last_fused_s = t_s
+        return Verdict(True, "fused", innovation)
+
+    def _pull_attitude(self, nu: np.ndarray) -> None:
+        """A fix north of the estimate says the acceleration north was under-estimated: the
+        tilt that explains it changes (dN = -g tE, so tE decreases; dE = g tN)."""
+        k = self.config.attitude.coupling_rad_per_m
+        self.tilt_err += k * np.array([nu[1], -nu[0]])
+
+    # ------------------------------------------------------------ outputs
+    def position(self) -> tuple[float, float, float]:
+        n, e, d = (float(v) for v in self.x[:, 0])
+        return n, e, d
+
+    def velocity(self) -> tuple[float, float, float]:
+        n, e, d = (float(v) for v in self.x[:, 1])
+        return n, e, d
+
+    def outage_s(self, t_s: float) -> float:
+        """Seconds since the last fused fix (since boot before the first)."""
+        return t_s - (self.t0_s if self.last_fused_s is None else self.last_fused_s)
+
+    def horizontal_ok(self, t_s: float) -> bool:
+        return self.outage_s(t_s) <= self.config.outage_flags_s
+
+    def flags(self, t_s: float, origin_set: bool) -> int:
+        """ArduPilot's EKF_STATUS_REPORT flags."""
+        if not origin_set:
+            return EKF_FLAGS_NO_ORIGIN
+        return EKF_FLAGS_HEALTHY if self.horizontal_ok(t_s) else EKF_FLAGS_NO_HORIZ
+
+    def attitude(self, true_rpy: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The reported attitude: the truth plus the estimate's error, tilt rotated into
+        the body's heading."""
+        r, p, y = true_rpy
+        tn, te = self.tilt_err
+        c, s = math.cos(y), math.sin(y)
+        roll_err, pitch_err = c * tn + s * te, -s * tn + c * te
+        return r + roll_err, p + pitch_err, math.remainder(y + self.yaw_err, math.tau)

@@ -1,0 +1,143 @@
+"""``companion run --fly`` (the docs/sitl.md closed loop) against the strict fake autopilot.
+
+The fake plays SITL: it flies the vehicle itself from the companion's GUIDED commands
+(``vehicle="guided"``), sends the simulator's truth (SIM_STATE) only when asked, fuses the
+fixes in its own estimator gated against its own estimate, and runs Copter's EKF failsafe.
+The vehicle starts hovering at the square's first corner (``guided_airborne_m``): from the
+ground the sample street gives no fix (docs/sitl.md).
+
+* An 8 s vision outage in flight: flags drop, "EKF Failsafe: changed to LAND Mode", the
+  heartbeat says LAND; the companion says why in one line and ``run --fly`` exits 3.
+* Three laps of the square: no EKF failsafe, the longest gap between fused fixes while
+  airborne under 1 s, the fake's estimate within 0.10 m (median) / 0.5 m (max) of truth.
+  Real time (~110 s a seed): marked ``slow``; one seed by default, not the issue's five, to
+  keep CI near its budget; ``SITL_SEEDS=0,1,2,3,4`` runs five.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.cli import main
+from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.fake_vehicle import ARDUCOPTER_LAND
+
+ROOT = Path(__file__).resolve().parents[1]
+HOVER_M = 4.0  # the square's altitude (companion.sim.square.SquarePlan)
+
+
+def guided(seed: int = 0, **kw: object) -> FakeAutopilotConfig:
+    return FakeAutopilotConfig(vehicle="guided", guided_start=(0.0, 0.0, 0.0, 90.0),
+                               guided_airborne_m=HOVER_M, seed=seed, **kw)  # type: ignore[arg-type]
+
+
+@contextmanager
+def fake_thread(config: FakeAutopilotConfig) -> Iterator[tuple[FakeAutopilot,
+                                                                asyncio.AbstractEventLoop]]:
+    """The fake on its own event loop and thread (``companion run`` owns the main one)."""
+    loop = asyncio.new_event_loop()
+    started = threading.Event()
+    box: list[FakeAutopilot] = []
+
+    async def serve() -> None:
+        fake = FakeAutopilot(config)
+        await fake.start()
+        box.append(fake)
+        started.set()
+        try:
+            await asyncio.Event().wait()
+        except asyncio.CancelledError:
+            pass
+        finally:
+            await fake.stop()
+
+    thread = threading.Thread(target=loop.run_until_complete, args=(serve(),), daemon=True)
+    thread.start()
+    assert started.wait(5.0), "fake autopilot did not start"
+    try:
+        yield box[0], loop
+    finally:
+        def cancel_all() -> None:
+            for t in asyncio.all_tasks(loop):
+                t.cancel()
+        loop.call_soon_threadsafe(cancel_all)
+        thread.join(5.0)
+
+
+def fly(port: int, tmp_path: Path, seconds: float, *extra: str) -> int:
+    return main(["run", "--config", str(ROOT / "config" / "sitl-ardupilot.toml"), "--fly",
+                 "--seconds", str(seconds), "--set", f"mavlink.endpoint=udpout:127.0.0.1:{port}",
+                 "--set", "monitor.enabled=false", "--set", f'flightlog.dir="{tmp_path}"',
+                 *extra])
+
+
+def when(pred: Callable[[], bool], action: Callable[[], None], timeout_s: float) -> None:
+    """On a watcher thread: call ``action`` once ``pred`` holds (or give up)."""
+    def watch() -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if pred():
+                action()
+                return
+            time.sleep(0.05)
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def test_an_8s_outage_in_flight_lands_and_stops_fly(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    blind: list[float] = []
+    with fake_thread(guided()) as (fake, loop):
+        def go_blind() -> None:
+            blind.append(fake.flight_s())
+            loop.call_soon_threadsafe(fake.blind, 8.0)
+        when(lambda: len(fake.accepted()) >= 20, go_blind, 30.0)
+        status = fly(fake.local_port, tmp_path, 60.0)
+        events, texts = list(fake.flight.events), list(fake.statustexts_sent)
+        mode, vision = fake.flight.custom_mode, list(fake.vision)
+    err = capsys.readouterr().err
+    assert blind, "the outage was never started (no fixes fused)"
+    land = [t for t, what in events if what == "failsafe LAND"]
+    assert land, f"no EKF failsafe: {events}"
+    assert 6.0 <= land[0] - blind[0] <= 8.0, (blind, land)  # 6 s flags + 1 s confirmation
+    assert mode == ARDUCOPTER_LAND
+    assert {"VisOdom: not healthy", "EKF Failsafe: changed to LAND Mode"} <= set(texts), texts
+    fused_before = [r for r in vision if r.accepted and r.arrival_s < blind[0]]
+    assert len(fused_before) >= 20
+    assert status == 3, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("--fly stopped commanding: the autopilot changed mode to LAND"), err
+    assert "EKF Failsafe" in last and "Traceback" not in err
+    print(f"blind at {blind[0]:.1f} s, LAND {land[0] - blind[0]:.1f} s later; {last}")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="a finding, measured on i19link after merging issue "
+                   "19's pose side: no failsafe, but fixes still stop for 6.6 s on a leg and "
+                   "the fake's estimate is 0.109 m median / 1.34 m max off truth (seed 0)")
+@pytest.mark.parametrize("seed", [int(v) for v in os.environ.get("SITL_SEEDS", "0").split(",")])
+def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
+    with fake_thread(guided(seed)) as (fake, _loop):
+        status = fly(fake.local_port, tmp_path, 110.0, "--set", f"source.seed={seed}")
+        end_s = fake.flight_s()
+        events, vision = list(fake.flight.events), list(fake.vision)
+        errors = [float(np.linalg.norm(np.subtract(e, t))) for _, e, t in fake.track]
+        failsafe = fake.flight.failsafe
+    fused = [r.arrival_s for r in vision if r.accepted]
+    assert fused, "no fix fused"
+    gaps = np.diff([*fused, end_s])  # to the companion's end: an outage at the end counts
+    median, worst = float(np.median(errors)), float(np.max(errors))
+    print(f"seed {seed}: {len(fused)}/{len(vision)} fused, longest gap {gaps.max():.2f} s, "
+          f"estimate error median {median:.3f} m max {worst:.3f} m, events {events[-3:]}")
+    assert failsafe is None, events
+    assert status == 0
+    assert gaps.max() < 1.0
+    assert median < 0.10 and worst < 0.5

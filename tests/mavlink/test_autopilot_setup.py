@@ -1,0 +1,59 @@
+"""``companion autopilot setup`` against the fake autopilot, which starts with the real
+autopilot's parameter defaults and answers the parameter protocol."""
+
+from __future__ import annotations
+
+import pytest
+
+from companion.cli import main
+from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
+from mavlink_bridge.params import autopilot_defaults, profile_parameters, same_value
+from tests.follow.test_run_follow import fake_in_thread
+
+
+def setup_args(port: int, profile: str, *extra: str) -> list[str]:
+    return ["--set", "monitor.enabled=false", "autopilot", "setup", "--profile", profile,
+            "--endpoint", f"udpout:127.0.0.1:{port}", "--timeout", "5", *extra]
+
+
+@pytest.mark.parametrize("profile", ["ardupilot", "px4"])
+def test_setup_sets_reads_back_and_says_reboot(profile: str,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """Defaults -> wanted with --yes; read back; the second run has nothing to set.  PX4's
+    INT32 parameters travel byte-wise: a wrong encoding would read back wrong."""
+    wanted = profile_parameters(profile, 45.0)
+    with fake_in_thread(FakeAutopilotConfig(profile=profile)) as fake:  # type: ignore[arg-type]
+        assert fake.params.values == autopilot_defaults(profile)
+        status = main(setup_args(fake.local_port, profile, "--yes", "--delay-ms", "45"))
+        out = capsys.readouterr().out
+        values = dict(fake.params.values)
+        again = main(setup_args(fake.local_port, profile, "--delay-ms", "45"))
+        out2 = capsys.readouterr().out
+    assert status == 0, out
+    assert all(same_value(values[k], v) for k, v in wanted.items()), values
+    delay = "VISO_DELAY_MS" if profile == "ardupilot" else "EKF2_EV_DELAY"
+    assert values[delay] == 45.0
+    if profile == "ardupilot":
+        assert "reboot the autopilot: VISO_TYPE, GPS1_TYPE" in out, out
+    else:
+        assert "no reboot needed" in out, out
+    assert again == 0 and "nothing to set" in out2, out2
+
+
+def test_setup_without_yes_and_no_answer_sets_nothing(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("builtins.input", lambda _prompt: "n")
+    with fake_in_thread(FakeAutopilotConfig()) as fake:
+        status = main(setup_args(fake.local_port, "ardupilot"))
+        values, sets = dict(fake.params.values), list(fake.params.sets)
+    out = capsys.readouterr().out
+    assert status == 1 and "nothing set" in out
+    assert sets == [] and values == autopilot_defaults("ardupilot")
+    assert "VISO_TYPE" in out and "-> 1" in out  # the table showed current -> wanted
+
+
+def test_setup_without_an_autopilot_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    status = main(["autopilot", "setup", "--endpoint", "udpout:127.0.0.1:9", "--timeout",
+                   "0.5"])
+    err = capsys.readouterr().err
+    assert status != 0 and "no autopilot heartbeat" in err and "Traceback" not in err

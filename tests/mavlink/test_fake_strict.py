@@ -1,0 +1,164 @@
+"""The strict fake autopilot's parts, without a link: streams, estimator, failsafe."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mavlink_bridge.fake_ekf import (
+    EKF_FLAGS_HEALTHY,
+    EKF_FLAGS_NO_HORIZ,
+    AttitudeModel,
+    EstimatorConfig,
+    FakeEstimator,
+    estimator_defaults,
+)
+from mavlink_bridge.fake_streams import MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, FakeStreams
+from mavlink_bridge.fake_vehicle import (
+    ARDUCOPTER_GUIDED,
+    ARDUCOPTER_LAND,
+    PX4_LAND,
+    FlightState,
+    GuidedVehicle,
+)
+from mavlink_bridge.streams import MESSAGE_IDS
+
+PERIODS = (("HEARTBEAT", 1.0), ("ATTITUDE", 0.05), ("TIMESYNC", 0.1), ("DISTANCE_SENSOR", 0.1))
+SENDABLE = frozenset({"HEARTBEAT", "ATTITUDE", "TIMESYNC", "DISTANCE_SENSOR"})
+
+
+def sent(streams: FakeStreams, seconds: float, step_s: float = 0.01) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for k in range(round(seconds / step_s)):
+        for name in streams.due(k * step_s):
+            out[name] = out.get(name, 0) + 1
+    return out
+
+
+def test_strict_streams_only_heartbeat_until_asked_and_a_reboot_forgets() -> None:
+    s = FakeStreams("strict", "ardupilot", PERIODS, SENDABLE)
+    assert sent(s, 2.0) == {"HEARTBEAT": 2}
+    assert s.set_interval(MESSAGE_IDS["ATTITUDE"], 100_000) == MAV_RESULT_ACCEPTED
+    assert sent(s, 1.0)["ATTITUDE"] in (9, 10)  # on a 10 ms loop, like the real fake
+    assert s.set_interval(MESSAGE_IDS["ATTITUDE"], 0) == MAV_RESULT_ACCEPTED  # default 20 Hz
+    assert sent(s, 1.0)["ATTITUDE"] in (19, 20)
+    assert s.set_interval(MESSAGE_IDS["ATTITUDE"], -1) == MAV_RESULT_ACCEPTED  # stop
+    assert "ATTITUDE" not in sent(s, 1.0)
+    assert s.set_interval(MESSAGE_IDS["LOCAL_POSITION_NED"], 1e5) == MAV_RESULT_FAILED
+    assert s.request_once(MESSAGE_IDS["ATTITUDE"]) == MAV_RESULT_ACCEPTED
+    assert sent(s, 1.0).get("ATTITUDE") == 1
+    s.set_interval(MESSAGE_IDS["ATTITUDE"], 100_000)
+    s.reset()
+    assert sent(s, 1.0) == {"HEARTBEAT": 1}
+
+
+def test_px4_sends_timesync_unasked_and_absent_sensors_nothing() -> None:
+    s = FakeStreams("strict", "px4", PERIODS, SENDABLE, absent=("DISTANCE_SENSOR",))
+    assert sent(s, 1.0) == {"HEARTBEAT": 1, "TIMESYNC": 10}
+    assert s.set_interval(MESSAGE_IDS["DISTANCE_SENSOR"], 50_000) == MAV_RESULT_ACCEPTED
+    assert "DISTANCE_SENSOR" not in sent(s, 1.0)
+    assert sent(FakeStreams("all", "ardupilot", PERIODS, SENDABLE), 1.0)["ATTITUDE"] in (19, 20)
+
+
+def hover_estimator(config: EstimatorConfig | None = None) -> FakeEstimator:
+    """Initialised at (0, 0, -5) after 2 s of fixes at the truth, hovering."""
+    ekf = FakeEstimator(config or EstimatorConfig(accel_bias_m_s2=0.0))
+    for k in range(200):
+        t = k * 0.01
+        ekf.predict(t, np.zeros(3))
+        if k % 5 == 0:
+            assert ekf.fuse(t, (0.0, 0.0, -5.0), (0.01, 0.01, 0.01)).accepted
+    return ekf
+
+
+def test_the_gate_is_against_its_own_estimate_never_the_truth() -> None:
+    """The estimate has drifted 3 m; a fix at the truth is 3 m from it and rejected, a fix
+    next to the (wrong) estimate is fused: exactly what a real EKF does."""
+    ekf = hover_estimator()
+    ekf.x[0, 0] += 3.0  # the estimate is 3 m north of the truth (0, 0, -5)
+    for k in range(1, 11):
+        ekf.predict(2.0 + k * 0.01, np.zeros(3))
+    ekf.P[0] = np.diag([0.01, 0.01])
+    truth_fix = ekf.fuse(2.1, (0.0, 0.0, -5.0), (0.01, 0.01, 0.01))
+    assert (truth_fix.accepted, truth_fix.reason) == (False, "innovation_gate")
+    assert truth_fix.innovation_m == pytest.approx(3.0, abs=0.01)
+    near_estimate = ekf.fuse(2.1, (3.05, 0.0, -5.0), (0.01, 0.01, 0.01))
+    assert near_estimate.accepted
+
+
+def test_noise_floor_and_delay_follow_the_profile() -> None:
+    assert estimator_defaults("ardupilot").delay_ms == 10.0  # VISO_DELAY_MS
+    assert estimator_defaults("ardupilot").noise_floor_m == 0.2  # VISO_POS_M_NSE
+    assert estimator_defaults("px4").delay_ms == 0.0  # EKF2_EV_DELAY
+    assert estimator_defaults("px4").noise_floor_m == 0.1  # EKF2_EVP_NOISE
+    # a 0.7 m innovation: outside 5 sigma of a 0.1 m floor with a tiny P, inside 5 x 0.2 m
+    for floor, accepted in ((0.1, False), (0.2, True)):
+        ekf = hover_estimator(EstimatorConfig(accel_bias_m_s2=0.0, noise_floor_m=floor))
+        ekf.P[:, 0, 0] = 1e-4
+        assert ekf.fuse(2.0, (0.7, 0.0, -5.0), (1e-6, 1e-6, 1e-6)).accepted is accepted
+
+
+def test_flags_drop_6s_into_an_outage() -> None:
+    ekf = hover_estimator()
+    last = ekf.last_fused_s
+    assert last is not None
+    assert ekf.flags(last, origin_set=True) == EKF_FLAGS_HEALTHY == 0x33F
+    assert ekf.flags(last + 5.99, origin_set=True) == EKF_FLAGS_HEALTHY
+    assert ekf.flags(last + 6.01, origin_set=True) == EKF_FLAGS_NO_HORIZ == 0x25
+
+
+@pytest.mark.parametrize(("profile", "land", "texts"), [
+    ("ardupilot", ARDUCOPTER_LAND, ["VisOdom: not healthy", "EKF variance",
+                                    "EKF Failsafe: changed to LAND Mode"]),
+    ("px4", PX4_LAND, ["Failsafe activated: switching to Land"])])
+def test_ekf_failsafe_lands_one_second_after_the_position_goes(
+        profile: str, land: int, texts: list[str]) -> None:
+    said: list[str] = []
+    f = FlightState(profile, armed=True, custom_mode=ARDUCOPTER_GUIDED)
+    f.check_ekf(10.0, False, said.append)
+    f.check_ekf(10.9, False, said.append)
+    assert f.failsafe is None and f.custom_mode == ARDUCOPTER_GUIDED
+    f.check_ekf(11.0, False, said.append)
+    assert f.failsafe == "ekf" and f.custom_mode == land and f.landing
+    assert said == texts
+    assert f.heartbeat() == (0x81, land, 5)  # armed, custom; MAV_STATE_CRITICAL
+    assert f.set_mode(11.5, ARDUCOPTER_GUIDED, 0) == 4  # no position mode in failsafe
+
+
+def test_arming_without_a_position_is_refused_like_ardupilot() -> None:
+    said: list[str] = []
+    f = FlightState("ardupilot")
+    assert f.arm(0.0, True, position_ok=False, text=said.append) == 4
+    assert said == ["PreArm: VisOdom: not healthy"] and not f.armed
+    assert f.arm(1.0, True, position_ok=True, text=said.append) == 0 and f.armed
+
+
+def test_coupled_attitude_follows_the_fixes() -> None:
+    """A fix steadily 0.3 m north of the estimate pulls the tilt (coupled) and not at all
+    otherwise; the yaw drifts at the configured rate."""
+    tilts = []
+    for coupled in (False, True):
+        model = AttitudeModel(yaw_drift_deg_min=2.0, coupled=coupled)
+        ekf = hover_estimator(EstimatorConfig(accel_bias_m_s2=0.0, attitude=model))
+        for k in range(100):
+            ekf.fuse(2.0 + k * 0.03, (ekf.position()[0] + 0.3, 0.0, -5.0), (0.04,) * 3)
+        tilts.append(ekf.tilt_err.copy())
+        assert math.degrees(ekf.yaw_err) == pytest.approx(2.0 * 2.0 / 60.0, rel=0.05)
+    assert np.allclose(tilts[0], 0.0)
+    # tE decreases (a fix north says "accelerating north"); tN barely moves
+    assert tilts[1][1] < -0.03 and abs(tilts[1][0]) < 0.1 * abs(tilts[1][1])
+
+
+def test_guided_vehicle_takes_off_flies_to_a_target_and_lands() -> None:
+    v = GuidedVehicle((0.0, 0.0, 0.0), math.radians(90.0))
+    v.takeoff(4.0)
+    v.step_to(8.0)
+    assert v(8.0).position_ned_m[2] == pytest.approx(-4.0, abs=0.05)
+    v.goto((6.0, 0.0, -4.0), math.radians(90.0))
+    v.step_to(16.0)
+    assert v(16.0).position_ned_m[0] == pytest.approx(6.0, abs=0.05)
+    v.landing = True
+    v.step_to(30.0)
+    assert v.on_ground()
