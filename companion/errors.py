@@ -28,6 +28,8 @@ from mavlink_bridge.errors import (
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_CONFIG = 2
+#: ``run --fly`` stopped commanding: the vehicle disarmed, changed mode or failed safe
+EXIT_FLIGHT_ABORTED = 3
 
 
 class CompanionError(Exception):

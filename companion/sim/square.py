@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from companion.errors import CompanionError
+from companion.errors import EXIT_FLIGHT_ABORTED, CompanionError
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +48,7 @@ PX4_AUTO_SUB = {2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND"}
 class FlightAbortedError(CompanionError):
     """``--fly`` stopped commanding: the vehicle disarmed, changed mode or is in failsafe."""
 
-    exit_status = 3
+    exit_status = EXIT_FLIGHT_ABORTED
 
 
 def mode_name(profile: str, custom_mode: int) -> str:
