@@ -18,6 +18,7 @@ from companion.landmarks.geojson_io import read_map, write_map
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.vehicle import TruthFn
 
 SIM_LAYER = Path(__file__).resolve().parents[1] / "config" / "sim.toml"
 
@@ -77,13 +78,21 @@ def fake_flying(scenario: str, config: FakeAutopilotConfig | None = None
     """The fake autopilot, on its own event loop in a thread (``companion run`` owns the
     main one), flying the scenario's trajectory from its start, on a free loopback port."""
     sim = Simulator(load_scenario(scenario))
+    with fake_in_thread(config or FakeAutopilotConfig(endpoint="udpin:127.0.0.1:0"),
+                        sim.truth_fn) as fake:
+        yield fake
+
+
+@contextmanager
+def fake_in_thread(config: FakeAutopilotConfig, truth: TruthFn) -> Iterator[FakeAutopilot]:
+    """The fake autopilot flying ``truth`` on its own event loop in a thread, until the
+    ``with`` block ends."""
     loop = asyncio.new_event_loop()
     started = threading.Event()
     box: list[FakeAutopilot] = []
 
     async def serve() -> None:
-        fake = FakeAutopilot(config or FakeAutopilotConfig(endpoint="udpin:127.0.0.1:0"),
-                             truth=sim.truth_fn)
+        fake = FakeAutopilot(config, truth=truth)
         await fake.start()
         box.append(fake)
         started.set()

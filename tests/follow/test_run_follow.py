@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -34,44 +33,22 @@ from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.vehicle import VehicleState
+from tests.run_helpers import fake_in_thread as fake_thread
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @contextmanager
 def fake_in_thread(config: FakeAutopilotConfig) -> Iterator[FakeAutopilot]:
-    """The fake autopilot on its own event loop (``companion run`` owns the main one)."""
+    """The fake autopilot on its own event loop (``companion run`` owns the main one),
+    8 s into the survey: landmarks in view."""
     sim = Simulator(load_scenario("survey"))
-    loop = asyncio.new_event_loop()
-    started = threading.Event()
-    box: list[FakeAutopilot] = []
 
-    def truth(t_s: float) -> VehicleState:  # 8 s into the survey: landmarks in view
+    def truth(t_s: float) -> VehicleState:
         return sim.truth_fn(t_s + 8.0)
 
-    async def serve() -> None:
-        fake = FakeAutopilot(config, truth=truth)
-        await fake.start()
-        box.append(fake)
-        started.set()
-        try:
-            await asyncio.Event().wait()
-        except asyncio.CancelledError:
-            pass
-        finally:
-            await fake.stop()
-
-    thread = threading.Thread(target=loop.run_until_complete, args=(serve(),), daemon=True)
-    thread.start()
-    assert started.wait(5.0), "fake autopilot did not start"
-    try:
-        yield box[0]
-    finally:
-        def cancel_all() -> None:
-            for t in asyncio.all_tasks(loop):
-                t.cancel()
-        loop.call_soon_threadsafe(cancel_all)
-        thread.join(5.0)
+    with fake_thread(config, truth) as fake:
+        yield fake
 
 
 def run_args(config: str, port: int, tmp_path: Path, *extra: str) -> list[str]:
