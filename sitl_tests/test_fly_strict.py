@@ -20,8 +20,8 @@ import asyncio
 import os
 import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,7 @@ import pytest
 from companion.cli import main
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.fake_vehicle import ARDUCOPTER_LAND
+from tests.run_helpers import fake_and_loop
 
 ROOT = Path(__file__).resolve().parents[1]
 HOVER_M = 4.0  # the square's altitude (companion.sim.square.SquarePlan)
@@ -40,37 +41,10 @@ def guided(seed: int = 0, **kw: object) -> FakeAutopilotConfig:
                                guided_airborne_m=HOVER_M, seed=seed, **kw)  # type: ignore[arg-type]
 
 
-@contextmanager
-def fake_thread(config: FakeAutopilotConfig) -> Iterator[tuple[FakeAutopilot,
-                                                                asyncio.AbstractEventLoop]]:
+def fake_thread(config: FakeAutopilotConfig
+                ) -> AbstractContextManager[tuple[FakeAutopilot, asyncio.AbstractEventLoop]]:
     """The fake on its own event loop and thread (``companion run`` owns the main one)."""
-    loop = asyncio.new_event_loop()
-    started = threading.Event()
-    box: list[FakeAutopilot] = []
-
-    async def serve() -> None:
-        fake = FakeAutopilot(config)
-        await fake.start()
-        box.append(fake)
-        started.set()
-        try:
-            await asyncio.Event().wait()
-        except asyncio.CancelledError:
-            pass
-        finally:
-            await fake.stop()
-
-    thread = threading.Thread(target=loop.run_until_complete, args=(serve(),), daemon=True)
-    thread.start()
-    assert started.wait(5.0), "fake autopilot did not start"
-    try:
-        yield box[0], loop
-    finally:
-        def cancel_all() -> None:
-            for t in asyncio.all_tasks(loop):
-                t.cancel()
-        loop.call_soon_threadsafe(cancel_all)
-        thread.join(5.0)
+    return fake_and_loop(config)
 
 
 def fly(port: int, tmp_path: Path, seconds: float, *extra: str) -> int:

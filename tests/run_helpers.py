@@ -87,6 +87,15 @@ def fake_flying(scenario: str, config: FakeAutopilotConfig | None = None
 def fake_in_thread(config: FakeAutopilotConfig, truth: TruthFn) -> Iterator[FakeAutopilot]:
     """The fake autopilot flying ``truth`` on its own event loop in a thread, until the
     ``with`` block ends."""
+    with fake_and_loop(config, truth) as (fake, _loop):
+        yield fake
+
+
+@contextmanager
+def fake_and_loop(config: FakeAutopilotConfig, truth: TruthFn | None = None
+                  ) -> Iterator[tuple[FakeAutopilot, asyncio.AbstractEventLoop]]:
+    """The fake autopilot on its own event loop in a thread (``companion run`` owns the
+    main one), and that loop (to call the fake's fault methods on it)."""
     loop = asyncio.new_event_loop()
     started = threading.Event()
     box: list[FakeAutopilot] = []
@@ -107,7 +116,7 @@ def fake_in_thread(config: FakeAutopilotConfig, truth: TruthFn) -> Iterator[Fake
     thread.start()
     assert started.wait(5.0), "fake autopilot did not start"
     try:
-        yield box[0]
+        yield box[0], loop
     finally:
         def cancel_all() -> None:
             for t in asyncio.all_tasks(loop):
