@@ -6,9 +6,10 @@
 Runs on one core (OMP/OpenBLAS/MKL threads = 1, cv2.setNumThreads(1)); image decoding is
 excluded from timing.  Sequences: Coke, Tiger1, Car4, Crossing, boat1 (when present) and the
 simulated illumination-change sequence (written to a temporary OTB folder and read back like
-the others).  Prints a markdown table (mean over seeds for the particle trackers) and the speed
-ratio adaptive / MIL measured in the same run.  ``--ablation`` adds the adaptive tracker with all
-particles mean-shifted (Shan et al.) and with none.
+the others).  Prints a markdown table (mean over seeds for the particle trackers; one run of
+the OpenCV peers MIL and, where opencv-contrib is installed, CSRT) with updates/s measured in
+the same run.  ``--ablation`` adds the adaptive tracker with all particles mean-shifted
+(Shan et al.) and with none.
 """
 
 from __future__ import annotations
@@ -31,8 +32,10 @@ from companion.evaluation.runner import make_tracker, run_frames  # noqa: E402
 from companion.evaluation.sequences import load_sequence  # noqa: E402
 from companion.evaluation.synthetic import SynthSpec, write_otb  # noqa: E402
 from tracker import AdaptiveTracker, TrackerConfig  # noqa: E402
+from tracker.baselines import csrt_available  # noqa: E402
 
 SEQUENCES = ("Coke", "Tiger1", "Car4", "Crossing", "boat1")
+PEERS = ("mil", "csrt")  # OpenCV peers: one run (the seed only seeds cv2.setRNGSeed)
 
 
 def _variants(ablation: bool) -> dict[str, TrackerConfig | None]:
@@ -42,6 +45,8 @@ def _variants(ablation: bool) -> dict[str, TrackerConfig | None]:
         "meanshift": None,
         "mil": None,
     }
+    if csrt_available():  # opencv-contrib only: run from a separate venv (docs/benchmarks.md)
+        out["csrt"] = None
     if ablation:
         out["adaptive-allshift"] = dataclasses.replace(TrackerConfig(), mean_shift_fraction=1.0)
         out["adaptive-noshift"] = dataclasses.replace(TrackerConfig(), mean_shift_fraction=0.0)
@@ -83,7 +88,7 @@ def main() -> int:
         size = f"{images[0].shape[1]}x{images[0].shape[0]}"
         for name, config in _variants(args.ablation).items():
             runs = []
-            for seed in seeds if name != "mil" else seeds[:1]:
+            for seed in seeds if name not in PEERS else seeds[:1]:
                 tracker = (
                     AdaptiveTracker(config, seed)
                     if config is not None

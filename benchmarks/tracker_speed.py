@@ -5,8 +5,8 @@
 Frames: the first 150 of OTB Coke (640x480) when present, else the simulated illumination
 sequence (640x480).  Each tracker runs ``--repeats`` times over the same decoded frames; the
 script prints the median ms per update of every run, their minimum (the run least disturbed by
-other processes on a shared machine) and median, and the ratio to TrackerMIL measured in the
-same run.
+other processes on a shared machine) and median, and the ratio to TrackerMIL and (where
+opencv-contrib is installed) TrackerCSRT measured in the same run.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 from companion.evaluation.runner import make_tracker, run_frames  # noqa: E402
 from companion.evaluation.sequences import Sequence, load_sequence  # noqa: E402
 from companion.evaluation.synthetic import SynthSpec, generate  # noqa: E402
+from tracker.baselines import csrt_available  # noqa: E402
 
 
 def _frames(data: Path) -> tuple[Sequence, list[np.ndarray]]:
@@ -43,7 +44,8 @@ def main() -> int:
     shared = Path(os.environ.get("LMC_SHARED_DATA", root / "../shared/data"))
     parser.add_argument("--data", type=Path, default=shared / "otb")
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--trackers", default="adaptive,pf,meanshift,mil")
+    default = "adaptive,pf,meanshift,mil" + (",csrt" if csrt_available() else "")
+    parser.add_argument("--trackers", default=default)
     args = parser.parse_args()
     cv2.setNumThreads(1)
     seq, frames = _frames(args.data)
@@ -65,11 +67,12 @@ def main() -> int:
             + f" | median {np.median(runs):.2f} ms = {1e3 / np.median(runs):.0f} updates/s",
             flush=True,
         )
-    if "adaptive" in best and "mil" in best:
-        print(
-            f"adaptive is {best['mil'] / best['adaptive']:.1f}x faster than TrackerMIL "
-            f"(min of run medians)"
-        )
+    for peer in ("mil", "csrt"):
+        if "adaptive" in best and peer in best:
+            print(
+                f"adaptive is {best[peer] / best['adaptive']:.1f}x faster than {peer} "
+                f"(min of run medians)"
+            )
     print(f"load avg after: {os.getloadavg()[0]:.1f}")
     return 0
 

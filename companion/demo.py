@@ -91,6 +91,15 @@ def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarr
     return landmarks, references
 
 
+def with_fake_attitude_sigmas(settings: Settings) -> Settings:
+    """``settings`` with the attitude prior's sigmas set to the fake autopilot's accuracy
+    (``AttitudeErrorConfig``'s 0.2 deg roll/pitch, 1 deg yaw)."""
+    fake = AttitudeErrorConfig()
+    return dataclasses.replace(settings, pose=dataclasses.replace(
+        settings.pose, attitude_roll_pitch_sigma_deg=fake.roll_pitch_sigma_deg,
+        attitude_yaw_sigma_deg=fake.yaw_sigma_deg))
+
+
 async def run_demo(settings: Settings, scenario: str, seconds: float,
                    progress: Callable[[str], None] | None = None,
                    attitude_error: bool = False,
@@ -111,10 +120,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
                  "shows this flight)", ", ".join(f"listening on {e}" for e in m.listen)
                  or ", ".join(f"connected to {e}" for e in m.connect))
     if not deployment_prior:
-        fake_att = AttitudeErrorConfig()
-        settings = dataclasses.replace(settings, pose=dataclasses.replace(
-            settings.pose, attitude_roll_pitch_sigma_deg=fake_att.roll_pitch_sigma_deg,
-            attitude_yaw_sigma_deg=fake_att.yaw_sigma_deg))
+        settings = with_fake_attitude_sigmas(settings)
     sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
     landmarks, references = map_landmarks(sim)
     o = sim.scenario.origin

@@ -23,8 +23,9 @@ from mavlink_bridge.vehicle import VehicleState
 class AttitudeErrorConfig:
     """1-sigma of the ATTITUDE error per axis and its correlation time (0 sigma: exact).
 
-    The defaults are what the pose solver assumes of an autopilot's attitude
-    (``tracker.pose.AttitudeSample``: 0.2 deg roll/pitch, 1 deg yaw)."""
+    The defaults (0.2 deg roll/pitch, 1 deg yaw) are a good autopilot's; the pose solver's
+    own default prior is looser (2.5 / 5 deg, docs/decisions.md), and ``companion demo``
+    states these to it unless ``--deployment-prior``."""
 
     roll_pitch_sigma_deg: float = field(default=0.2, metadata={"ge": 0})
     yaw_sigma_deg: float = field(default=1.0, metadata={"ge": 0})

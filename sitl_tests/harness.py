@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp, FrameResult
-from companion.demo import map_landmarks, nees_3d
+from companion.demo import map_landmarks, nees_3d, with_fake_attitude_sigmas
 from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception, PerceptionWrapper
@@ -231,10 +231,14 @@ Script = Callable[["Flight"], Awaitable[None]]
 
 
 def sitl_settings(tmp: Path, *, profile: str = "ardupilot", monitor: bool = False,
-                  **sections: dict[str, Any]) -> Settings:
+                  deployment_prior: bool = False, **sections: dict[str, Any]) -> Settings:
     """The default configuration, flight logs in ``tmp``, monitoring off unless asked, and
-    ``section={key: value}`` overrides."""
+    ``section={key: value}`` overrides.  The attitude prior states the fake autopilot's own
+    accuracy (0.2 deg / 1 deg, as ``companion demo`` does) unless ``deployment_prior``:
+    then the configured default (2.5 deg / 5 deg, docs/decisions.md)."""
     s = load_settings(sets=[f"vehicle.profile={profile}"], shipped=SIM_LAYERS)
+    if not deployment_prior:
+        s = with_fake_attitude_sigmas(s)
     s = dataclasses.replace(s, flightlog=dataclasses.replace(s.flightlog, dir=str(tmp)),
                             monitor=dataclasses.replace(s.monitor, enabled=monitor))
     for name, values in sections.items():

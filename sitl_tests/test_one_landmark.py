@@ -4,7 +4,8 @@ On ArduPilot SITL's square, the leg from (6, 0) to (6, 6) sees one landmark with
 corners, and the companion gave no fix for 6-7 s ("one landmark without corners and no
 attitude: pose unobservable"): the EKF dropped its position.  Here the companion hovers
 10 m in front of wall-04 alone (config/scenarios/one_landmark.toml) with the fake
-autopilot's attitude (exact), height (LOCAL_POSITION_NED) and, when configured, a forward
+autopilot's attitude (exact, stated with the deployment default 2.5 deg / 5 deg), height
+(LOCAL_POSITION_NED) and, when configured, a forward
 range finder (DISTANCE_SENSOR orientation 0) -- the side sensors of
 :class:`companion.sensors.SensorHistory`:
 
@@ -54,7 +55,8 @@ OVERCONFIDENT = pytest.mark.xfail(strict=True, reason="one plate's corners: tilt
                                   "box+laser"])
 async def test_one_landmark_for_10_s_gives_honest_fixes(tmp_path: Path, case: str) -> None:
     perception, laser, solvers = CASES[case]
-    settings = sitl_settings(tmp_path, perception=perception, pose={"rangefinder": laser})
+    settings = sitl_settings(tmp_path, deployment_prior=True, perception=perception,
+                             pose={"rangefinder": laser})
     fake = FakeAutopilotConfig(rangefinder_orientation=0)  # the scenario's laser: forward
     flight = await Flight("one_landmark", SECONDS, settings, autopilot=fake).run()
     window = [f for f in flight.frames if WINDOW_S[0] <= f.t_s <= WINDOW_S[1]]

@@ -9,13 +9,14 @@ Stable API::
 """
 
 from tracker.adaptive import AdaptiveTracker
-from tracker.baselines import MeanShiftTracker, MilTracker, ParticleFilterTracker
+from tracker.baselines import CsrtTracker, MeanShiftTracker, MilTracker, ParticleFilterTracker
 from tracker.config import TrackerConfig
 from tracker.types import Box, TrackResult
 
 __all__ = [
     "AdaptiveTracker",
     "Box",
+    "CsrtTracker",
     "MeanShiftTracker",
     "MilTracker",
     "ParticleFilterTracker",

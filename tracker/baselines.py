@@ -3,6 +3,7 @@
 - :class:`ParticleFilterTracker`: a plain particle filter, fixed RGB histogram, 120 particles.
 - :class:`MeanShiftTracker`: plain mean shift (Comaniciu et al.) with a fixed RGB histogram.
 - :class:`MilTracker`: OpenCV's ``TrackerMIL`` as an external peer.
+- :class:`CsrtTracker`: OpenCV contrib's ``TrackerCSRT`` (only where contrib is installed).
 """
 
 from __future__ import annotations
@@ -191,14 +192,18 @@ def _dense_kernel(
 MIL_MIN_SIDE_PX = 6
 
 
-class MilTracker:
-    """OpenCV ``TrackerMIL`` (Babenko et al.) with this package's interface."""
+class _OpenCvPeer:
+    """An OpenCV ``cv2.Tracker*`` behind this package's interface (external peers)."""
 
-    name = "mil"
+    name = "opencv"
+    label = "Tracker"
 
     def __init__(self, seed: int = 0) -> None:
         self.seed = seed
         self._shape: tuple[int, ...] | None = None
+
+    def _create(self) -> cv2.Tracker:
+        raise NotImplementedError
 
     def init(self, image_bgr: npt.NDArray[np.uint8], box: Box) -> None:
         """Start tracking the target inside ``box`` of the first frame."""
@@ -207,17 +212,17 @@ class MilTracker:
         if w < MIL_MIN_SIDE_PX or h < MIL_MIN_SIDE_PX:
             # OpenCV 5.0's TrackerMIL never returns from init/update on boxes of 4 px or less
             raise ValueError(
-                f"box: TrackerMIL needs width and height >= {MIL_MIN_SIDE_PX} px, "
+                f"box: {self.label} needs width and height >= {MIL_MIN_SIDE_PX} px, "
                 f"got w={w:g}, h={h:g}"
             )
         self._shape = image.shape
         cv2.setRNGSeed(self.seed)
-        self._tracker = cv2.TrackerMIL.create()
+        self._tracker = self._create()
         try:
             self._tracker.init(image, (round(x), round(y), round(w), round(h)))
         except cv2.error as err:
             raise ValueError(
-                f"box: TrackerMIL cannot sample around (x={x:g}, y={y:g}, w={w:g}, h={h:g}); "
+                f"box: {self.label} cannot sample around (x={x:g}, y={y:g}, w={w:g}, h={h:g}); "
                 "expected a box with room around it inside the image"
             ) from err
         self._cue: Cue = "grayscale" if is_grayscale(image, 1.0) else "colour"
@@ -232,3 +237,40 @@ class MilTracker:
             return TrackResult(None, 0.0, (), True, self._cue, 0)
         box = tuple(float(v) for v in rect)
         return TrackResult((box[0], box[1], box[2], box[3]), 1.0, (), False, self._cue, 0)
+
+
+class MilTracker(_OpenCvPeer):
+    """OpenCV ``TrackerMIL`` (Babenko et al.) with this package's interface."""
+
+    name = "mil"
+    label = "TrackerMIL"
+
+    def _create(self) -> cv2.Tracker:
+        return cv2.TrackerMIL.create()
+
+
+def csrt_available() -> bool:
+    """True when this OpenCV build has ``TrackerCSRT`` (opencv-contrib only)."""
+    return hasattr(cv2, "TrackerCSRT")
+
+
+class CsrtTracker(_OpenCvPeer):
+    """OpenCV contrib ``TrackerCSRT`` (Lukezic et al., CSR-DCF), a comparison peer only.
+
+    The project depends on opencv-python-headless, which has no CSRT; construct this only in
+    an environment with opencv-contrib (see docs/benchmarks.md), else ``ValueError``.
+    """
+
+    name = "csrt"
+    label = "TrackerCSRT"
+
+    def __init__(self, seed: int = 0) -> None:
+        if not csrt_available():
+            raise ValueError(
+                "tracker csrt: expected an OpenCV build with contrib (TrackerCSRT), "
+                f"got OpenCV {cv2.__version__} without it"
+            )
+        super().__init__(seed)
+
+    def _create(self) -> cv2.Tracker:
+        return cv2.TrackerCSRT.create()  # type: ignore[attr-defined,unused-ignore]

@@ -62,6 +62,16 @@ class TrackerConfig:
     reacquire_confidence: float = field(default=0.45, metadata={"ge": 0.0, "le": 1.0})
     reacquire_growth: float = field(default=1.5, metadata={"gt": 1.0})
     gray_tolerance: float = field(default=1.0, metadata={"ge": 0.0})
+    template_refine: bool = True
+    template_search_frac: float = field(default=0.3, metadata={"gt": 0.0, "le": 2.0})
+    template_accept_score: float = field(default=0.5, metadata={"ge": -1.0, "le": 1.0})
+    template_update_score: float = field(default=0.7, metadata={"ge": -1.0, "le": 1.0})
+    template_update_rate: float = field(default=0.1, metadata={"ge": 0.0, "le": 1.0})
+    template_anchor: float = field(default=0.3, metadata={"ge": 0.0, "le": 1.0})
+    size_filters: Literal["scale", "scale+aspect", "width+height"] = "width+height"
+    scale_filter_scales: int = field(default=17, metadata={"ge": 3, "le": 65})
+    scale_filter_step: float = field(default=1.02, metadata={"gt": 1.0, "le": 1.2})
+    scale_filter_rate: float = field(default=0.025, metadata={"ge": 0.0, "le": 1.0})
 
 
 def check_config(config: TrackerConfig) -> None:

@@ -6,9 +6,13 @@ feature, which leaves 49 (ids 0..48).  Each feature is mapped linearly from its 
 ``[255*sum(w<0), 255*sum(w>0)]`` onto ``bins`` histogram bins; the fixed range (not the patch's
 min/max) keeps histograms of different frames comparable.
 
-Grayscale fallback (R=G=B collapses every colour feature to scaled intensity): ids
-``GRAY_INTENSITY`` (49), ``GRAY_GRADIENT`` (50, Sobel |gx|+|gy|) and ``GRAY_CONTRAST``
-(51, intensity minus its 7x7 local mean).
+Grayscale features (R=G=B collapses every colour feature to scaled intensity): ids
+``GRAY_INTENSITY`` (49), ``GRAY_GRADIENT`` (50, Sobel |gx|+|gy|), ``GRAY_CONTRAST``
+(51, intensity minus its 7x7 local mean), ``GRAY_ORIENTATION`` (52, signed gradient direction
+where the gradient is clear, one bin for flat pixels) and ``GRAY_LBP`` (53, rotation-invariant
+uniform local binary pattern, Ojala et al. 2002: the 8 neighbours at radius 1 against the
+centre, 10 codes).  The last two describe texture and shape rather than brightness, so they
+separate a grey target from a background of the same grey levels.
 """
 
 from __future__ import annotations
@@ -23,8 +27,29 @@ import numpy.typing as npt
 GRAY_INTENSITY = 49
 GRAY_GRADIENT = 50
 GRAY_CONTRAST = 51
-GRAY_FEATURES: tuple[int, ...] = (GRAY_INTENSITY, GRAY_GRADIENT, GRAY_CONTRAST)
-_GRAY_NAMES = {GRAY_INTENSITY: "intensity", GRAY_GRADIENT: "gradient", GRAY_CONTRAST: "contrast"}
+GRAY_ORIENTATION = 52
+GRAY_LBP = 53
+GRAY_FEATURES: tuple[int, ...] = (
+    GRAY_INTENSITY,
+    GRAY_GRADIENT,
+    GRAY_CONTRAST,
+    GRAY_ORIENTATION,
+    GRAY_LBP,
+)
+_GRAY_NAMES = {
+    GRAY_INTENSITY: "intensity",
+    GRAY_GRADIENT: "gradient",
+    GRAY_CONTRAST: "contrast",
+    GRAY_ORIENTATION: "orientation",
+    GRAY_LBP: "lbp",
+}
+# a pixel's gradient is "clear" from |gx|+|gy| >= 16 on the 3x3 Sobel scale, i.e. a step of
+# about 4 grey levels: above JPEG and sensor noise, below any edge worth describing
+ORIENTATION_MIN_GRADIENT = 16.0
+# LBP neighbours must exceed the centre by this many grey levels to count as "brighter", so
+# that noise on flat areas does not draw random patterns
+LBP_TOLERANCE = 3.0
+_LBP_CODES = 10  # riu2 with 8 neighbours: 0..8 ones for uniform patterns, 9 for the rest
 
 
 @lru_cache(maxsize=1)
@@ -91,7 +116,7 @@ def colour_feature_bins(
 def gray_feature_bins(
     patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int, stretch: bool = False
 ) -> npt.NDArray[np.intp]:
-    """Bin index images of the grayscale fallback features, shape (k, H, W).
+    """Bin index images of the grayscale features, shape (k, H, W).
 
     With ``stretch`` the grey levels are first stretched to the patch's [min, max].
     """
@@ -103,13 +128,19 @@ def gray_feature_bins(
     for fid in ids:
         if fid == GRAY_INTENSITY:
             value = gray * (bins / 256.0)
-        elif fid == GRAY_GRADIENT:
-            gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=3)
-            gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3)
-            value = np.minimum(np.abs(gx) + np.abs(gy), 511.0) * (bins / 512.0)
+        elif fid in (GRAY_GRADIENT, GRAY_ORIENTATION):
+            gx = np.asarray(cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32)
+            gy = np.asarray(cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32)
+            magnitude = np.abs(gx) + np.abs(gy)
+            if fid == GRAY_GRADIENT:
+                value = np.minimum(magnitude, 511.0) * (bins / 512.0)
+            else:
+                value = _orientation(gx, gy, magnitude, bins)
         elif fid == GRAY_CONTRAST:
             local = cv2.blur(gray, (7, 7))
             value = (np.clip(gray - local, -64.0, 63.0) + 64.0) * (bins / 128.0)
+        elif fid == GRAY_LBP:
+            value = lbp_riu2(gray) * (bins / _LBP_CODES)
         else:
             raise ValueError(f"ids: expected grayscale feature ids {GRAY_FEATURES}, got {fid}")
         planes.append(value)
@@ -118,10 +149,42 @@ def gray_feature_bins(
     return out
 
 
+def _orientation(
+    gx: npt.NDArray[np.float32],
+    gy: npt.NDArray[np.float32],
+    magnitude: npt.NDArray[np.float32],
+    bins: int,
+) -> npt.NDArray[np.float32]:
+    """Signed gradient direction in ``bins - 2`` sectors at bins 2.., flat pixels in bin 0.
+
+    Bin 1 stays empty so that requantising to half the bins (the joint histogram) keeps the
+    flat pixels apart from the first sector.
+    """
+    sectors = bins - 2
+    angle = cv2.phase(gx, gy)  # radians in [0, 2 pi)
+    sector = np.minimum(angle * (sectors / (2.0 * np.pi)), sectors - 1e-3)
+    return np.where(magnitude >= ORIENTATION_MIN_GRADIENT, 2.0 + sector, 0.0).astype(np.float32)
+
+
+def lbp_riu2(gray: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """Rotation-invariant uniform LBP (8 neighbours, radius 1): codes 0..9 per pixel.
+
+    A uniform pattern (at most two 0/1 transitions around the circle) is coded by its number
+    of brighter neighbours (0..8), any other pattern by 9; edge pixels copy their neighbours.
+    """
+    padded = cv2.copyMakeBorder(gray, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
+    h, w = gray.shape
+    ring = ((0, 0), (0, 1), (0, 2), (1, 2), (2, 2), (2, 1), (2, 0), (1, 0))  # circular order
+    bits = [padded[dy : dy + h, dx : dx + w] >= gray + LBP_TOLERANCE for dy, dx in ring]
+    ones = np.sum(bits, axis=0)
+    transitions = np.sum([bits[i] != bits[i - 1] for i in range(8)], axis=0)
+    return np.where(transitions <= 2, ones, _LBP_CODES - 1).astype(np.float32)
+
+
 def feature_bins(
     patch_bgr: npt.NDArray[np.uint8], ids: tuple[int, ...], bins: int, stretch: bool = False
 ) -> npt.NDArray[np.intp]:
-    """Bin index images for any mix of ids: colour ids 0..48, grayscale ids 49..51."""
+    """Bin index images for any mix of ids: colour ids 0..48, grayscale ids 49..53."""
     if all(i < GRAY_INTENSITY for i in ids):
         return colour_feature_bins(patch_bgr, ids, bins, stretch)
     if all(i in _GRAY_NAMES for i in ids):

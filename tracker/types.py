@@ -21,7 +21,8 @@ class TrackResult:
     ``box`` is ``None`` when the tracker considers the target lost (then ``lost`` is True).
     ``confidence`` is in [0, 1]; ``features`` are the ids of the features in use (see
     :func:`tracker.features.feature_name`); ``cue`` says whether colour features or the
-    grayscale fallback (intensity and gradient) were used; ``particles`` is the number of
+    grayscale ones (intensity, gradient, contrast, orientation, LBP) were used; ``particles``
+    is the number of
     particles evaluated for this frame (0 for trackers without particles).
     """
 

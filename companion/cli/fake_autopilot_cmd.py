@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.cli import positive_seconds
-from companion.errors import ConfigError, InputError, LinkError
+from companion.errors import ConfigError, InputError, LinkError, note_stop_signal
 from companion.settings import Settings
 from mavlink_bridge.codec import load_signing_key
 from mavlink_bridge.errors import EndpointError, LinkOpenError, SigningKeyError
@@ -86,7 +86,7 @@ async def _run(config: FakeAutopilotConfig, seconds: float | None) -> dict[str, 
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
-            loop.add_signal_handler(sig, stop.set)
+            loop.add_signal_handler(sig, _stop_by_signal, stop, sig)
     try:
         ap = FakeAutopilot(config)
         await ap.start()
@@ -101,6 +101,11 @@ async def _run(config: FakeAutopilotConfig, seconds: float | None) -> dict[str, 
             with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
                 loop.remove_signal_handler(sig)
     return ap.summary()
+
+
+def _stop_by_signal(stop: asyncio.Event, signum: int) -> None:
+    note_stop_signal(signum)  # summary first, then the CLI exits 128 + signum
+    stop.set()
 
 
 def _one_line(s: dict[str, Any]) -> str:

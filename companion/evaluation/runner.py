@@ -14,6 +14,7 @@ from companion.evaluation.metrics import Scores, score, visible
 from companion.evaluation.sequences import Sequence
 from tracker import (
     AdaptiveTracker,
+    CsrtTracker,
     MeanShiftTracker,
     MilTracker,
     ParticleFilterTracker,
@@ -26,6 +27,7 @@ TRACKERS: dict[str, Callable[[int, TrackerConfig | None], Tracker]] = {
     "pf": lambda seed, _: ParticleFilterTracker(seed=seed),
     "meanshift": lambda seed, _: MeanShiftTracker(seed=seed),
     "mil": lambda seed, _: MilTracker(seed=seed),
+    "csrt": lambda seed, _: CsrtTracker(seed=seed),
 }
 
 
@@ -60,7 +62,10 @@ def make_tracker(name: str, seed: int = 0, config: TrackerConfig | None = None) 
     """A tracker by its name in :data:`TRACKERS` (``config`` is used by ``adaptive``)."""
     if name not in TRACKERS:
         raise InputError(f"unknown tracker {name!r}; expected one of {', '.join(TRACKERS)}")
-    return TRACKERS[name](seed, config)
+    try:
+        return TRACKERS[name](seed, config)
+    except ValueError as err:  # e.g. csrt without opencv-contrib: one clear line
+        raise InputError(str(err)) from err
 
 
 def run_frames(

@@ -7,6 +7,7 @@ import numpy.typing as npt
 import pytest
 
 from tracker import AdaptiveTracker, TrackerConfig
+from tracker.features import GRAY_FEATURES
 
 Scene = tuple[list[npt.NDArray[np.uint8]], npt.NDArray[np.float64]]
 
@@ -60,14 +61,14 @@ def test_reports_lost_while_hidden_and_reacquires(hidden_sign: Scene) -> None:
     assert max(err) < 20.0
 
 
-def test_grayscale_input_falls_back_to_intensity_and_gradient(moving_sign: Scene) -> None:
+def test_grayscale_input_uses_the_grey_features(moving_sign: Scene) -> None:
     frames, truth = moving_sign
     grey = [np.repeat(f.mean(axis=2, keepdims=True).astype(np.uint8), 3, axis=2) for f in frames]
     t = AdaptiveTracker(seed=0)
     results = _run(t, grey[:30], truth)
     assert t.cue == "grayscale"
     assert all(r.cue == "grayscale" for r in results)
-    assert set(results[-1].features) <= {49, 50, 51}
+    assert set(results[-1].features) <= set(GRAY_FEATURES)
     err = [_error(r.box, x) for r, x in zip(results, truth[1:30], strict=True)]
     assert np.median(err) < 10.0
 

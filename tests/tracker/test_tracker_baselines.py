@@ -6,7 +6,10 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from companion.errors import InputError
+from companion.evaluation.runner import make_tracker
 from tracker import MeanShiftTracker, MilTracker, ParticleFilterTracker
+from tracker.baselines import csrt_available
 from tracker.types import Tracker
 
 Scene = tuple[list[npt.NDArray[np.uint8]], npt.NDArray[np.float64]]
@@ -52,3 +55,11 @@ def test_mil_refuses_boxes_it_cannot_handle(moving_sign: Scene) -> None:
     h, w = frames[0].shape[:2]
     with pytest.raises(ValueError, match=r"^box: TrackerMIL cannot sample"):
         MilTracker().init(frames[0], (0, 0, w, h))
+
+
+def test_csrt_without_contrib_is_one_clear_error() -> None:
+    """The project's OpenCV has no TrackerCSRT: asking for the peer says so in one line."""
+    if csrt_available():
+        pytest.skip("this OpenCV has contrib's TrackerCSRT")
+    with pytest.raises(InputError, match="TrackerCSRT"):
+        make_tracker("csrt")

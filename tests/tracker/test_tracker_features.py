@@ -8,6 +8,8 @@ import numpy as np
 
 from tracker.features import (
     GRAY_FEATURES,
+    GRAY_LBP,
+    GRAY_ORIENTATION,
     colour_feature_bins,
     colour_weights,
     feature_bins,
@@ -35,8 +37,31 @@ def test_feature_bank_has_49_distinct_features() -> None:
 
 def test_feature_names_are_readable() -> None:
     names = {feature_name(i) for i in range(49)} | {feature_name(i) for i in GRAY_FEATURES}
-    assert len(names) == 52
-    assert "gray:gradient" in names
+    assert len(names) == 49 + len(GRAY_FEATURES)
+    assert {"gray:gradient", "gray:orientation", "gray:lbp"} <= names
+
+
+def test_orientation_tells_edge_directions_apart_and_flat_pixels_from_edges() -> None:
+    """A dark-to-bright step and its mirror land in opposite sectors; flat pixels in bin 0."""
+    step = np.full((9, 12, 3), 50, np.uint8)
+    step[:, 6:] = 200
+    rising = feature_bins(step, (GRAY_ORIENTATION,), 16)[0]
+    falling = feature_bins(step[:, ::-1].copy(), (GRAY_ORIENTATION,), 16)[0]
+    assert rising[4, 0] == 0 and rising[4, 11] == 0  # flat
+    assert rising[4, 6] == 2  # gradient along +x: first sector
+    assert falling[4, 5] == 2 + 7  # along -x: half a turn later (14 sectors)
+
+
+def test_lbp_codes_flat_spot_and_texture() -> None:
+    """Flat: no brighter neighbour (code 0); a dark dot: 8 (uniform); a checkerboard: 9."""
+    flat = np.full((5, 5, 3), 120, np.uint8)
+    dot = flat.copy()
+    dot[2, 2] = 20
+    checker = np.where((np.indices((5, 5)).sum(axis=0) % 2)[:, :, None] == 0, 200, 20)
+    bins = [feature_bins(p.astype(np.uint8), (GRAY_LBP,), 10)[0, 2, 2] for p in (flat, dot)]
+    assert bins == [0, 8]
+    alternating = feature_bins(np.repeat(checker, 3, axis=2).astype(np.uint8), (GRAY_LBP,), 10)
+    assert alternating[0, 2, 1] == 9  # dark centre: bright, dark, bright ... around it
 
 
 def test_bins_follow_the_feature_value() -> None:
@@ -61,5 +86,5 @@ def test_grayscale_is_detected_and_has_its_own_features() -> None:
     colour[:, :, 2] = 200
     assert not is_grayscale(colour, 1.0)
     planes = feature_bins(grey, GRAY_FEATURES, 16)
-    assert planes.shape == (3, 8, 8)
+    assert planes.shape == (len(GRAY_FEATURES), 8, 8)
     assert planes[0, 0, 0] < planes[0, 7, 7]  # intensity rises with the grey level

@@ -1,0 +1,121 @@
+"""The target's template and size filters: the refinement stage of the adaptive tracker.
+
+The particle filter (colour histograms, mean shift) finds the target to a fraction of its size;
+this stage then locates it to a pixel on a template (:mod:`tracker.template`) and reads its
+change of width and height with two one-dimensional correlation filters
+(:mod:`tracker.scale_filter`).  :class:`Refiner` holds that state for one target; the
+:class:`tracker.adaptive.AdaptiveTracker` decides when its answers are used and when it learns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tracker.config import TrackerConfig
+from tracker.scale_filter import (
+    ScaleFilter,
+    factor_pairs,
+    grey_region,
+    sample_size,
+    samples,
+)
+from tracker.template import Match, crop, match, template_size
+
+FloatArray = npt.NDArray[np.float64]
+Frame = npt.NDArray[np.uint8]
+Patch = npt.NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class _Sizer:
+    """One size filter with its (width, height) factor pairs."""
+
+    factors: FloatArray
+    model: ScaleFilter
+
+
+class Refiner:
+    """Template (first frame's mixed with a running one) and size filters of one target.
+
+    ``patch`` is the float32 search window, ``centre``/``box`` on it in patch pixels;
+    ``frame``, ``xy``/``box_px`` in full-resolution pixels.
+    """
+
+    def __init__(
+        self,
+        config: TrackerConfig,
+        patch: Patch,
+        centre: FloatArray,
+        box: FloatArray,
+        frame: Frame,
+        xy: FloatArray,
+        box_px: FloatArray,
+    ) -> None:
+        self.config = config
+        self._size = template_size(box)
+        self._first = crop(patch, centre, box, self._size)
+        self._current = self._first.copy()
+        self._shape = sample_size(box_px)
+        count, step = config.scale_filter_scales, config.scale_filter_step
+        steps = [factor_pairs(count, step, kind) for kind in config.size_filters.split("+")]
+        self._factors = np.vstack(steps)  # every filter's rows, sampled together
+        self._reach = self._factors.max(axis=0)
+        rows = self._rows(frame, xy, box_px)
+        self._sizers = [
+            _Sizer(f, ScaleFilter.train(part)) for f, part in zip(steps, rows, strict=True)
+        ]
+
+    def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
+        """Each size filter's rows for the box ``box_px`` at ``xy`` (one resampling for all).
+
+        The filters all look at the same box (the width filter at widths ``a**n`` x the box's
+        height, the height filter the other way), so their answers multiply.
+        """
+        region = grey_region(frame, xy, box_px * self._reach / 2.0 + 2.0)
+        rows = samples(region, xy, box_px, self._factors, self._shape)
+        count = self.config.scale_filter_scales
+        return [rows[i : i + count] for i in range(0, len(rows), count)]
+
+    def template(self) -> Patch:
+        """``template_anchor`` x the first frame's template + the rest x the running one."""
+        a = self.config.template_anchor
+        return np.asarray(a * self._first + (1.0 - a) * self._current, dtype=np.float32)
+
+    def locate(self, patch: Patch, centres: FloatArray, box: FloatArray) -> Match:
+        """The template's best match around ``centres[0]`` (the filter's estimate).
+
+        If the filter moved further than the search reaches (``template_search_frac`` of the
+        box) from ``centres[1]`` (the last estimate), the template is looked for there too.
+        """
+        frac = self.config.template_search_frac
+        template = self.template()
+        found = match(patch, template, centres[0], box, frac, ((1.0, 1.0),))
+        if np.any(np.abs(centres[1] - centres[0]) > frac * box):
+            last = match(patch, template, centres[1], box, frac, ((1.0, 1.0),))
+            found = last if last.score > found.score else found
+        return found
+
+    def size_change(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> FloatArray:
+        """(width, height) factors of the box at ``xy``: the product of the filters' peaks."""
+        change = np.ones(2)
+        for sizer, rows in zip(self._sizers, self._rows(frame, xy, box_px), strict=True):
+            change = change * sizer.factors[sizer.model.peak(rows) + len(rows) // 2]
+        return change
+
+    def learn(
+        self,
+        patch: Patch,
+        box_on_patch: tuple[FloatArray, FloatArray],
+        frame: Frame,
+        box_in_frame: tuple[FloatArray, FloatArray],
+    ) -> None:
+        """The running template and the size filters learn the box (centre, size) given."""
+        centre, box = box_on_patch
+        rate = self.config.template_update_rate
+        self._current = (1.0 - rate) * self._current + rate * crop(patch, centre, box, self._size)
+        xy, box_px = box_in_frame
+        for sizer, rows in zip(self._sizers, self._rows(frame, xy, box_px), strict=True):
+            sizer.model.update(rows, self.config.scale_filter_rate)
