@@ -22,7 +22,9 @@ from companion.runtime import bridge_for
 from companion.settings import BUILT_IN, Settings
 from companion.sources.base import EndOfStream
 from companion.sources.factory import open_source, resolve
+from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.errors import MavlinkBridgeError
+from mavlink_bridge.params import profile_parameters, read_parameters, same_value
 from tracker.acquire import ReferenceMatcher
 from tracker.camera import CameraModel
 
@@ -163,27 +165,82 @@ def check_landmarks(settings: Settings) -> Check:
                  "reference image the matcher accepts")
 
 
-async def check_link(settings: Settings, timeout_s: float) -> Check:
-    """The autopilot answers with a heartbeat of the configured profile's kind."""
+async def check_autopilot(settings: Settings, timeout_s: float, streams_s: float = 3.0
+                          ) -> list[Check]:
+    """The link, the streams the configuration needs, the profile's parameters: one bridge
+    session, opened as ``companion run`` opens it (it asks for the streams on link-up)."""
     bridge = bridge_for(settings)
-    endpoint = settings.mavlink.endpoint
     started = time.monotonic()
     await bridge.start()
     try:
-        if not await bridge.wait_link(True, timeout_s):
-            return Check("link", "fail", f"{endpoint}: no autopilot heartbeat in {timeout_s:g} s")
-        waited = time.monotonic() - started
-        beat = bridge.latest("HEARTBEAT")
-        kind = getattr(beat.value if beat is not None else None, "autopilot", None)
-        want = AUTOPILOT_IDS[settings.vehicle.profile]
-        if kind != want:
-            name = AUTOPILOT_NAMES.get(kind or -1, f"MAV_AUTOPILOT {kind}")
-            return Check("link", "fail", f"{endpoint}: the autopilot is {name}, "
-                         f"vehicle.profile = {settings.vehicle.profile}")
-        return Check("link", "pass", f"{endpoint}: {AUTOPILOT_NAMES[want]} heartbeat after "
-                     f"{waited:.1f} s")
+        link = await check_link(bridge, settings, timeout_s, started)
+        if link.verdict == "fail":
+            return no_link(link)
+        up = time.monotonic()
+        params = await check_parameters(bridge, settings)
+        await asyncio.sleep(max(0.0, streams_s - (time.monotonic() - up)))
+        return [link, check_streams(bridge), params]
     finally:
         await bridge.stop()
+
+
+def no_link(link: Check) -> list[Check]:
+    """A failed link, and the two checks that needed it."""
+    return [link, Check("streams", "fail", "no link"), Check("parameters", "fail", "no link")]
+
+
+async def check_link(bridge: VisionBridge, settings: Settings, timeout_s: float,
+                     started: float) -> Check:
+    """The autopilot answers with a heartbeat of the configured profile's kind."""
+    endpoint = settings.mavlink.endpoint
+    if not await bridge.wait_link(True, timeout_s):
+        return Check("link", "fail", f"{endpoint}: no autopilot heartbeat in {timeout_s:g} s")
+    waited = time.monotonic() - started
+    beat = bridge.latest("HEARTBEAT")
+    kind = getattr(beat.value if beat is not None else None, "autopilot", None)
+    want = AUTOPILOT_IDS[settings.vehicle.profile]
+    if kind != want:
+        name = AUTOPILOT_NAMES.get(kind or -1, f"MAV_AUTOPILOT {kind}")
+        return Check("link", "fail", f"{endpoint}: the autopilot is {name}, "
+                     f"vehicle.profile = {settings.vehicle.profile}")
+    return Check("link", "pass", f"{endpoint}: {AUTOPILOT_NAMES[want]} heartbeat after "
+                 f"{waited:.1f} s")
+
+
+def check_streams(bridge: VisionBridge) -> Check:
+    """Every stream the configuration asks for arrives at its asked rate
+    (mavlink_bridge.streams judges "arriving")."""
+    report = bridge.stream_report()
+    if not report:
+        return Check("streams", "warn", "this configuration asks for no stream")
+    bad = [f"{name} {r['state']} ({r['rate_hz']:g} of {r['asked_hz']:g} Hz)"
+           for name, r in report.items() if r["state"] != "arriving"]
+    if bad:
+        return Check("streams", "fail", "; ".join(bad) + " (docs/mavlink.md, streams)")
+    return Check("streams", "pass", ", ".join(f"{name} {r['rate_hz']:g} Hz"
+                                              for name, r in report.items()))
+
+
+async def check_parameters(bridge: VisionBridge, settings: Settings) -> Check:
+    """The autopilot's parameters are the profile's (mavlink_bridge.params); the delay only
+    needs an answer: its value is the measured latency, which the preflight cannot know."""
+    link = getattr(bridge, "link", None)
+    if link is None:
+        return Check("parameters", "fail", "reading parameters needs mavlink.backend = "
+                     "\"pymavlink\"")
+    profile = settings.vehicle.profile
+    wanted = profile_parameters(profile)
+    delay = {k for k, v in profile_parameters(profile, 0.0).items()
+             if v != profile_parameters(profile, 1.0)[k]}
+    got = await read_parameters(link, list(wanted), profile)
+    bad = [f"{name} {'no answer' if got[name] is None else f'{got[name]:g}'} (wants {v:g})"
+           for name, v in wanted.items()
+           if got[name] is None or (name not in delay and not same_value(got[name] or 0.0, v))]
+    if bad:
+        return Check("parameters", "fail", "; ".join(bad) + " (companion autopilot setup)")
+    shown = ", ".join(f"{n} {got[n]:g}" for n in sorted(delay))
+    return Check("parameters", "pass", f"{len(wanted)} as the {profile} profile wants "
+                 f"({shown} ms)")
 
 
 def guarded(name: str, error: CompanionError) -> Check:
@@ -203,8 +260,8 @@ async def run_checks(settings: Settings, link_timeout_s: float = 5.0) -> Sequenc
     except CompanionError as err:
         out.append(guarded("landmarks", err))
     try:
-        out.append(await check_link(settings, link_timeout_s))
+        out.extend(await check_autopilot(settings, link_timeout_s))
     except (CompanionError, MavlinkBridgeError, ValueError) as err:  # an absent serial port,
         # a configuration the bridge refuses (mavlink_bridge raises ValueError for those)
-        out.append(Check("link", "fail", str(err)))
+        out.extend(no_link(Check("link", "fail", str(err))))
     return out

@@ -131,6 +131,10 @@ def test_check_against_the_fake_autopilot_and_a_recorded_stream(
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         time.sleep(1.0)
+        setup = run(installed / "companion", "autopilot", "setup", "--profile", "ardupilot",
+                    "--endpoint", f"udpout:127.0.0.1:{port}", "--yes", "--delay-ms", "35",
+                    cwd=empty)  # the walk of docs/deploy.md: set up, then check
+        assert setup.returncode == 0, setup.stdout + setup.stderr
         results = {}
         for name, camera in (("good", scene.camera),
                              ("wrong", CameraModel(1280, 720, 1050.0, 1050.0, 639.5, 359.5))):

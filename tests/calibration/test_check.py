@@ -10,6 +10,7 @@ import pytest
 
 from companion.cli import main
 from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
+from mavlink_bridge.params import profile_parameters
 from tests.calibration.still import StillScene, camera_toml, still_scene, vehicle_toml
 from tests.follow.test_run_follow import fake_in_thread
 from tracker.camera import CameraModel
@@ -42,19 +43,25 @@ def check(tmp_path: Path, scene: StillScene, capsys: pytest.CaptureFixture[str],
 def test_a_good_set_up_passes(tmp_path: Path, scene: StillScene,
                               capsys: pytest.CaptureFixture[str]) -> None:
     with fake_in_thread(FakeAutopilotConfig(profile="ardupilot")) as fake:
+        fake.params.values.update(profile_parameters("ardupilot", 35.0))  # as set up
         status, lines = check(tmp_path, scene, capsys, fake.local_port)
     assert status == 0, lines
-    assert list(lines) == ["noise", "camera file", "camera", "landmarks", "link"]
+    assert list(lines) == ["noise", "camera file", "camera", "landmarks", "link", "streams",
+                           "parameters"]
     assert lines["noise"].startswith("warn  noise: uncalibrated noise")
     assert lines["camera"].startswith("pass  camera: ") and "640x480 at 30.0 fps" in lines["camera"]
     assert lines["landmarks"] == ("pass  landmarks: 4 in the map, each with a reference image "
                                   "the matcher accepts")
     assert lines["link"].startswith("pass  link: ") and "ArduPilot heartbeat" in lines["link"]
+    assert lines["streams"].startswith("pass  streams: ATTITUDE ")
+    assert lines["parameters"] == ("pass  parameters: 9 as the ardupilot profile wants "
+                                   "(VISO_DELAY_MS 35 ms)")
 
 
 def test_a_wrong_camera_file_fails_on_that_line(tmp_path: Path, scene: StillScene,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     with fake_in_thread(FakeAutopilotConfig(profile="ardupilot")) as fake:
+        fake.params.values.update(profile_parameters("ardupilot", 35.0))
         status, lines = check(tmp_path, scene, capsys, fake.local_port, WRONG)
     assert status == 1
     assert lines["camera"].startswith("FAIL  camera: ")
@@ -119,6 +126,24 @@ def test_the_shipped_defaults_fail_every_line_without_a_traceback(
     assert status == 1 and "Traceback" not in err
     names = [line.split(":", 1)[0] for line in out.splitlines()[:-1]]
     assert names == ["warn  noise", "FAIL  camera file", "FAIL  camera", "FAIL  landmarks",
-                     "FAIL  link"]
-    assert out.splitlines()[-1] == ("1 of 5 checks passed; failed: camera file, camera, "
-                                    "landmarks, link")
+                     "FAIL  link", "FAIL  streams", "FAIL  parameters"]
+    assert out.splitlines()[-1] == ("1 of 7 checks passed; failed: camera file, camera, "
+                                    "landmarks, link, streams, parameters")
+
+
+def test_an_autopilot_not_set_up_fails_parameters_and_a_missing_stream_fails_streams(
+        tmp_path: Path, scene: StillScene, capsys: pytest.CaptureFixture[str]) -> None:
+    """ArduPilot's own defaults (no external navigation: VISO_TYPE 0, GPS as the position
+    source) and a range finder configured on an autopilot that has none: both lines fail,
+    each naming what is wrong; the other lines still pass."""
+    cfg = FakeAutopilotConfig(profile="ardupilot", absent=("DISTANCE_SENSOR",))
+    with fake_in_thread(cfg) as fake:
+        status, lines = check(tmp_path, scene, capsys, fake.local_port, None, "--set",
+                              "pose.rangefinder=true")
+    assert status == 1
+    assert lines["link"].startswith("pass  link: ")
+    assert lines["streams"].startswith("FAIL  streams: DISTANCE_SENSOR missing"), lines
+    assert "ATTITUDE" not in lines["streams"]  # the streams that arrive are not listed
+    assert lines["parameters"].startswith("FAIL  parameters: VISO_TYPE 0 (wants 1); ")
+    assert "EK3_SRC1_POSXY 3 (wants 6)" in lines["parameters"]
+    assert "VISO_DELAY_MS" not in lines["parameters"]  # any answer will do for the delay
