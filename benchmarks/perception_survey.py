@@ -14,7 +14,8 @@ corners the perception hands the pose solver against the rendered truth, by the 
 width on screen (plates wholly in view), and of the tracker's box centres.
 
     PYTHONPATH=. python benchmarks/perception_survey.py [--scenario survey] [--frames 900]
-        [--pixel-sigma 0.15] [--exact-attitude] [--attitude-sigma-deg 0.2 1.0] [--check]
+        [--pixel-sigma 0.15] [--one-plate-outline-sigma-rel 3] [--exact-attitude]
+        [--attitude-sigma-deg 0.2 1.0] [--check]
 
 ``--check`` exits 1 when fewer than 90 % of the fixes (all, or those from 2+ landmarks) have
 their NEES inside the 95 % bounds, or the 2+ fixes' RMSE is above 0.5 % of their distance
@@ -51,6 +52,9 @@ def main() -> int:
     parser.add_argument("--scenario", default="survey")
     parser.add_argument("--frames", type=int, default=900)
     parser.add_argument("--pixel-sigma", type=float, default=0.15)
+    parser.add_argument("--one-plate-outline-sigma-rel", type=float, default=3.0,
+                        help="pose.one_plate_outline_sigma_rel (config/sim.toml's; 0: a lone "
+                        "plate's corners independent)")
     parser.add_argument("--check", action="store_true", help="exit 1 below issue 6's targets")
     parser.add_argument("--exact-attitude", action="store_true",
                         help="feed the true attitude (default: the truth plus the autopilot's "
@@ -80,7 +84,9 @@ def main() -> int:
                            altitude=alt)
 
     perception = Perception(sim.scenario.camera, landmarks, references, sensors=sensors,
-                            pose_config=PoseConfig(pixel_sigma_px=args.pixel_sigma))
+                            pose_config=PoseConfig(
+                                pixel_sigma_px=args.pixel_sigma,
+                                one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel))
     process_ms, house_ms, errors, dists, nees, counts, traces = [], [], [], [], [], [], []
     corner_err: dict[str, list[float]] = {b: [] for b in (*WIDTH_BINS, "box centre")}
     for i in range(args.frames):

@@ -7,7 +7,8 @@ landmark) or PnP-RANSAC, "attitude" uses IPPE or bearing least squares with the 
 attitude as a prior.  The figure includes validation, association of labelled observations,
 solving, refinement and covariance.  The corners carry the common scale error the perception
 declares (``--scale-sigma``, default ``perception.corner_scale_sigma_px``; 0: independent
-corners only, as before 2026-11-24 22:30).  ``--check`` exits 1 when any median CPU time
+corners only, as before 2026-11-24 22:30); ``--one-plate-outline-sigma-rel`` the lone plate's
+outline error (``pose.one_plate_outline_sigma_rel``).  ``--check`` exits 1 when any median CPU time
 per fix is above issue 6's budget, :data:`BUDGET_US` (CPU time: less noisy than wall time on
 a shared machine; still, run it on a quiet one).
 """
@@ -25,7 +26,7 @@ import numpy as np
 
 from companion.perception_types import PerceptionConfig
 from tracker.camera import CameraModel
-from tracker.pose import AttitudeSample, MapLandmark, PoseFix, solve_pose
+from tracker.pose import AttitudeSample, MapLandmark, PoseConfig, PoseFix, solve_pose
 from tracker.pose.simulate import SensorNoise, observe_landmark
 
 #: Issue 6: "<= 0.5 ms per fix with up to 8 landmarks".
@@ -54,7 +55,8 @@ DECOY = MapLandmark("X", (30.0, 25.0, 5.0), 1.5, 1.5, 200.0, "sign")
 
 
 def time_fixes(
-    n: int, use_attitude: bool, repeats: int, outlier: bool = False, scale_sigma: float = 0.0
+    n: int, use_attitude: bool, repeats: int, outlier: bool = False, scale_sigma: float = 0.0,
+    config: PoseConfig | None = None,
 ) -> tuple[float, float, float, str]:
     """Median wall, median CPU and minimum wall microseconds per fix, and the solver.
 
@@ -69,15 +71,16 @@ def time_fixes(
         seen[n // 2] = replace(seen[n // 2], landmark_id=DECOY.landmark_id)
         lms = (*lms, DECOY)
     att = AttitudeSample(0, *RPY) if use_attitude else None
-    fix = solve_pose(seen, lms, CAMERA, 0, attitude=att)
+    cfg = config or PoseConfig()
+    fix = solve_pose(seen, lms, CAMERA, 0, attitude=att, config=cfg)
     assert isinstance(fix, PoseFix), fix
     assert not outlier or DECOY.landmark_id not in fix.landmark_ids
     for _ in range(min(repeats, 200)):  # warm up caches and branch predictors first
-        solve_pose(seen, lms, CAMERA, 0, attitude=att)
+        solve_pose(seen, lms, CAMERA, 0, attitude=att, config=cfg)
     wall, cpu = [], []
     for _ in range(repeats):
         t0, c0 = time.perf_counter_ns(), time.process_time_ns()
-        solve_pose(seen, lms, CAMERA, 0, attitude=att)
+        solve_pose(seen, lms, CAMERA, 0, attitude=att, config=cfg)
         cpu.append(time.process_time_ns() - c0)
         wall.append(time.perf_counter_ns() - t0)
     med_wall, med_cpu = statistics.median(wall) / 1e3, statistics.median(cpu) / 1e3
@@ -93,13 +96,16 @@ def main() -> None:
     parser.add_argument("--scale-sigma", type=float,
                         default=PerceptionConfig().corner_scale_sigma_px,
                         help="corners' common scale error, px of width (0: none)")
+    parser.add_argument("--one-plate-outline-sigma-rel", type=float,
+                        default=PoseConfig().one_plate_outline_sigma_rel,
+                        help="pose.one_plate_outline_sigma_rel (config/sim.toml: 3)")
     args = parser.parse_args()
     cv2.setNumThreads(args.cv_threads)
     load = os.getloadavg()[0]
     print(
         f"median per fix over {args.repeats} runs (OpenCV threads: {cv2.getNumThreads()}, "
         f"{os.cpu_count()} CPUs, 1-min load average {load:.1f} at start; corner scale "
-        f"sigma {args.scale_sigma} px)"
+        f"sigma {args.scale_sigma} px, one plate's outline {args.one_plate_outline_sigma_rel} x)"
     )
     print(
         "| landmarks | no attitude: solver | median wall us | median CPU us | min wall us "
@@ -112,7 +118,8 @@ def main() -> None:
         cells = []
         for use_attitude in (False, True):
             wall, cpu, fastest, solver = time_fixes(
-                n, use_attitude, args.repeats, outlier, args.scale_sigma
+                n, use_attitude, args.repeats, outlier, args.scale_sigma,
+                PoseConfig(one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel),
             )
             cells.append(f"{solver} | {wall:.0f} | {cpu:.0f} | {fastest:.0f}")
             if cpu > BUDGET_US:

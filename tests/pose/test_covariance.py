@@ -127,6 +127,60 @@ def test_a_plates_common_scale_error_is_in_its_covariance(camera: CameraModel) -
         assert isinstance(out, NoFix) and "corner_scale_sigma_px" in out.reason
 
 
+def _outline_error(c: np.ndarray, amplitude: np.ndarray) -> np.ndarray:
+    """Corner errors along a plate's outline modes (scale, aspect, shear, keystone across
+    and along; unit 8-vectors orthonormal to each other and to shift and rotation)."""
+    x, y = (c - c.mean(axis=0)).T
+    one, zero = np.ones(4), np.zeros(4)
+    raw = [(one, zero), (zero, one), (-y, x), (x, y), (x, -y), (y, x), (x * x, x * y),
+           (x * y, y * y)]
+    q = np.linalg.qr(np.column_stack([np.column_stack(m).ravel() for m in raw]))[0][:, 3:]
+    return np.asarray((q @ amplitude).reshape(4, 2))
+
+
+def test_one_plates_outline_error_is_in_its_covariance(camera: CameraModel) -> None:
+    """One plate whose outline errs as a whole (scale, aspect, shear, perspective, each
+    N(0, (rel sigma)^2)) besides independent corner noise: with
+    ``one_plate_outline_sigma_rel`` its fixes have NEES ~ chi-square(3); taken as
+    independent they are overconfident.  Two plates are left as they were."""
+    lms = wall()[:1]
+    clean = see(lms, camera)[0]
+    assert clean.corners_px is not None
+    c = np.array(clean.corners_px)
+    sigma, rel = 0.1, 4.0  # a 35 px plate: 0.4 px of outline error per mode
+    told_cfg = PoseConfig(one_plate_outline_sigma_rel=rel)
+    exact = AttitudeSample(0, *TRUE_RPY)
+    att_sigma = [exact.roll_pitch_sigma_rad, exact.roll_pitch_sigma_rad, exact.yaw_sigma_rad]
+    rng = np.random.default_rng(12)
+    told, untold = [], []
+    for _ in range(200):
+        r, p, y = (float(v) for v in np.asarray(TRUE_RPY) + rng.normal(0.0, att_sigma))
+        att = replace(exact, roll_rad=r, pitch_rad=p, yaw_rad=y)
+        noisy = c + _outline_error(c, rng.normal(0.0, rel * sigma, 5))
+        noisy = noisy + rng.normal(0.0, sigma, c.shape)
+        obs = replace(clean, corners_px=tuple((float(u), float(v)) for u, v in noisy),
+                      corner_sigma_px=sigma)
+        fix = solve_pose([obs], lms, camera, 0, attitude=att, config=told_cfg)
+        assert isinstance(fix, PoseFix), getattr(fix, "reason", "")
+        e = np.asarray(fix.position_ned_m) - TRUE_P
+        told.append(float(e @ np.linalg.solve(fix.covariance[:3, :3], e)))
+        naive = solve_pose([obs], lms, camera, 0, attitude=att)
+        if isinstance(naive, PoseFix):  # else refused: "reprojection error N sigma"
+            e = np.asarray(naive.position_ned_m) - TRUE_P
+            untold.append(float(e @ np.linalg.solve(naive.covariance[:3, :3], e)))
+    nees = np.array(told)
+    assert 2.4 < nees.mean() < 3.6
+    assert np.mean((nees >= NEES_LOW_3DOF) & (nees <= NEES_HIGH_3DOF)) >= 0.9
+    # independent corners: the outline's error unaccounted for (or the plate refused)
+    assert len(untold) < 180 or np.median(untold) > 2 * np.median(nees)
+    two = wall()[:2]
+    seen = see(two, camera)
+    with_rel, without = (solve_pose(seen, two, camera, 0, attitude=exact, config=cfg)
+                         for cfg in (told_cfg, PoseConfig()))
+    assert isinstance(with_rel, PoseFix) and isinstance(without, PoseFix)
+    np.testing.assert_array_equal(with_rel.covariance, without.covariance)
+
+
 _num = st.floats(allow_nan=True, allow_infinity=True, width=64) | st.floats(-2000, 2000)
 _pair = st.tuples(_num, _num)
 

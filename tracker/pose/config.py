@@ -69,6 +69,12 @@ class PoseConfig:
     #: to the distance (0: not used).  A tracker's box is not the plate's outline (its
     #: centre is off by 1.5-4.4 px, docs/pose.md): a fifth, cautious.
     box_size_sigma_rel: float = field(default=0.2, metadata={"ge": 0})
+    #: A fix from one plate's corners alone: the outline's common scale and perspective
+    #: (keystone) errors, which one plate cannot average out, get a 1-sigma of this times
+    #: the corners' sigma each (0: the corners are independent).  The alignment moves an
+    #: outline as a whole; its perspective decides the plate's tilt, and was measured
+    #: 0.6-5.5 x the corner sigma (docs/pose.md, "One plate's outline").
+    one_plate_outline_sigma_rel: float = field(default=0.0, metadata={"ge": 0})
     #: Gauss-Newton iterations of the final refinement.
     max_iterations: int = field(default=10, metadata={"ge": 1})
     #: Largest accepted condition number of the normal matrix (degenerate geometry).

@@ -45,6 +45,9 @@ class Group:
     #: common scale error (see refine.PointSet); beta 0: none
     scale_dir: FloatArray | None = None
     scale_beta: float = 0.0
+    #: 1-sigma (px) of the outline's common scale and perspective when this plate's corners
+    #: are all the fix has (``PoseConfig.one_plate_outline_sigma_rel``; see :func:`point_set`)
+    outline_sigma_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -111,7 +114,9 @@ def make_groups(
             px = np.array([obs.centre_px], dtype=np.float64)
         ideal = _undistort(ctx, px) if ctx.distorted else px
         scale = obs.corner_scale_sigma_px if obs.corners_px is not None else None
-        groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale)))
+        outline = cfg.one_plate_outline_sigma_rel * sig if obs.corners_px is not None else 0.0
+        groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale),
+                            outline))
     return groups
 
 
@@ -139,8 +144,39 @@ def _undistort(ctx: Context, px: FloatArray) -> FloatArray:
     return np.asarray(out.reshape(-1, 2), dtype=np.float64)
 
 
+def _outline_modes(g: Group) -> tuple[FloatArray, FloatArray]:
+    """A lone plate's common outline errors: its corners' unit modes (k x 2 x 5) of scale
+    about its centre, aspect, shear and perspective (keystone across and along), orthonormal
+    to each other and to the outline's shift and rotation (which stay independent), and
+    their betas (5,).
+
+    The scale mode's variance is the declared width error's (``scale_beta``) plus
+    ``outline_sigma_px**2``; each other mode's is ``outline_sigma_px**2``."""
+    d = g.pixels_ideal - g.pixels_ideal.mean(axis=0)
+    x, y = d[:, 0], d[:, 1]
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    basis = np.column_stack([np.column_stack(pair).ravel() for pair in (
+        (one, zero), (zero, one), (-y, x), (x, y), (x, -y), (y, x), (x * x, x * y),
+        (x * y, y * y))])
+    q = np.linalg.qr(basis)[0][:, 3:]  # scale, aspect, shear, perspective across, along
+    sig = g.sigma_px
+    var = np.full(5, g.outline_sigma_px**2)
+    if g.scale_beta > 0.0:  # beta = 1 - sigma / sqrt(sigma^2 + a): a back from beta
+        var[0] += sig**2 * ((1.0 / (1.0 - g.scale_beta)) ** 2 - 1.0)
+    return q.reshape(-1, 2, 5), 1.0 - sig / np.sqrt(sig**2 + var)
+
+
 def point_set(groups: list[Group]) -> PointSet:
-    """Stack every landmark's points for the refinement."""
+    """Stack every landmark's points for the refinement.  One plate alone (its corners
+    all the fix has) also gets its outline's common scale and perspective errors
+    (:func:`_outline_modes`): one plate cannot average them out."""
+    if len(groups) == 1 and groups[0].outline_sigma_px > 0.0 and (
+            groups[0].observation.corners_px is not None):
+        g = groups[0]
+        dirs, betas = _outline_modes(g)
+        k = g.points_ned.shape[0]
+        return PointSet(g.points_ned, g.pixels_ideal, np.full(k, g.sigma_px),
+                        np.zeros(k, dtype=np.int64), dirs, np.tile(betas, (k, 1)))
     counts = [g.points_ned.shape[0] for g in groups]
     scale_dir = scale_beta = None
     if any(g.scale_beta > 0.0 for g in groups):

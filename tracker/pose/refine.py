@@ -32,12 +32,14 @@ _MIN_DEPTH_M = 1e-3
 class PointSet:
     """Correspondences: Nx3 NED points, Nx2 ideal pixels, N sigmas (px), N landmark indices.
 
-    ``scale_dir`` / ``scale_beta`` (optional): a landmark's pixel errors may share a part
-    that scales its quadrilateral about its centre, ``Sigma = sigma^2 I + a u u^T`` over its
-    2k pixel coordinates (``u``: the corners' offsets from their centre).  ``scale_dir`` holds
-    each point's two components of the landmark's unit ``u`` (N x 2), ``scale_beta`` the
-    landmark's ``beta = 1 - sigma / sqrt(sigma^2 + a |u|^2)`` for each point (0: none), so
-    that ``(I - beta u u^T) / sigma`` whitens them (:func:`_decorrelate`).
+    ``scale_dir`` / ``scale_beta`` (optional): a landmark's pixel errors may share parts
+    common to its outline, ``Sigma = sigma^2 I + sum_m a_m u_m u_m^T`` over its 2k pixel
+    coordinates, along orthonormal modes ``u_m`` (e.g. the quadrilateral's scale about its
+    centre: the corners' offsets from it; or its perspective, docs/pose.md).  ``scale_dir``
+    holds each point's two components of its landmark's unit modes (N x 2, or N x 2 x M for
+    M modes), ``scale_beta`` each mode's ``beta_m = 1 - sigma / sqrt(sigma^2 + a_m)`` for
+    each point (N or N x M; 0: none), so that ``(I - sum_m beta_m u_m u_m^T) / sigma``
+    whitens them (:func:`_decorrelate`).
     """
 
     points_ned: FloatArray
@@ -168,14 +170,17 @@ def _residuals(
 
 
 def _decorrelate(rows: FloatArray, pts: PointSet) -> FloatArray:
-    """``(I - beta u u^T)`` applied, landmark by landmark, to (2N, C) whitened pixel rows."""
+    """``(I - sum_m beta_m u_m u_m^T)`` applied, landmark by landmark, to (2N, C) whitened
+    pixel rows."""
     assert pts.scale_dir is not None and pts.scale_beta is not None
     n = pts.points_ned.shape[0]
     r = rows.reshape(n, 2, -1)
-    along = pts.scale_dir[:, 0, None] * r[:, 0] + pts.scale_dir[:, 1, None] * r[:, 1]  # N x C
-    same = pts.landmark_index[:, None] == pts.landmark_index[None, :]  # N x N
-    back = pts.scale_beta[:, None] * (same @ along)  # beta u^T r of each point's landmark
-    return np.asarray((r - pts.scale_dir[:, :, None] * back[:, None, :]).reshape(rows.shape))
+    dirs = pts.scale_dir.reshape(n, 2, -1)  # N x 2 x M
+    beta = pts.scale_beta.reshape(n, -1)  # N x M
+    along = np.einsum("njm,njc->nmc", dirs, r)  # u_m^T r, point by point
+    same = (pts.landmark_index[:, None] == pts.landmark_index[None, :]).astype(np.float64)
+    back = beta[:, :, None] * np.einsum("nk,kmc->nmc", same, along)  # beta u^T r per landmark
+    return np.asarray((r - np.einsum("njm,nmc->njc", dirs, back)).reshape(rows.shape))
 
 
 def _prior_rows(
