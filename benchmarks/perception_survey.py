@@ -14,7 +14,7 @@ corners the perception hands the pose solver against the rendered truth, by the 
 width on screen (plates wholly in view), and of the tracker's box centres.
 
     PYTHONPATH=. python benchmarks/perception_survey.py [--scenario survey] [--frames 900]
-        [--pixel-sigma 0.15] [--one-plate-outline-sigma-rel 3] [--exact-attitude]
+        [--pixel-sigma 0.15] [--one-plate-outline-sigma-rel 0] [--exact-attitude]
         [--attitude-sigma-deg 0.2 1.0] [--check]
 
 ``--check`` exits 1 when fewer than 90 % of the fixes (all, or those from 2+ landmarks) have
@@ -52,8 +52,8 @@ def main() -> int:
     parser.add_argument("--scenario", default="survey")
     parser.add_argument("--frames", type=int, default=900)
     parser.add_argument("--pixel-sigma", type=float, default=0.15)
-    parser.add_argument("--one-plate-outline-sigma-rel", type=float, default=3.0,
-                        help="pose.one_plate_outline_sigma_rel (config/sim.toml's; 0: a lone "
+    parser.add_argument("--one-plate-outline-sigma-rel", type=float, default=0.0,
+                        help="pose.one_plate_outline_sigma_rel (0 in both shipped layers: a lone "
                         "plate's corners independent)")
     parser.add_argument("--check", action="store_true", help="exit 1 below issue 6's targets")
     parser.add_argument("--exact-attitude", action="store_true",

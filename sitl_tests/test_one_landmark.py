@@ -24,7 +24,8 @@ covariance too cautious is not the danger, one that hides the error is.)
 The corner case held only once one plate's corners were no longer taken as independent:
 they fixed its tilt to a claimed 0.06-0.09 m in height and were 0.2-0.6 m off (NEES median
 ~40-50; the alignment moves a plate's outline as a whole, docs/pose.md, "One plate's
-outline").  With ``pose.one_plate_outline_sigma_rel`` (config/sim.toml) the outline's
+outline").  With ``pose.one_plate_outline_sigma_rel = 3`` (opt-in: off in both shipped
+layers, docs/decisions.md) the outline's
 scale, aspect, shear and perspective carry a common error and the tilt's covariance says
 how weak one plate is.  Before issue 19 the exact attitude, taken as near-certain, pinned
 the tilt and hid it (the issue's "parked 0.40 m off truth").
@@ -43,10 +44,13 @@ from sitl_tests.harness import Flight, sitl_settings
 SECONDS = 14.0
 WINDOW_S = (3.0, 13.5)  # after acquisition; 10.5 s
 NEES_95_3DOF = 7.815  # chi2.ppf(0.95, 3)
+#: one plate's outline error (docs/pose.md, "One plate's outline"): opt-in, off in both shipped
+#: layers; without it the corner case fails (NEES inside 9 %, median 48)
+ONE_PLATE_OUTLINE = 3.0
 #: settings, range finder, the solvers expected (size_bearing: a frame whose height sample
 #: came late; altitude_bearing with the laser: a dropout or the beam off the plate)
 CASES = {
-    "corners": ({}, False, ("ippe",)),
+    "corners": ({}, False, ("ippe",)),  # with pose.one_plate_outline_sigma_rel = 3 (below)
     "box": ({"refine_corners": False}, False, ("altitude_bearing", "size_bearing")),
     "box+laser": ({"refine_corners": False}, True,
                   ("range_bearing", "altitude_bearing", "size_bearing")),
@@ -57,7 +61,8 @@ CASES = {
 async def test_one_landmark_for_10_s_gives_honest_fixes(tmp_path: Path, case: str) -> None:
     perception, laser, solvers = CASES[case]
     settings = sitl_settings(tmp_path, deployment_prior=True, perception=perception,
-                             pose={"rangefinder": laser})
+                             pose={"rangefinder": laser,
+                                   "one_plate_outline_sigma_rel": ONE_PLATE_OUTLINE})
     fake = FakeAutopilotConfig(rangefinder_orientation=0)  # the scenario's laser: forward
     flight = await Flight("one_landmark", SECONDS, settings, autopilot=fake).run()
     window = [f for f in flight.frames if WINDOW_S[0] <= f.t_s <= WINDOW_S[1]]
