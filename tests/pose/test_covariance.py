@@ -96,12 +96,10 @@ def test_a_plates_common_scale_error_is_in_its_covariance(camera: CameraModel) -
     width = 0.5 * (np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3]))
     sigma, scale = 0.2, 0.6
     exact = AttitudeSample(0, *TRUE_RPY)
-    att_sigma = [exact.roll_pitch_sigma_rad, exact.roll_pitch_sigma_rad, exact.yaw_sigma_rad]
     rng = np.random.default_rng(11)
     told, untold = [], []
     for _ in range(200):
-        r, p, y = (float(v) for v in np.asarray(TRUE_RPY) + rng.normal(0.0, att_sigma))
-        att = replace(exact, roll_rad=r, pitch_rad=p, yaw_rad=y)
+        att = _drawn_attitude(rng)
         eps = rng.normal(0.0, scale / width)
         noisy = c.mean(axis=0) + (1.0 + eps) * (c - c.mean(axis=0))
         noisy = noisy + rng.normal(0.0, sigma, c.shape)
@@ -150,12 +148,10 @@ def test_one_plates_outline_error_is_in_its_covariance(camera: CameraModel) -> N
     sigma, rel = 0.1, 4.0  # a 35 px plate: 0.4 px of outline error per mode
     told_cfg = PoseConfig(one_plate_outline_sigma_rel=rel)
     exact = AttitudeSample(0, *TRUE_RPY)
-    att_sigma = [exact.roll_pitch_sigma_rad, exact.roll_pitch_sigma_rad, exact.yaw_sigma_rad]
     rng = np.random.default_rng(12)
     told, untold = [], []
     for _ in range(200):
-        r, p, y = (float(v) for v in np.asarray(TRUE_RPY) + rng.normal(0.0, att_sigma))
-        att = replace(exact, roll_rad=r, pitch_rad=p, yaw_rad=y)
+        att = _drawn_attitude(rng)
         noisy = c + _outline_error(c, rng.normal(0.0, rel * sigma, 5))
         noisy = noisy + rng.normal(0.0, sigma, c.shape)
         obs = replace(clean, corners_px=tuple((float(u), float(v)) for u, v in noisy),
@@ -240,3 +236,11 @@ def test_covariance_upper_triangle_is_row_major_for_mavlink(camera: CameraModel)
     # ArduPilot reads c0, c6, c11 (x y z) and c15, c18, c20 (roll pitch yaw)
     assert urt[0] == c[0, 0] and urt[5] == c[0, 5] and urt[6] == c[1, 1] and urt[11] == c[2, 2]
     assert urt[15] == c[3, 3] and urt[18] == c[4, 4] and urt[20] == c[5, 5]
+
+
+def _drawn_attitude(rng: np.random.Generator) -> AttitudeSample:
+    """The true attitude plus a draw of its own stated noise (roll/pitch, yaw sigmas)."""
+    exact = AttitudeSample(0, *TRUE_RPY)
+    sigma = [exact.roll_pitch_sigma_rad, exact.roll_pitch_sigma_rad, exact.yaw_sigma_rad]
+    r, p, y = (float(v) for v in np.asarray(TRUE_RPY) + rng.normal(0.0, sigma))
+    return replace(exact, roll_rad=r, pitch_rad=p, yaw_rad=y)
