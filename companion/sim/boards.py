@@ -3,6 +3,15 @@
 A chessboard or ChArUco board (:class:`companion.calibration.BoardSpec`) is a textured quad
 of the simulated world, drawn by :class:`companion.sim.render.Renderer` with the camera's
 known intrinsics and distortion, so a calibration's result can be compared with the truth.
+
+A real sensor integrates the light over each pixel's area; the renderer samples the
+texture at each pixel's centre (a bilinear warp), which aliases the board's edges when the
+texture is minified and moves them by a fraction of a pixel.  The board camera therefore
+renders at ``supersample`` times the resolution (the same lens: focal lengths and principal
+point scaled, the distortion coefficients unchanged) and averages each block of
+``supersample`` x ``supersample`` pixels (``cv2.INTER_AREA``): the image a camera with a
+100 % fill factor would record.  ChArUco corners, which sit next to the markers' edges,
+moved by up to 0.6 px without it (docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -55,23 +64,51 @@ def board_quad(spec: BoardSpec, texture: ImageU8, camera: CameraModel, view: Boa
     return Quad(corners_cam @ CAM_TO_NED.T, texture, two_sided=True, landmark_id="board")
 
 
-class BoardCamera:
-    """Renders a board (or no board) through a camera model, with the scenery behind it."""
+def scaled(camera: CameraModel, factor: int) -> CameraModel:
+    """The same lens on a sensor with ``factor`` x ``factor`` pixels in place of each pixel.
 
-    def __init__(self, camera: CameraModel, spec: BoardSpec, px_per_square: int = 40) -> None:
-        self.camera = CameraModel(camera.width, camera.height, camera.fx, camera.fy, camera.cx,
-                                  camera.cy, camera.distortion, (0.0, 0.0, 0.0))
+    With OpenCV's convention (pixel centres at integers) fine pixel ``U`` covers coarse
+    pixel ``u`` where ``U = factor * u + (factor - 1) / 2``."""
+    shift = (factor - 1) / 2.0
+    return CameraModel(camera.width * factor, camera.height * factor, camera.fx * factor,
+                       camera.fy * factor, camera.cx * factor + shift,
+                       camera.cy * factor + shift, camera.distortion, (0.0, 0.0, 0.0))
+
+
+class BoardCamera:
+    """Renders a board (or no board) through a camera model, with the scenery behind it,
+    each pixel the mean of ``supersample`` x ``supersample`` samples over its area."""
+
+    def __init__(self, camera: CameraModel, spec: BoardSpec, px_per_square: int = 40,
+                 supersample: int = 4) -> None:
+        self.camera = scaled(camera, 1)  # level mount: the board is placed in camera axes
         self.spec = spec
+        self.supersample = supersample
         self.texture = board_texture(spec, px_per_square)
-        self.renderer = Renderer(self.camera, World([]))
+        self.renderer = Renderer(scaled(camera, supersample), World([]))
 
     def render(self, view: BoardView | None, blur_sigma_px: float = 0.0) -> ImageU8:
         """One frame showing the board as ``view`` says (None: no board)."""
         extra = [] if view is None else [board_quad(self.spec, self.texture, self.camera, view)]
         image = self.renderer.render(LEVEL, extra).image
+        if self.supersample > 1:
+            size = (self.camera.width, self.camera.height)
+            image = np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA),
+                               dtype=np.uint8)
         if blur_sigma_px > 0:
             image = np.asarray(cv2.GaussianBlur(image, (0, 0), blur_sigma_px), dtype=np.uint8)
         return image
+
+
+    def true_corners(self, view: BoardView) -> FloatArray:
+        """Where the board's inner corners are in the image (N x 2, OpenCV's chessboard
+        corner order: row by row from the board's top left; ChArUco corner ids)."""
+        pc = board_quad(self.spec, self.texture, self.camera, view).corners_ned @ CAM_TO_NED
+        cols, rows = self.spec.squares
+        across, down = (pc[1] - pc[0]) / (cols + 2), (pc[3] - pc[0]) / (rows + 2)
+        points = [pc[0] + (i + 2) * across + (j + 2) * down
+                  for j in range(rows - 1) for i in range(cols - 1)]
+        return self.camera.project_camera_points(np.asarray(points))
 
 
 def spread_views(camera: CameraModel, count: int, seed: int = 0, reach: float = 0.75,
