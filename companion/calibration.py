@@ -164,7 +164,7 @@ def refine_charuco(grey: ImageU8, corners: F32, ids: npt.NDArray[np.integer],
     0.2-0.6 px off on rendered boards); a fixed window does the same on small squares
     (2.6 px).  A corner with under 2 px of room on a side is dropped, not guessed."""
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-4)
-    out: list[F32] = []
+    out: list[npt.NDArray[np.floating]] = []
     kept: list[int] = []
     for corner, corner_id in zip(corners.reshape(-1, 2), np.ravel(ids), strict=True):
         room = min((_chebyshev(corner, m) for m in markers), default=0.0) - margin_px
