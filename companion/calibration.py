@@ -164,15 +164,16 @@ def refine_charuco(grey: ImageU8, corners: F32, ids: npt.NDArray[np.integer],
     0.2-0.6 px off on rendered boards); a fixed window does the same on small squares
     (2.6 px).  A corner with under 2 px of room on a side is dropped, not guessed."""
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-4)
-    out: list[npt.NDArray[np.floating]] = []
+    out: list[F32] = []
     kept: list[int] = []
     for corner, corner_id in zip(corners.reshape(-1, 2), np.ravel(ids), strict=True):
         room = min((_chebyshev(corner, m) for m in markers), default=0.0) - margin_px
         if room < 2.0:
             continue
         half = min(int(room), 10)
-        out.append(cv2.cornerSubPix(grey, corner.reshape(1, 1, 2).copy(), (half, half),
-                                    (-1, -1), criteria).reshape(2))
+        start = np.asarray(corner, np.float32).reshape(1, 1, 2)
+        out.append(np.asarray(cv2.cornerSubPix(grey, start, (half, half), (-1, -1), criteria),
+                              np.float32).reshape(2))
         kept.append(int(corner_id))
     return (np.asarray(out, np.float32).reshape(-1, 1, 2),
             np.asarray(kept, np.int32).reshape(-1, 1))
