@@ -265,7 +265,8 @@ class Limits:
 
 def collect(frames: Iterable[tuple[str, ImageU8]], spec: BoardSpec, limits: Limits,
             progress: Callable[[str], None] | None = None) -> tuple[ViewPicker, tuple[int, int]]:
-    """Search every frame for the board and keep the views worth calibrating on."""
+    """Search the frames for the board and keep the views worth calibrating on, until
+    ``limits.max_views`` are kept or the frames end."""
     detector = BoardDetector(spec)
     picker: ViewPicker | None = None
     size = (0, 0)
@@ -280,6 +281,8 @@ def collect(frames: Iterable[tuple[str, ImageU8]], spec: BoardSpec, limits: Limi
         if progress is not None:
             progress(f"{name}: {verdict}; {len(picker.kept)} views kept, "
                      f"coverage {picker.coverage:.0%}")
+        if len(picker.kept) >= limits.max_views:
+            break  # a camera session ends here, not at its time limit
     if picker is None:
         raise CalibrationError("calibrate: no frames to calibrate on")
     return picker, size

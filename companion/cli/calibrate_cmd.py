@@ -11,19 +11,18 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 from companion.calibration import (
     BoardSpec,
-    ImageU8,
+    CalibrationError,
     Limits,
     calibrate,
     camera_toml,
     collect,
 )
 from companion.calibration_io import (
-    capture_frames,
+    CaptureSession,
     folder_frames,
     refuse_existing,
     write_atomically,
@@ -74,19 +73,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     cam.add_argument("--every-s", type=float, default=0.5,
                      help="video or camera: look at one frame every this many seconds")
     cam.add_argument("--seconds", type=float, default=90.0,
-                     help="live camera: stop after this long (default 90)")
+                     help="live camera: stop after this long (default 90), or as soon as "
+                     "--max-views views are kept")
     cam.add_argument("--fit-k3", action="store_true",
                      help="also fit k3 (wide-angle lenses); default k3 = 0")
     cam.set_defaults(handler=run)
     calibrate_noise.register_action(actions)
 
 
-def _frames(args: argparse.Namespace) -> Iterator[tuple[str, ImageU8]]:
-    if args.images is not None:
-        return folder_frames(args.images)
+def _session(args: argparse.Namespace) -> CaptureSession | None:
     if args.video is not None:
-        return capture_frames(args.video, args.every_s, None, live=False)
-    return capture_frames(args.camera, args.every_s, args.seconds, live=True)
+        return CaptureSession(args.video, args.every_s)
+    if args.camera is not None:
+        return CaptureSession(args.camera, args.every_s, args.seconds, live=True)
+    return None
 
 
 def run(args: argparse.Namespace, settings: Settings) -> int:
@@ -100,8 +100,19 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         print(f"calibrate: {line}", file=sys.stderr, flush=True)
 
     refuse_existing(args.out, args.overwrite)  # before the session, not after it
-    picker, size = collect(_frames(args), spec, limits, progress)
-    result = calibrate(picker, size, spec, limits)
+    session = _session(args)
+    frames = folder_frames(args.images) if session is None else session.frames()
+    try:
+        picker, size = collect(frames, spec, limits, progress)
+    finally:
+        frames.close()  # a camera is released before the fit, not when collected
+    try:
+        result = calibrate(picker, size, spec, limits)
+    except CalibrationError as err:
+        if session is None or not session.timed_out:
+            raise
+        raise CalibrationError(f"{err} (the camera stopped at --seconds {args.seconds:g}: "
+                               "allow longer)") from None
     c = result.camera
     print(f"calibrated on {len(result.view_rms_px)} views of a {spec.describe()} "
           f"({c.width}x{c.height}, views covering {result.coverage:.0%} of the image)")
