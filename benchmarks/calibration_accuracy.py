@@ -1,7 +1,7 @@
 """``companion calibrate camera``'s accuracy on rendered boards with known intrinsics.
 
 Run: ``PYTHONPATH=. python benchmarks/calibration_accuracy.py [--boards chessboard,charuco]
-[--seeds 1,2,3] [--count 25] [--supersample 4]``
+[--seeds 1,2,3] [--count 25] [--supersample 4] [--distance-m 0.45,0.75]``
 
 For each board and seed: ``count`` views spread over the image (tests/calibration/boards.py's
 camera, board sizes and texture sizes), the views ``calibrate`` keeps, the RMS reprojection
@@ -28,7 +28,8 @@ from companion.sim.boards import BoardCamera, spread_views
 from tests.calibration.boards import CHARUCO, CHESSBOARD, PX_PER_SQUARE, TRUTH
 
 
-def measure(kind: str, seed: int, count: int, supersample: int) -> str:
+def measure(kind: str, seed: int, count: int, supersample: int,
+            distance_m: tuple[float, float]) -> str:
     """One line of figures for one rendered session."""
     spec = CHESSBOARD if kind == "chessboard" else CHARUCO
     cam = BoardCamera(TRUTH, spec, PX_PER_SQUARE[kind], supersample)
@@ -36,7 +37,7 @@ def measure(kind: str, seed: int, count: int, supersample: int) -> str:
     picker = ViewPicker((TRUTH.width, TRUTH.height))
     corner_errors: list[float] = []
     shifted = 0
-    for i, view in enumerate(spread_views(TRUTH, count, seed)):
+    for i, view in enumerate(spread_views(TRUTH, count, seed, 0.75, distance_m)):
         found = detector.find(f"view_{i:02d}", cam.render(view))
         picker.offer(found)
         if found is not None:
@@ -63,10 +64,13 @@ def main() -> None:
     parser.add_argument("--seeds", default="1,2,3")
     parser.add_argument("--count", type=int, default=25)
     parser.add_argument("--supersample", type=int, default=4)
+    parser.add_argument("--distance-m", default="0.45,0.75",
+                        help="nearest,farthest board (the tests' range: 0.45,0.75)")
     args = parser.parse_args()
+    near, far = (float(d) for d in args.distance_m.split(","))
     for kind in args.boards.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):
-            print(measure(kind, seed, args.count, args.supersample), flush=True)
+            print(measure(kind, seed, args.count, args.supersample, (near, far)), flush=True)
 
 
 if __name__ == "__main__":
