@@ -1,0 +1,226 @@
+"""``companion replay``: the whole companion on a recorded stream, on one clock.
+
+The recording's time ``r`` (0 at its first frame) is mapped onto the companion's
+monotonic clock, and everything runs on that mapping: a frame recorded at ``r`` is stamped
+``T(r)`` (so the bridge's fix-age gate, the attitude lookup and the latency all see one
+time), and the fake autopilot (in-process, on UDP loopback, as in ``companion demo``) flies
+on the recording's time: its flight time *is* ``r``, so the telemetry it sends and the
+flight it judges fixes against are the recording's at the frame's moment.
+
+* real time (default): ``T(r) = T0 + r``; a frame is delivered at ``T(r)``; when the
+  processing falls behind, frames are dropped as from a live camera.
+* ``--fast``: no frame is dropped; the next frame is delivered once the worker took the
+  previous one.  The fake's clock is stepped to the frame's ``r``, it sends what is due
+  (the recorded telemetry up to ``r``) and the frame is then stamped with the companion's
+  clock ``T`` at its delivery: ``r -> T`` is monotonic, piecewise, and the same for the
+  gate, the attitude lookup and the latency.
+
+The attitude: a version-2 stream's recorded ATTITUDE, replayed by the fake
+(:mod:`mavlink_bridge.fake_replay`); without telemetry, ``truth_pose.csv`` plus an
+autopilot's stated error (:class:`companion.recorded.TruthAttitude`), said in one line.
+Scores: :mod:`companion.replay_score`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import bisect
+import dataclasses
+import logging
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from companion.flightmap import load_practical_map
+from companion.recorded import OnCompanionClock, RecordedTruth, TruthAttitude
+from companion.replay_score import ReplayScorer, replay_summary, visible_counts
+from companion.runtime import bridge_for, detector_for, fly, perception_for
+from companion.sensors import SensorHistory
+from companion.settings import Settings
+from companion.sources.base import Frame, monotonic_us
+from companion.sources.files import RecordedStreamSource
+from companion.sources.stream_format import TruthPose
+from companion.sources.stream_io import read_telemetry
+from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.fake_replay import RecordedMessage, TelemetryReplay
+from mavlink_bridge.vehicle import TruthFn, VehicleState
+
+log = logging.getLogger(__name__)
+
+#: How long ``--fast`` lets the loopback deliver the telemetry of a step before the frame.
+SETTLE_S = 0.002
+
+
+class ReplayClock:
+    """The recording's time on the companion's clock (module doc).  ``fake_ns`` is the
+    fake autopilot's clock: its flight time is the recording's."""
+
+    def __init__(self, fast: bool) -> None:
+        self.fast = fast
+        self.t0_ns = time.monotonic_ns()
+        self.recorded_us = 0
+
+    def fake_ns(self) -> int:
+        if self.fast:
+            return self.t0_ns + self.recorded_us * 1000
+        return time.monotonic_ns()
+
+    def companion_us(self, recorded_us: int) -> int:
+        """Real time: when a frame recorded at ``recorded_us`` is due."""
+        return self.t0_ns // 1000 + recorded_us
+
+
+class ReplaySource(OnCompanionClock):
+    """A recorded stream delivered on a :class:`ReplayClock` (module doc); ``taken()`` is
+    called by the processing when it takes a frame (``--fast`` waits for it)."""
+
+    def __init__(self, stream: RecordedStreamSource, clock: ReplayClock,
+                 step: Any = None) -> None:
+        super().__init__(stream)
+        self.stream = stream
+        self.clock = clock
+        self.step = step  # called after the clock stepped (the fake sends what is due)
+        self.first_us: int | None = None
+        self.delivered = self.started = 0
+        self._taken = asyncio.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        times = [e.t_us for e in stream.entries]
+        period = 1.0 / stream.meta.fps if stream.meta.fps > 0 else 0.0
+        self.seconds = (times[-1] - times[0]) / 1e6 + period if times else 0.0
+
+    def taken(self) -> None:
+        """Called from the worker thread as it takes a frame."""
+        self.started += 1
+        if self._loop is not None:
+            self._loop.call_soon_threadsafe(self._taken.set)
+
+    async def recv(self) -> Frame:
+        self._loop = asyncio.get_running_loop()
+        frame = await self.stream.recv()
+        self.first_us = frame.t_us if self.first_us is None else self.first_us
+        r_us = frame.t_us - self.first_us
+        if self.clock.fast:
+            while self.started < self.delivered:  # the worker has not taken the last one
+                self._taken.clear()
+                await self._taken.wait()
+            self.clock.recorded_us = r_us
+            if self.step is not None:
+                self.step()
+            await asyncio.sleep(SETTLE_S)
+            t_us = monotonic_us()
+        else:
+            t_us = self.clock.companion_us(r_us)
+            await asyncio.sleep(max(0.0, (t_us - monotonic_us()) / 1e6))
+        t_us = max(t_us, (self.last_us or 0) + 1)
+        self.remember(t_us, frame.index, frame.t_us)
+        self.delivered += 1
+        return Frame(frame.index, t_us, frame.image, frame.camera_id)
+
+
+def recorded_flight(poses: dict[int, tuple[int, TruthPose]]) -> TruthFn | None:
+    """``truth_pose.csv`` as the fake autopilot's flight (interpolated position, velocity
+    by differences, the nearest earlier attitude), on the recording's time from its first
+    frame; None without poses."""
+    rows = sorted(poses.values(), key=lambda r: r[0])
+    if not rows:
+        return None
+    t0 = rows[0][0]
+    times = [(t - t0) / 1e6 for t, _ in rows]
+    pos = [(p.north_m, p.east_m, p.down_m) for _, p in rows]
+
+    def truth(t: float) -> VehicleState:
+        i = min(max(bisect.bisect_right(times, t) - 1, 0), len(rows) - 1)
+        j = min(i + 1, len(rows) - 1)
+        dt = times[j] - times[i]
+        f = 0.0 if dt <= 0 else min(max((t - times[i]) / dt, 0.0), 1.0)
+        p = tuple(a + f * (b - a) for a, b in zip(pos[i], pos[j], strict=True))
+        v = tuple(0.0 if dt <= 0 else (b - a) / dt for a, b in zip(pos[i], pos[j], strict=True))
+        q = rows[i][1]
+        rng = max(-p[2], 0.0) / max(math.cos(q.roll_rad) * math.cos(q.pitch_rad), 0.1)
+        return VehicleState(t, p, v, (q.roll_rad, q.pitch_rad, q.yaw_rad), rng)  # type: ignore[arg-type]
+
+    return truth
+
+
+def replay_settings(settings: Settings, stream: RecordedStreamSource) -> Settings:
+    """The EKF origin is the stream's ``[origin]``; the map, unless ``landmarks.map_path``
+    is set, the stream's own ``landmarks.geojson`` when it has one (``companion synth``)."""
+    mav, lms = settings.mavlink, settings.landmarks
+    o = stream.meta.origin
+    if o is not None:
+        mav = dataclasses.replace(mav, origin_lat_deg=o.lat, origin_lon_deg=o.lon,
+                                  origin_alt_m=o.alt_m)
+    own = stream.folder / "landmarks.geojson"
+    if not lms.map_path and own.is_file():
+        log.info("replay: the stream's own map %s", own)
+        lms = dataclasses.replace(lms, map_path=str(own))
+    return dataclasses.replace(settings, mavlink=mav, landmarks=lms)
+
+
+def telemetry_of(folder: Path) -> TelemetryReplay | None:
+    """The stream's recorded telemetry (format version 2) on its time from the first
+    frame, or None when it has none."""
+    rows = read_telemetry(folder)
+    if not rows:
+        return None
+    stream = RecordedStreamSource(folder, realtime=False)
+    first = min((e.t_us for e in stream.entries), default=0)
+    stream.close()
+    return TelemetryReplay([RecordedMessage((t - first) / 1e6, name, fields)
+                            for t, name, fields in rows])
+
+
+async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> dict[str, Any]:
+    """Replay ``folder`` through the whole companion; returns the summary
+    (:func:`companion.replay_score.replay_summary`)."""
+    stream = RecordedStreamSource(folder, realtime=False)
+    settings = replay_settings(settings, stream)
+    telemetry = telemetry_of(folder)
+    clock = ReplayClock(fast)
+    source = ReplaySource(stream, clock)
+    pmap = load_practical_map(settings)
+    truth = RecordedTruth(source, stream, pmap.origin)
+    uses_telemetry = telemetry is not None and telemetry.covers("ATTITUDE")
+    attitude = None if uses_telemetry or not truth else TruthAttitude(truth)
+    if attitude is not None:
+        from companion.demo import with_fake_attitude_sigmas
+
+        settings = with_fake_attitude_sigmas(settings)  # the solver is told that noise
+    said = ("the recording's ATTITUDE (telemetry.csv), replayed by the fake autopilot"
+            if uses_telemetry else "truth_pose.csv with an autopilot's stated noise "
+            "(no recorded telemetry)" if attitude is not None else "the fake autopilot's")
+    log.warning("replay: attitude from %s", said)
+    flight = recorded_flight(truth.poses) or (telemetry.trajectory() if telemetry else None)
+    detector_for(settings)  # loaded before the clock starts
+    fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
+                                             endpoint="udpin:127.0.0.1:0"),
+                         truth=flight, clock_ns=clock.fake_ns, replay=telemetry)
+    clock.t0_ns = fake.start_ns  # the fake's flight time 0 is the recording's first frame
+    source.step = fake.tick
+    await fake.start()
+    o = pmap.origin
+    bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+                        origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
+                        origin_alt_m=o.alt_m, set_origin=True)
+    scorers: list[ReplayScorer] = []
+    camera = stream.meta.camera
+
+    def processor(sensors: SensorHistory) -> ReplayScorer:
+        scorers.append(ReplayScorer(perception_for(settings, camera, pmap, sensors), truth,
+                                    pmap.landmarks, sensors, source.taken))
+        return scorers[0]
+
+    cpu0, wall0 = os.times(), time.monotonic()
+    try:
+        app = await fly(settings, source, bridge, processor, pmap, prefix="replay",
+                        attitude=attitude)
+    finally:
+        cpu1, wall1 = os.times(), time.monotonic()
+        await fake.stop()
+    busy = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / max(wall1 - wall0, 1e-9)
+    visible = visible_counts(truth, camera, pmap.landmarks)
+    return replay_summary(app, fake, bridge, scorers[0], source, busy, visible,
+                          {"attitude": said, "mode": "fast" if fast else "real time",
+                           "stream": str(folder)})
