@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from companion.app import CompanionApp, Frame, FrameResult
+from companion.autopilot import outcome_lines
 from companion.demo import DemoResult, TruthRecorder, print_summary, summary
 from companion.perception import Perception
 from companion.recorded import RecordedTruth
@@ -128,11 +129,12 @@ def print_replay(s: dict[str, Any], out: Any = sys.stdout) -> None:
     print(f"replay            {s['stream']} ({s['mode']}); attitude from {s['attitude']}",
           file=out)
     print_summary(s, out)
-    refused = ", ".join(f"{k} {v}" for k, v in s["fixes_refused"].items()) or "none"
+    line, none_sent = outcome_lines({**s["fixes_refused"], "sent": s["fixes_sent"]})
     lines = [
         f"fully visible     {s['frames_2plus_visible']} frames with >= 2 landmarks, "
         f"{f(s['fix_share_2plus_visible'])} of them with a fix",
-        f"fixes solved      {s['fixes_solved']}; refused by the bridge: {refused}",
+        f"fixes solved      {s['fixes_solved']}: {line}",
+        *([f"WARNING           {none_sent}"] if none_sent else []),
         f"attitude given    {f(s['attitude_error_deg'])} deg against the truth",
     ]
     print("\n".join(lines), file=out)
