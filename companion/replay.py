@@ -30,6 +30,7 @@ import logging
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -49,39 +50,67 @@ from mavlink_bridge.vehicle import TruthFn, VehicleState
 
 log = logging.getLogger(__name__)
 
+#: How long the replay waits for the companion to ask the fake for its streams.
+READY_S = 5.0
+#: ``--fast`` steps the fake autopilot's clock by its own loop period (10 ms).
+TICK_US = 10_000
 #: How long ``--fast`` lets the loopback deliver the telemetry of a step before the frame.
 SETTLE_S = 0.002
 
 
 class ReplayClock:
-    """The recording's time on the companion's clock (module doc).  ``fake_ns`` is the
-    fake autopilot's clock: its flight time is the recording's."""
+    """The recording's time on the companion's clock (module doc).
+
+    ``fake_ns`` is the fake autopilot's clock.  It runs in real time from the fake's start
+    (its flight time 0, ``t0_ns``) until :meth:`start` at the first frame -- the pre-roll,
+    in which the link comes up and the companion asks for its streams -- and the
+    recording's time 0 is then the fake's flight time :attr:`preroll_s`: the fake flies
+    and replays ``recording_s(flight time)``."""
 
     def __init__(self, fast: bool) -> None:
         self.fast = fast
         self.t0_ns = time.monotonic_ns()
+        self.started_ns: int | None = None
         self.recorded_us = 0
+        #: called with :attr:`preroll_s` at :meth:`start`
+        self.on_start: list[Callable[[float], None]] = []
+
+    @property
+    def preroll_s(self) -> float:
+        return 0.0 if self.started_ns is None else (self.started_ns - self.t0_ns) / 1e9
+
+    def start(self) -> None:
+        self.started_ns = time.monotonic_ns()
+        for fn in self.on_start:
+            fn(self.preroll_s)
 
     def fake_ns(self) -> int:
-        if self.fast:
-            return self.t0_ns + self.recorded_us * 1000
+        if self.fast and self.started_ns is not None:
+            return self.started_ns + self.recorded_us * 1000
         return time.monotonic_ns()
+
+    def recording_s(self, flight_s: float) -> float:
+        """The recording's time at the fake's flight time (0 during the pre-roll)."""
+        return 0.0 if self.started_ns is None else max(flight_s - self.preroll_s, 0.0)
 
     def companion_us(self, recorded_us: int) -> int:
         """Real time: when a frame recorded at ``recorded_us`` is due."""
-        return self.t0_ns // 1000 + recorded_us
+        return (self.started_ns or time.monotonic_ns()) // 1000 + recorded_us
 
 
 class ReplaySource(OnCompanionClock):
     """A recorded stream delivered on a :class:`ReplayClock` (module doc); ``taken()`` is
     called by the processing when it takes a frame (``--fast`` waits for it)."""
 
-    def __init__(self, stream: RecordedStreamSource, clock: ReplayClock,
-                 step: Any = None) -> None:
+    def __init__(self, stream: RecordedStreamSource, clock: ReplayClock) -> None:
         super().__init__(stream)
         self.stream = stream
         self.clock = clock
-        self.step = step  # called after the clock stepped (the fake sends what is due)
+        #: called after the clock stepped (the fake sends what is due)
+        self.step: Callable[[], None] | None = None
+        #: True once the autopilot streams what the companion asked (waited for, up to
+        #: :data:`READY_S`, before the first frame)
+        self.ready: Callable[[], bool] = lambda: True
         self.first_us: int | None = None
         self.delivered = self.started = 0
         self._taken = asyncio.Event()
@@ -89,6 +118,22 @@ class ReplaySource(OnCompanionClock):
         times = [e.t_us for e in stream.entries]
         period = 1.0 / stream.meta.fps if stream.meta.fps > 0 else 0.0
         self.seconds = (times[-1] - times[0]) / 1e6 + period if times else 0.0
+
+    async def _wait_ready(self) -> None:
+        for _ in range(round(READY_S / 0.01)):
+            if self.ready():
+                return
+            await asyncio.sleep(0.01)
+        log.warning("replay: the companion did not ask the fake autopilot for its streams "
+                    "within %g s: starting anyway", READY_S)
+
+    def _step_to(self, r_us: int) -> None:
+        """``--fast``: the fake's clock to ``r_us`` in its own 10 ms ticks (its streams are
+        scheduled as in continuous time, not once per frame)."""
+        for t_us in [*range(self.clock.recorded_us + TICK_US, r_us, TICK_US), r_us]:
+            self.clock.recorded_us = t_us
+            if self.step is not None:
+                self.step()
 
     def taken(self) -> None:
         """Called from the worker thread as it takes a frame."""
@@ -99,15 +144,16 @@ class ReplaySource(OnCompanionClock):
     async def recv(self) -> Frame:
         self._loop = asyncio.get_running_loop()
         frame = await self.stream.recv()
-        self.first_us = frame.t_us if self.first_us is None else self.first_us
+        if self.first_us is None:
+            self.first_us = frame.t_us
+            await self._wait_ready()
+            self.clock.start()
         r_us = frame.t_us - self.first_us
         if self.clock.fast:
             while self.started < self.delivered:  # the worker has not taken the last one
                 self._taken.clear()
                 await self._taken.wait()
-            self.clock.recorded_us = r_us
-            if self.step is not None:
-                self.step()
+            self._step_to(r_us)
             await asyncio.sleep(SETTLE_S)
             t_us = monotonic_us()
         else:
@@ -196,9 +242,14 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
     detector_for(settings)  # loaded before the clock starts
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
                                              endpoint="udpin:127.0.0.1:0"),
-                         truth=flight, clock_ns=clock.fake_ns, replay=telemetry)
-    clock.t0_ns = fake.start_ns  # the fake's flight time 0 is the recording's first frame
+                         truth=None if flight is None else
+                         lambda t: flight(clock.recording_s(t)),
+                         clock_ns=clock.fake_ns, replay=telemetry)
+    clock.t0_ns = fake.start_ns
+    if telemetry is not None:
+        clock.on_start.append(telemetry.start)
     source.step = fake.tick
+    source.ready = lambda: "ATTITUDE" in fake.streams.periods
     await fake.start()
     o = pmap.origin
     bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",

@@ -299,6 +299,9 @@ class FakeAutopilot:
                 if name in _TRUTH_STREAMS and (self.config.home or self.origin) is None:
                     continue
                 self._send_stream(name, state)
+            if self.replay is not None:
+                self.replay.pump(self.codec.mav, self.streams.periods, self.flight_s(),
+                                 int(self.boot_s() * 1000) & 0xFFFFFFFF)
 
     def _advance(self, t: float) -> VehicleState:
         """Fly, propagate the estimator with the IMU, run the EKF failsafe; -> the truth."""
@@ -357,8 +360,7 @@ class FakeAutopilot:
         mav = self.codec.mav
         boot_ms = int(self.boot_s() * 1000) & 0xFFFFFFFF
         if self.replay is not None and self.replay.covers(name):
-            self.replay.send(mav, name, self.flight_s(), boot_ms)
-            return
+            return  # sent by the replay at its recorded times (tick)
         own = self.config.judge == "estimate"
         if own and self.origin is None and name == "LOCAL_POSITION_NED":
             return  # no origin, no local position (ArduPilot: get_relative_position_NED_origin)

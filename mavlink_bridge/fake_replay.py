@@ -10,14 +10,16 @@ flight time is the recording's time, ``companion.replay`` maps it onto the compa
 
 What stays the strict fake's:
 
-* A stream goes out only once asked (SET_MESSAGE_INTERVAL / REQUEST_MESSAGE) and at most at
-  the asked interval: ArduPilot sends a message when its interval is due from the deferred
-  message buckets, built from the vehicle's *current* state at that moment
+* A stream goes out only once asked with SET_MESSAGE_INTERVAL, and at most at the asked
+  interval: ArduPilot sends a message when its interval is due from the deferred message
+  buckets, built from the vehicle's *current* state at that moment
   (``libraries/GCS_MAVLink/GCS_Common.cpp`` ``update_send`` / ``try_send_message``, e.g.
   ``send_attitude`` reads AP_AHRS then).  The replay's current state is the newest recorded
-  message; one already sent is not sent again (a repeat would carry a new arrival time for
-  an old attitude), so a stream asked faster than it was recorded arrives at the recorded
-  rate.
+  message, sent when its recorded time comes; one already sent is not sent again (a repeat
+  would carry a new arrival time for an old attitude), so a stream asked faster than it was
+  recorded arrives at the recorded rate, and one asked slower is thinned to the asked rate.
+  A REQUEST_MESSAGE (once) of a replayed message sends nothing (not needed by the
+  companion's streams).
 * ``time_boot_ms`` is the fake's own boot time when sent, never the recorded one: the
   companion detects an autopilot reboot by ``time_boot_ms`` going backwards
   (``mavlink_bridge/link.py``), as it would on a real link.
@@ -58,27 +60,38 @@ class TelemetryReplay:
         self._sent: dict[str, int] = {}
         #: messages sent per name (for tests and the replay's summary)
         self.sent: dict[str, int] = dict.fromkeys(self.by_name, 0)
+        #: the fake's flight time of the recording's time 0 (infinite: not started)
+        self.offset_s = math.inf
+
+    def start(self, offset_s: float) -> None:
+        """The recording starts at the fake's flight time ``offset_s``."""
+        self.offset_s = offset_s
 
     def covers(self, name: str) -> bool:
         """True when the recording has this message: the fake then sends only those."""
         return name in self.by_name
 
-    def due(self, name: str, now_s: float) -> RecordedMessage | None:
-        """The newest recorded ``name`` at ``now_s`` (recording time) not sent yet."""
-        i = bisect.bisect_right(self._times[name], now_s) - 1
-        if i < 0 or i <= self._sent.get(name, -1):
-            return None
-        self._sent[name] = i
-        self.sent[name] += 1
-        return self.by_name[name][i]
-
-    def send(self, mav: Any, name: str, now_s: float, boot_ms: int) -> bool:
-        """Send the due message of ``name`` on ``mav`` (a pymavlink MAVLink object)."""
-        msg = self.due(name, now_s)
-        if msg is None:
-            return False
-        getattr(mav, f"{name.lower()}_send")(**{**msg.fields, "time_boot_ms": boot_ms})
-        return True
+    def pump(self, mav: Any, periods: Mapping[str, float], now_s: float,
+             boot_ms: int) -> int:
+        """Send, for each recorded message whose stream is asked (``periods``: name ->
+        asked period, s), the newest one recorded by the fake's flight time ``now_s`` (less
+        :attr:`offset_s`) if it is at least 0.9 of
+        the asked period after the last one sent (10 % slack: a 30 Hz recording under a
+        30 Hz ask is not halved by its jitter).  Returns how many were sent."""
+        count = 0
+        for name, times in self._times.items():
+            period = periods.get(name)
+            i = bisect.bisect_right(times, now_s - self.offset_s) - 1
+            last = self._sent.get(name, -1)
+            if period is None or i <= last or (last >= 0 and times[i] - times[last]
+                                               < 0.9 * period):
+                continue
+            self._sent[name] = i
+            self.sent[name] += 1
+            fields = {**self.by_name[name][i].fields, "time_boot_ms": boot_ms}
+            getattr(mav, f"{name.lower()}_send")(**fields)
+            count += 1
+        return count
 
     def trajectory(self) -> TruthFn | None:
         """The recorded flight (LOCAL_POSITION_NED and ATTITUDE, held between samples) as
