@@ -165,6 +165,17 @@ class ReplaySource(OnCompanionClock):
         return Frame(frame.index, t_us, frame.image, frame.camera_id)
 
 
+async def _heartbeats(fake: FakeAutopilot) -> None:
+    """``--fast``: the fake's HEARTBEAT at 1 Hz of the companion's clock as well.  Its
+    streams follow the recording's stepped time, but a link's liveness is judged on the
+    companion's clock (``mavlink.link_timeout_s``): a processing slower than a third of
+    real time would otherwise let the link time out (``no_link`` refusals, seen at load
+    average 18)."""
+    while True:
+        await asyncio.sleep(1.0)
+        fake.send_heartbeat()
+
+
 def recorded_flight(poses: dict[int, tuple[int, TruthPose]]) -> TruthFn | None:
     """``truth_pose.csv`` as the fake autopilot's flight (interpolated position, velocity
     by differences, the nearest earlier attitude), on the recording's time from its first
@@ -263,12 +274,15 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
                                     pmap.landmarks, sensors, source.taken))
         return scorers[0]
 
+    beats = asyncio.create_task(_heartbeats(fake) if fast else asyncio.sleep(0))
     cpu0, wall0 = os.times(), time.monotonic()
     try:
         app = await fly(settings, source, bridge, processor, pmap, prefix="replay",
                         attitude=attitude)
     finally:
         cpu1, wall1 = os.times(), time.monotonic()
+        beats.cancel()
+        await asyncio.gather(beats, return_exceptions=True)
         await fake.stop()
     busy = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / max(wall1 - wall0, 1e-9)
     visible = visible_counts(truth, camera, pmap.landmarks)

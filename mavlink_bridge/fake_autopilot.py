@@ -303,6 +303,12 @@ class FakeAutopilot:
                 self.replay.pump(self.codec.mav, self.streams.periods, self.flight_s(),
                                  int(self.boot_s() * 1000) & 0xFFFFFFFF)
 
+    def send_heartbeat(self) -> None:
+        """One HEARTBEAT now, outside the stream schedule (a replay on a stepped clock keeps
+        the link alive on the companion's clock with it)."""
+        if not self.faults.link_down():
+            self._send_stream("HEARTBEAT", self.truth(self.flight_s()))
+
     def _advance(self, t: float) -> VehicleState:
         """Fly, propagate the estimator with the IMU, run the EKF failsafe; -> the truth."""
         if self.guided is not None:
