@@ -159,3 +159,23 @@ def test_replay_in_real_time_stamps_frames_on_the_recordings_schedule(
     brief = {k: s[k] for k in ("frames", "dropped_frames", "fixes_solved", "fixes_sent",
                                "fixes_refused", "latency_p50_ms")}
     assert s["fixes_sent"] > 0 and s["fixes_refused"].get("stale", 0) < s["fixes_sent"], brief
+
+
+def test_run_that_sent_no_fix_says_why(tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """``companion run`` on a recording whose every fix is refused (a 0.001 ms age limit)
+    ends with the refusals by reason and a warning naming the top one; before, it ended
+    "0 fixes sent" and nothing else."""
+    from tests.run_helpers import fake_flying, run_args
+
+    stream = synth(tmp_path / "hover", seconds=3.0, scenario="hover")
+    with fake_flying("hover") as fake:
+        status = main(run_args(tmp_path, stream, fake.local_port, "--truth-attitude",
+                               "--set", f'landmarks.map_path="{stream / "landmarks.geojson"}"',
+                               "--set", "mavlink.max_fix_age_ms=0.001"))
+        received = len(fake.vision)
+    err = capsys.readouterr().err
+    assert status == 0, err
+    assert received == 0
+    assert "fixes sent, " in err and "refused (stale " in err, err
+    assert "no fix was sent although" in err and "mostly stale" in err, err
