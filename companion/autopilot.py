@@ -80,6 +80,9 @@ class ResetPolicy:
 
 #: A refusal's log line repeats at most this often per reason (the count in between).
 REFUSAL_LOG_S = 5.0
+#: Refusals that are the output's pacing (mavlink.rate_hz, EKF3's 20 ms spacing), not a
+#: fault: logged at INFO, the others at WARNING.
+PACING = ("rate_limited", "not_newer")
 
 
 class RefusalLog:
@@ -96,8 +99,9 @@ class RefusalLog:
         self._since[reason] = self._since.get(reason, 0) + 1
         last = self._last.get(reason)
         if last is None or now - last >= REFUSAL_LOG_S:
-            log.warning("fix not sent: %s (%d such since the last line; docs/replay.md)",
-                        reason, self._since[reason])
+            level = logging.INFO if reason in PACING else logging.WARNING
+            log.log(level, "fix not sent: %s (%d such since the last line; docs/replay.md)",
+                    reason, self._since[reason])
             self._last[reason], self._since[reason] = now, 0
 
 
