@@ -34,6 +34,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from companion.errors import InputError
 from companion.flightmap import load_practical_map
 from companion.recorded import OnCompanionClock, RecordedTruth, TruthAttitude
 from companion.replay_score import ReplayScorer, replay_summary, visible_counts
@@ -239,6 +240,9 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
     source = ReplaySource(stream, clock)
     pmap = load_practical_map(settings)
     truth = RecordedTruth(source, stream, pmap.origin)
+    if not truth and telemetry is None:
+        raise InputError(f"{folder}: neither truth_pose.csv nor telemetry.csv: nothing to "
+                         "take the attitude from or to score against (docs/replay.md)")
     uses_telemetry = telemetry is not None and telemetry.covers("ATTITUDE")
     attitude = None if uses_telemetry or not truth else TruthAttitude(truth)
     if attitude is not None:

@@ -179,3 +179,15 @@ def test_run_that_sent_no_fix_says_why(tmp_path: Path,
     assert received == 0
     assert "fixes sent, " in err and "refused (stale " in err, err
     assert "no fix was sent although" in err and "mostly stale" in err, err
+
+
+def test_replay_refuses_a_stream_without_truth_or_telemetry(
+        tmp_path: Path, survey: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import shutil
+
+    bare = tmp_path / "bare"
+    shutil.copytree(survey, bare)
+    (bare / "truth_pose.csv").unlink()
+    status, _ = replay(tmp_path, bare)
+    assert status == 2
+    assert "neither truth_pose.csv nor telemetry.csv" in capsys.readouterr().err
