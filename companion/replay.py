@@ -230,6 +230,40 @@ def telemetry_of(folder: Path) -> TelemetryReplay | None:
                             for t, name, fields in rows])
 
 
+def _attitude(settings: Settings, truth: RecordedTruth, telemetry: TelemetryReplay | None
+              ) -> tuple[Settings, TruthAttitude | None, str]:
+    """Where the solver's attitude comes from (said in one line), and the settings that
+    state its noise to the solver."""
+    uses_telemetry = telemetry is not None and telemetry.covers("ATTITUDE")
+    attitude = None if uses_telemetry or not truth else TruthAttitude(truth)
+    if attitude is not None:
+        from companion.demo import with_fake_attitude_sigmas
+
+        settings = with_fake_attitude_sigmas(settings)  # the solver is told that noise
+    said = ("the recording's ATTITUDE (telemetry.csv), replayed by the fake autopilot"
+            if uses_telemetry else "truth_pose.csv with an autopilot's stated noise "
+            "(no recorded telemetry)" if attitude is not None else "the fake autopilot's")
+    log.warning("replay: attitude from %s", said)
+    return settings, attitude, said
+
+
+def _fake(settings: Settings, clock: ReplayClock, source: ReplaySource, truth: RecordedTruth,
+          telemetry: TelemetryReplay | None) -> FakeAutopilot:
+    """The fake autopilot flying the recording on its time, replaying its telemetry."""
+    flight = recorded_flight(truth.poses) or (telemetry.trajectory() if telemetry else None)
+    fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
+                                             endpoint="udpin:127.0.0.1:0"),
+                         truth=None if flight is None else
+                         lambda t: flight(clock.recording_s(t)),
+                         clock_ns=clock.fake_ns, replay=telemetry)
+    clock.t0_ns = fake.start_ns
+    if telemetry is not None:
+        clock.on_start.append(telemetry.start)
+    source.step = fake.tick
+    source.ready = lambda: "ATTITUDE" in fake.streams.periods
+    return fake
+
+
 async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> dict[str, Any]:
     """Replay ``folder`` through the whole companion; returns the summary
     (:func:`companion.replay_score.replay_summary`)."""
@@ -243,33 +277,9 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
     if not truth and telemetry is None:
         raise InputError(f"{folder}: neither truth_pose.csv nor telemetry.csv: nothing to "
                          "take the attitude from or to score against (docs/replay.md)")
-    uses_telemetry = telemetry is not None and telemetry.covers("ATTITUDE")
-    attitude = None if uses_telemetry or not truth else TruthAttitude(truth)
-    if attitude is not None:
-        from companion.demo import with_fake_attitude_sigmas
-
-        settings = with_fake_attitude_sigmas(settings)  # the solver is told that noise
-    said = ("the recording's ATTITUDE (telemetry.csv), replayed by the fake autopilot"
-            if uses_telemetry else "truth_pose.csv with an autopilot's stated noise "
-            "(no recorded telemetry)" if attitude is not None else "the fake autopilot's")
-    log.warning("replay: attitude from %s", said)
-    flight = recorded_flight(truth.poses) or (telemetry.trajectory() if telemetry else None)
+    settings, attitude, said = _attitude(settings, truth, telemetry)
     detector_for(settings)  # loaded before the clock starts
-    fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                             endpoint="udpin:127.0.0.1:0"),
-                         truth=None if flight is None else
-                         lambda t: flight(clock.recording_s(t)),
-                         clock_ns=clock.fake_ns, replay=telemetry)
-    clock.t0_ns = fake.start_ns
-    if telemetry is not None:
-        clock.on_start.append(telemetry.start)
-    source.step = fake.tick
-    source.ready = lambda: "ATTITUDE" in fake.streams.periods
-    await fake.start()
-    o = pmap.origin
-    bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
-                        origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
-                        origin_alt_m=o.alt_m, set_origin=True)
+    fake = _fake(settings, clock, source, truth, telemetry)
     scorers: list[ReplayScorer] = []
     camera = stream.meta.camera
 
@@ -278,9 +288,14 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
                                     pmap.landmarks, sensors, source.taken))
         return scorers[0]
 
+    await fake.start()
     beats = asyncio.create_task(_heartbeats(fake) if fast else asyncio.sleep(0))
     cpu0, wall0 = os.times(), time.monotonic()
     try:
+        o = pmap.origin
+        bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+                            origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
+                            origin_alt_m=o.alt_m, set_origin=True)
         app = await fly(settings, source, bridge, processor, pmap, prefix="replay",
                         attitude=attitude)
     finally:
