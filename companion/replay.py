@@ -9,11 +9,11 @@ flight it judges fixes against are the recording's at the frame's moment.
 
 * real time (default): ``T(r) = T0 + r``; a frame is delivered at ``T(r)``; when the
   processing falls behind, frames are dropped as from a live camera.
-* ``--fast``: no frame is dropped; the next frame is delivered once the worker took the
-  previous one.  The fake's clock is stepped to the frame's ``r``, it sends what is due
-  (the recorded telemetry up to ``r``) and the frame is then stamped with the companion's
-  clock ``T`` at its delivery: ``r -> T`` is monotonic, piecewise, and the same for the
-  gate, the attitude lookup and the latency.
+* ``--fast``: no frame is dropped; the next frame is decoded while the worker processes
+  the last one and delivered once it is done.  The fake's clock is stepped to the frame's
+  ``r``, it sends what is due (the recorded telemetry up to ``r``) and the frame is then
+  stamped with the companion's clock ``T`` at its delivery: ``r -> T`` is monotonic,
+  piecewise, and the same for the gate, the attitude lookup and the latency.
 
 The attitude: a version-2 stream's recorded ATTITUDE, replayed by the fake
 (:mod:`mavlink_bridge.fake_replay`); without telemetry, ``truth_pose.csv`` plus an
@@ -100,8 +100,8 @@ class ReplayClock:
 
 
 class ReplaySource(OnCompanionClock):
-    """A recorded stream delivered on a :class:`ReplayClock` (module doc); ``taken()`` is
-    called by the processing when it takes a frame (``--fast`` waits for it)."""
+    """A recorded stream delivered on a :class:`ReplayClock` (module doc); ``done()`` is
+    called by the processing when it finished a frame (``--fast`` waits for it)."""
 
     def __init__(self, stream: RecordedStreamSource, clock: ReplayClock) -> None:
         super().__init__(stream)
@@ -113,8 +113,8 @@ class ReplaySource(OnCompanionClock):
         #: :data:`READY_S`, before the first frame)
         self.ready: Callable[[], bool] = lambda: True
         self.first_us: int | None = None
-        self.delivered = self.started = 0
-        self._taken = asyncio.Event()
+        self.delivered = self.finished = 0
+        self._done = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
         times = [e.t_us for e in stream.entries]
         period = 1.0 / stream.meta.fps if stream.meta.fps > 0 else 0.0
@@ -136,11 +136,11 @@ class ReplaySource(OnCompanionClock):
             if self.step is not None:
                 self.step()
 
-    def taken(self) -> None:
-        """Called from the worker thread as it takes a frame."""
-        self.started += 1
+    def done(self) -> None:
+        """Called from the worker thread as it finished a frame."""
+        self.finished += 1
         if self._loop is not None:
-            self._loop.call_soon_threadsafe(self._taken.set)
+            self._loop.call_soon_threadsafe(self._done.set)
 
     async def recv(self) -> Frame:
         self._loop = asyncio.get_running_loop()
@@ -151,9 +151,9 @@ class ReplaySource(OnCompanionClock):
             self.clock.start()
         r_us = frame.t_us - self.first_us
         if self.clock.fast:
-            while self.started < self.delivered:  # the worker has not taken the last one
-                self._taken.clear()
-                await self._taken.wait()
+            while self.finished < self.delivered:  # the worker is still on the last one
+                self._done.clear()
+                await self._done.wait()
             self._step_to(r_us)
             await asyncio.sleep(SETTLE_S)
             t_us = monotonic_us()
@@ -285,7 +285,7 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
 
     def processor(sensors: SensorHistory) -> ReplayScorer:
         scorers.append(ReplayScorer(perception_for(settings, camera, pmap, sensors), truth,
-                                    pmap.landmarks, sensors, source.taken))
+                                    pmap.landmarks, sensors, source.done))
         return scorers[0]
 
     await fake.start()

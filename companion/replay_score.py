@@ -37,22 +37,24 @@ from tracker.pose.types import MapLandmark
 
 class ReplayScorer(TruthRecorder):
     """The demo's truth recorder on a recording, plus which frames got a fix and the
-    attitude the solver was given; ``taken()`` is called as a frame is taken."""
+    attitude the solver was given; ``done()`` is called as a frame is finished."""
 
     def __init__(self, perception: Perception, truth: RecordedTruth,
                  landmarks: Sequence[MapLandmark], sensors: SensorHistory,
-                 taken: Callable[[], None]) -> None:
+                 done: Callable[[], None]) -> None:
         super().__init__(perception, lambda f: truth.position(f.t_us),
                          {lm.landmark_id: lm for lm in landmarks})
         self.truth = truth
         self.sensors = sensors
-        self.taken = taken
+        self.done = done
         self.fixed: set[int] = set()
         self.attitude_errors: list[tuple[float, float, float]] = []
 
     def process(self, frame: Frame) -> FrameResult:
-        self.taken()
-        result: FrameResult = super().process(frame)
+        try:
+            result: FrameResult = super().process(frame)
+        finally:
+            self.done()
         if result.fix is not None:
             self.fixed.add(frame.index)
         found = self.truth.pose_at(frame.t_us)
