@@ -78,7 +78,10 @@ def test_replay_gives_the_solver_the_recorded_attitude(tmp_path: Path, recorded:
     status, s = replay(tmp_path, recorded)
     assert status == 0
     assert s["attitude"].startswith("the recording's ATTITUDE"), s["attitude"]
-    assert s["telemetry_replayed"]["ATTITUDE"] > 30, s["telemetry_replayed"]  # 54 seen
+    recorded_n = sum(name == "ATTITUDE" for _, name, _ in read_telemetry(recorded))
+    # each recorded message at most once, thinned to the asked 30 Hz: 30-54 of ~100 seen
+    # (fewer when the loaded machine recorded fewer)
+    assert 10 < s["telemetry_replayed"]["ATTITUDE"] <= recorded_n, s["telemetry_replayed"]
     expected = _recorded_yaw_error_deg(recorded)
     assert abs(s["attitude_error_deg"]["yaw_mean"] - expected) < 0.5, (s, expected)
 
