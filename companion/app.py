@@ -298,8 +298,11 @@ class CompanionApp:
                 own = self.sink.autopilot_position_ned()  # to plot the fix against it
                 extra = {} if own is None else {"autopilot_position_ned_m": own}
                 self.reporter.report("pose", result.capture_t_us, {**result.pose_json, **extra})
-        else:
+        else:  # refused by the bridge: visible with its reason (flight log, Zenoh)
             self.counters.fixes_refused += 1
+            self.reporter.report("events", result.capture_t_us, {
+                "event": "fix-refused", "frame": result.frame_index,
+                "reason": getattr(self.sink, "last_result", None) or "refused"})
         self._update_health()
 
     async def _status_loop(self) -> None:

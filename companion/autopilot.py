@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import logging
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,23 +50,75 @@ def vision_fix(fix: PoseFix, reset_counter: int) -> VisionFix:
 
 @dataclass
 class ResetPolicy:
-    """Bumps ``reset_counter`` when a fix jumps after a gap (a re-localisation)."""
+    """Bumps ``reset_counter`` when a fix jumps after a gap (a re-localisation).
+
+    :meth:`counter_for` says what a fix would carry; only :meth:`commit` of a fix that was
+    sent advances anything: a refused fix is no re-localisation the autopilot saw."""
 
     counter: int = 0
     last_time_us: int | None = None
     last_position: tuple[float, float, float] | None = None
 
-    def update(self, fix: PoseFix) -> int:
-        if self.last_time_us is not None and self.last_position is not None:
-            gap_s = (fix.time_us - self.last_time_us) / 1e6
-            jump = math.dist(fix.position_ned_m, self.last_position)
-            sigma = max(float(np.sqrt(np.trace(np.asarray(fix.covariance)[:3, :3]))), 0.01)
-            if gap_s > RESET_GAP_S and jump > RESET_SIGMAS * sigma:
-                self.counter += 1
-                log.info("re-localised: %.2f m jump after %.1f s; reset_counter %d",
-                         jump, gap_s, self.counter)
+    def counter_for(self, fix: PoseFix) -> int:
+        """The ``reset_counter`` ``fix`` carries if it is sent."""
+        if self.last_time_us is None or self.last_position is None:
+            return self.counter
+        gap_s = (fix.time_us - self.last_time_us) / 1e6
+        jump = math.dist(fix.position_ned_m, self.last_position)
+        sigma = max(float(np.sqrt(np.trace(np.asarray(fix.covariance)[:3, :3]))), 0.01)
+        return self.counter + 1 if gap_s > RESET_GAP_S and jump > RESET_SIGMAS * sigma \
+            else self.counter
+
+    def commit(self, fix: PoseFix, counter: int) -> None:
+        """``fix`` was sent with ``counter``."""
+        if counter != self.counter and self.last_position is not None:
+            log.info("re-localised: %.2f m jump; reset_counter %d",
+                     math.dist(fix.position_ned_m, self.last_position), counter)
+        self.counter = counter
         self.last_time_us, self.last_position = fix.time_us, fix.position_ned_m
-        return self.counter
+
+
+#: A refusal's log line repeats at most this often per reason (the count in between).
+REFUSAL_LOG_S = 5.0
+#: Refusals that are the output's pacing (mavlink.rate_hz, EKF3's 20 ms spacing), not a
+#: fault: logged at INFO, the others at WARNING.
+PACING = ("rate_limited", "not_newer")
+
+
+class RefusalLog:
+    """Logs refused fixes with their reason, at most once per :data:`REFUSAL_LOG_S` per
+    reason, saying how many were refused in between."""
+
+    def __init__(self, clock_s: Callable[[], float] = time.monotonic) -> None:
+        self.clock_s = clock_s
+        self._last: dict[str, float] = {}
+        self._since: dict[str, int] = {}
+
+    def note(self, reason: str) -> None:
+        now = self.clock_s()
+        self._since[reason] = self._since.get(reason, 0) + 1
+        last = self._last.get(reason)
+        if last is None or now - last >= REFUSAL_LOG_S:
+            level = logging.INFO if reason in PACING else logging.WARNING
+            log.log(level, "fix not sent: %s (%d such since the last line; docs/replay.md)",
+                    reason, self._since[reason])
+            self._last[reason], self._since[reason] = now, 0
+
+
+def outcome_lines(results: dict[str, int]) -> tuple[str, str | None]:
+    """The end of a flight: fixes sent and refused by reason, and a warning when fixes
+    were solved but none was sent (with the top reason)."""
+    refused = {k: v for k, v in results.items() if k != "sent"}
+    sent = results.get("sent", 0)
+    by_reason = ", ".join(f"{k} {v}" for k, v in sorted(refused.items(), key=lambda kv: -kv[1]))
+    line = f"{sent} fixes sent, {sum(refused.values())} refused" + \
+        (f" ({by_reason})" if by_reason else "")
+    warning = None
+    if sent == 0 and refused:
+        top = max(refused.items(), key=lambda kv: kv[1])
+        warning = (f"no fix was sent although {sum(refused.values())} were solved: "
+                   f"mostly {top[0]} ({top[1]})")
+    return line, warning
 
 
 class BridgeSink:
@@ -74,6 +128,8 @@ class BridgeSink:
         self.bridge = bridge
         self.reset = ResetPolicy()
         self.results: dict[str, int] = {}
+        self.last_result: str | None = None
+        self.refusals = RefusalLog()
         self._last_state: State | None = None
 
     @property
@@ -89,8 +145,16 @@ class BridgeSink:
                 self.bridge.statustext(state)
 
     async def send_fix(self, fix: Any) -> bool:
-        result = await self.bridge.send_fix(vision_fix(fix, self.reset.update(fix)))
+        """Send ``fix``; a refused one advances nothing (reset counter, last fix) and is
+        logged (:class:`RefusalLog`); its reason stays in :attr:`last_result`."""
+        counter = self.reset.counter_for(fix)
+        result = await self.bridge.send_fix(vision_fix(fix, counter))
         self.results[result] = self.results.get(result, 0) + 1
+        self.last_result = result
+        if result == "sent":
+            self.reset.commit(fix, counter)
+        else:
+            self.refusals.note(result)
         return result == "sent"
 
     async def statustext(self, text: str) -> None:

@@ -17,9 +17,9 @@ import os
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -49,28 +49,42 @@ class DemoResult:
     fixes: list[tuple[PoseFix, tuple[float, float, float], float]]  # fix, truth, distance
 
 
-class TruthRecorder(PerceptionWrapper):
-    """Wraps the perception to remember, for every fix, where the vehicle truly was."""
+#: The true position (flight NED, m) of the vehicle when a frame was taken, or None.
+TruthOf = Callable[[Any], Sequence[float] | None]
 
-    def __init__(self, perception: Perception, source: SimCameraSource,
+
+class TruthRecorder(PerceptionWrapper):
+    """Wraps the perception to remember, for every fix, where the vehicle truly was
+    (``truth_of(frame)``: the simulator's state, or a recording's ``truth_pose.csv``)."""
+
+    def __init__(self, perception: Perception, truth_of: TruthOf,
                  landmarks: dict[str, MapLandmark]) -> None:
         super().__init__(perception)
-        self.source = source
+        self.truth_of = truth_of
         self.landmarks = landmarks
         self.result = DemoResult([])
 
     def process(self, frame: Any) -> Any:
         result = self.perception.process(frame)
-        if isinstance(result.fix, PoseFix):
-            state = self.source.sim.state_at(self.source.scenario_time_s(frame))
-            truth = tuple(float(v) for v in state.position_ned_m)
+        truth_seq = self.truth_of(frame) if isinstance(result.fix, PoseFix) else None
+        if isinstance(result.fix, PoseFix) and truth_seq is not None:
+            truth = (float(truth_seq[0]), float(truth_seq[1]), float(truth_seq[2]))
             used = [self.landmarks[i] for i in result.fix.landmark_ids if i in self.landmarks]
             dist = float(np.mean([math.dist(truth, lm.position_ned_m) for lm in used])) \
                 if used else float("nan")
-            self.result.fixes.append((result.fix, truth, dist))  # type: ignore[arg-type]
+            self.result.fixes.append((result.fix, truth, dist))
             if result.pose_json is not None:
                 result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
         return result
+
+
+class TimedSource(Protocol):
+    """What the summary reads of a source: its length (s) and its skipped frames."""
+
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def status(self) -> Any: ...
 
 
 def nees_3d(fix: PoseFix, truth: tuple[float, float, float]) -> float:
@@ -143,8 +157,9 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
 
     def processor(sensors: SensorHistory) -> TruthRecorder:
         perception = perception_for(settings, sim.scenario.camera, pmap, sensors)
-        recorders.append(TruthRecorder(perception, source,
-                                       {lm.landmark_id: lm for lm in landmarks}))
+        recorders.append(TruthRecorder(
+            perception, lambda f: source.sim.state_at(source.scenario_time_s(f)).position_ned_m,
+            {lm.landmark_id: lm for lm in landmarks}))
         return recorders[0]
 
     tickers: list[asyncio.Task[None]] = []
@@ -182,7 +197,7 @@ async def _progress(app: CompanionApp, fake: FakeAutopilot, seconds: float,
 
 
 def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result: DemoResult,
-            source: SimCameraSource, cpu_cores_busy: float,
+            source: TimedSource, cpu_cores_busy: float,
             cpu_cores_busy_total: float) -> dict[str, Any]:
     """``cpu_cores_busy`` is the companion's share: the process's CPU time less what the
     simulated camera spent rendering (the fake autopilot's small share stays in);

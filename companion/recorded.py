@@ -55,11 +55,16 @@ class OnCompanionClock:
     async def recv(self) -> Frame:
         frame = await self.source.recv()
         t_us = max(monotonic_us(), (self.last_us or 0) + 1)  # strictly increasing
-        self._seen[t_us] = (frame.index, frame.t_us)
+        self.remember(t_us, frame.index, frame.t_us)
+        return Frame(frame.index, t_us, frame.image, frame.camera_id)
+
+    def remember(self, t_us: int, index: int, recorded_us: int) -> None:
+        """Note that the frame stamped ``t_us`` is recorded frame ``index`` of
+        ``recorded_us``."""
+        self._seen[t_us] = (index, recorded_us)
         while len(self._seen) > REMEMBER:
             self._seen.popitem(last=False)
         self.last_us = t_us
-        return Frame(frame.index, t_us, frame.image, frame.camera_id)
 
     def recorded(self, t_us: int) -> tuple[int, int] | None:
         return self._seen.get(t_us)
@@ -116,9 +121,13 @@ class RecordedTruth:
         if found is None:
             return None
         p = found[1]
+        return self.to_flight((p.north_m, p.east_m, p.down_m))
+
+    def to_flight(self, ned: tuple[float, float, float]) -> tuple[float, float, float]:
+        """A position of the stream's NED frame in the flight's."""
         if self._stream is None or self._stream == self._flight:
-            return (p.north_m, p.east_m, p.down_m)
-        lat, lon, alt = self._stream.to_wgs84(p.north_m, p.east_m, p.down_m)
+            return ned
+        lat, lon, alt = self._stream.to_wgs84(*ned)
         n, e, d = (float(v) for v in self._flight.to_ned(lat, lon, alt))
         return (n, e, d)
 

@@ -48,6 +48,7 @@ from mavlink_bridge.fake_drift import AttitudeDrift, AttitudeErrorConfig
 from mavlink_bridge.fake_ekf import EstimatorConfig, FakeEstimator, estimator_defaults
 from mavlink_bridge.fake_faults import FaultInjector
 from mavlink_bridge.fake_params import FakeParams
+from mavlink_bridge.fake_replay import TelemetryReplay
 from mavlink_bridge.fake_report import fake_summary
 from mavlink_bridge.fake_rules import (
     FakeRules,
@@ -150,8 +151,12 @@ class FakeAutopilot:
     """See module doc.  ``async with FakeAutopilot(cfg) as ap: ... ap.summary()``."""
 
     def __init__(self, config: FakeAutopilotConfig, truth: TruthFn | None = None,
-                 clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
+                 clock_ns: Callable[[], int] = time.monotonic_ns,
+                 replay: TelemetryReplay | None = None) -> None:
+        """``replay``: a recording's telemetry, sent instead of the fake's own for the
+        messages it holds (:mod:`mavlink_bridge.fake_replay`)."""
         self.config = config
+        self.replay = replay
         self.truth: TruthFn = truth or hover_then_circle()
         if config.vehicle == "guided":
             n, e, d, yaw = config.guided_start
@@ -282,14 +287,27 @@ class FakeAutopilot:
 
     async def _stream_loop(self) -> None:
         while True:
-            t = self.flight_s()
-            state = self._advance(t)
-            if not self.faults.link_down():
-                for name in self.streams.due(self.boot_s()):
-                    if name in _TRUTH_STREAMS and (self.config.home or self.origin) is None:
-                        continue
-                    self._send_stream(name, state)
+            self.tick()
             await asyncio.sleep(0.01)
+
+    def tick(self) -> None:
+        """Fly to now and send what is due (every 10 ms; a replay on a driven clock calls
+        it after each step of its clock)."""
+        state = self._advance(self.flight_s())
+        if not self.faults.link_down():
+            for name in self.streams.due(self.boot_s()):
+                if name in _TRUTH_STREAMS and (self.config.home or self.origin) is None:
+                    continue
+                self._send_stream(name, state)
+            if self.replay is not None:
+                self.replay.pump(self.codec.mav, self.streams.periods, self.flight_s(),
+                                 int(self.boot_s() * 1000) & 0xFFFFFFFF)
+
+    def send_heartbeat(self) -> None:
+        """One HEARTBEAT now, outside the stream schedule (a replay on a stepped clock keeps
+        the link alive on the companion's clock with it)."""
+        if not self.faults.link_down():
+            self._send_stream("HEARTBEAT", self.truth(self.flight_s()))
 
     def _advance(self, t: float) -> VehicleState:
         """Fly, propagate the estimator with the IMU, run the EKF failsafe; -> the truth."""
@@ -347,6 +365,8 @@ class FakeAutopilot:
             return
         mav = self.codec.mav
         boot_ms = int(self.boot_s() * 1000) & 0xFFFFFFFF
+        if self.replay is not None and self.replay.covers(name):
+            return  # sent by the replay at its recorded times (tick)
         own = self.config.judge == "estimate"
         if own and self.origin is None and name == "LOCAL_POSITION_NED":
             return  # no origin, no local position (ArduPilot: get_relative_position_NED_origin)

@@ -47,6 +47,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "check_cmd",
     "synth_cmd",
     "record_cmd",
+    "replay_cmd",
     "fake_autopilot_cmd",
     "autopilot_cmd",
     "landmarks_cmd",

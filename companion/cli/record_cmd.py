@@ -1,4 +1,5 @@
-"""``companion record``: record any frame source into a recorded stream folder."""
+"""``companion record``: record any frame source into a recorded stream folder, and with
+``--autopilot`` the autopilot's telemetry beside the frames (stream format version 2)."""
 
 from __future__ import annotations
 
@@ -7,18 +8,28 @@ import asyncio
 import dataclasses
 import logging
 from pathlib import Path
+from typing import Any
 
 from companion.cli import positive_seconds
 from companion.errors import ConfigError
 from companion.settings import Settings
 from companion.sim.source import SimCameraSource
-from companion.sources.base import EndOfStream, FrameSource
+from companion.sources.base import EndOfStream, FrameSource, monotonic_us
 from companion.sources.config import SourceConfig
 from companion.sources.factory import open_source, resolve
 from companion.sources.files import RecordedStreamSource
 from companion.sources.stream_format import StreamMeta
 from companion.sources.stream_io import IMAGE_FORMATS, StreamWriter
+from mavlink_bridge.bridge import VisionBridge
+from mavlink_bridge.codec import MAVLinkMessage
+from mavlink_bridge.fake_replay import REPLAYED
 from tracker.camera import CameraModel
+
+#: What ``--autopilot`` asks for (Hz): the messages the companion consumes
+#: (companion.sensors, the autopilot's position for the plots) at the rates it asks in
+#: flight (mavlink_bridge.streams.needed_streams), ATTITUDE at its 50 Hz.
+TELEMETRY_RATES = (("ATTITUDE", 50.0), ("LOCAL_POSITION_NED", 10.0),
+                   ("DISTANCE_SENSOR", 10.0), ("GLOBAL_POSITION_INT", 5.0))
 
 log = logging.getLogger(__name__)
 
@@ -45,8 +56,35 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="frame rate written for sources without their own (default 30)")
     parser.add_argument("--stall-timeout", type=float, default=2.0, metavar="S",
                         help="give up on a live source silent for this long (default 2 s)")
+    parser.add_argument("--jpeg-quality", type=int, default=95, metavar="Q",
+                        help="JPEG quality 1-100 with --format jpg (default 95)")
+    parser.add_argument("--autopilot", metavar="ENDPOINT",
+                        help="also record the autopilot's telemetry (ATTITUDE, "
+                        "LOCAL_POSITION_NED, DISTANCE_SENSOR, GLOBAL_POSITION_INT) from this "
+                        "MAVLink endpoint, e.g. udpin:0.0.0.0:14550 (docs/replay.md)")
     parser.add_argument("--overwrite", action="store_true")
     parser.set_defaults(handler=run)
+
+
+class TelemetryTap:
+    """The autopilot's messages the companion consumes, as they arrive (monotonic us)."""
+
+    def __init__(self, bridge: VisionBridge) -> None:
+        link = getattr(bridge, "link", None)
+        if link is None:
+            raise ConfigError("record --autopilot needs mavlink.backend = \"pymavlink\"")
+        self.items: list[tuple[int, str, dict[str, Any]]] = []
+        link.add_msg_listener(self._on)
+
+    def _on(self, msg: MAVLinkMessage) -> None:
+        name = msg.get_type()
+        if name in REPLAYED:
+            fields = {k: v for k, v in msg.to_dict().items() if k != "mavpackettype"}
+            self.items.append((monotonic_us(), name, fields))
+
+    def drain(self) -> list[tuple[int, str, dict[str, Any]]]:
+        out, self.items = self.items, []
+        return out
 
 
 def _meta(source: FrameSource, size: tuple[int, int], fps: float, spec: str,
@@ -67,33 +105,51 @@ def _meta(source: FrameSource, size: tuple[int, int], fps: float, spec: str,
 
 
 async def record(config: SourceConfig, out: Path, camera: CameraModel, *, seconds: float | None,
-                 frames: int | None, image_format: str, overwrite: bool) -> int:
-    """Copy frames from a source into a stream folder; returns the number written."""
+                 frames: int | None, image_format: str, overwrite: bool,
+                 jpeg_quality: int = 95, bridge: VisionBridge | None = None) -> int:
+    """Copy frames from a source into a stream folder; returns the number written.
+
+    With ``bridge`` (a link to the autopilot), its telemetry goes to ``telemetry.csv`` on the
+    frames' clock: the first frame's arrival fixes the offset between the monotonic clock
+    the messages arrive on and the frames' times (a live camera's frames carry their
+    capture time on the monotonic clock: the offset is then its small delivery delay)."""
+    tap = None if bridge is None else TelemetryTap(bridge)
+    if bridge is not None:
+        await bridge.start()
+        if not await bridge.wait_link(True, 5.0):
+            log.warning("record: no heartbeat from the autopilot at %s yet: recording the "
+                        "frames, telemetry from when it comes", bridge.config.endpoint)
     source = await open_source(config)
     writer: StreamWriter | None = None
-    count, first_t = 0, None
+    count, first_t, offset_us = 0, None, 0
     try:
         while frames is None or count < frames:
             try:
                 frame = await source.recv()
             except EndOfStream:
                 break
-            first_t = frame.t_us if first_t is None else first_t
+            if first_t is None:
+                first_t, offset_us = frame.t_us, monotonic_us() - frame.t_us
             if seconds is not None and frame.t_us - first_t >= seconds * 1e6:
                 break
             if writer is None:
                 meta = _meta(source, frame.size, config.fps, config.spec, camera,
                              config.camera_id)
-                writer = StreamWriter(out, meta, image_format, overwrite=overwrite)
+                writer = StreamWriter(out, meta, image_format, jpeg_quality, overwrite=overwrite)
             truth = None
             if isinstance(source, SimCameraSource | RecordedStreamSource):
                 truth = source.truth(frame.index)
             writer.write(frame, truth)
             count += 1
+            for t_us, name, fields in [] if tap is None else tap.drain():
+                if t_us - offset_us >= first_t:
+                    writer.write_telemetry(t_us - offset_us, name, fields)
     finally:
         source.close()
         if writer is not None:
             writer.close()
+        if bridge is not None:
+            await bridge.stop()
     if source.status.skipped:
         log.warning("record: skipped %d frame(s): %s", source.status.skipped,
                     source.status.skip_reasons)
@@ -106,10 +162,20 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         raise ConfigError(f"--frames: expected an integer >= 1, got {args.frames}")
     config = resolve(SourceConfig(spec=args.source, realtime=False, fps=args.fps,
                                   stall_timeout_s=args.stall_timeout))
-    if config.kind == "sim":  # simulated frames render as fast as they can be written
-        config = dataclasses.replace(config, realtime=False)
+    if not 1 <= args.jpeg_quality <= 100:
+        raise ConfigError(f"--jpeg-quality: expected 1-100, got {args.jpeg_quality}")
+    if config.kind == "sim":  # simulated frames render as fast as they can be written,
+        # or in real time beside a live autopilot's telemetry
+        config = dataclasses.replace(config, realtime=args.autopilot is not None)
+    bridge = None
+    if args.autopilot is not None:
+        from companion.runtime import bridge_for
+
+        bridge = bridge_for(settings, endpoint=args.autopilot, streams=TELEMETRY_RATES,
+                            set_origin=False)
     count = asyncio.run(record(config, args.out, settings.camera, seconds=args.seconds,
                                frames=args.frames, image_format=args.format,
-                               overwrite=args.overwrite))
+                               overwrite=args.overwrite, jpeg_quality=args.jpeg_quality,
+                               bridge=bridge))
     print(f"{args.out}: recorded {count} frames from {config.kind} {config.spec}")
     return 0

@@ -12,6 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
+from companion.autopilot import outcome_lines
 from companion.cli import positive_seconds
 from companion.config_checks import preflight
 from companion.errors import EXIT_FAILURE, EXIT_OK, ConfigError, SourceError
@@ -214,8 +215,10 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     app = asyncio.run(_run(settings, args.seconds, getattr(args, "fly", False),
                            getattr(args, "truth_attitude", False)))
     c = app.counters
-    log.info("stopped: %d frames, %d fixes sent, %d dropped frames", c.frames, c.fixes_sent,
-             app.dropped_frames)
+    line, none_sent = outcome_lines(getattr(app.sink, "results", {}))
+    log.info("stopped: %d frames, %s, %d dropped frames", c.frames, line, app.dropped_frames)
+    if none_sent is not None:
+        log.warning("%s", none_sent)
     if app.blocker is not None:
         log.warning("no fix could come: %s: %s", app.blocker.cause, app.blocker.detail)
     if c.worker_errors:  # a bug, logged with its traceback: not a clean stop

@@ -21,7 +21,8 @@ from tracker.camera import CameraModel
 from tracker.geometry import FloatArray
 
 FORMAT_NAME = "landmark-companion-stream"
-FORMAT_VERSION = 1
+#: 2 added ``telemetry.csv`` (the autopilot's messages beside the frames); 1 still reads.
+FORMAT_VERSION = 2
 
 FRAMES_HEADER = ("index", "t_us", "file")
 BOXES_HEADER = ("index", "landmark_id", "x", "y", "w", "h")
@@ -31,6 +32,7 @@ POSE_HEADER = ("index", "t_us", "north_m", "east_m", "down_m", "roll_rad", "pitc
 R_COLUMNS = tuple(f"r{i}{j}" for i in range(3) for j in range(3))
 CAMERA_HEADER = ("index", "t_us", "north_m", "east_m", "down_m", *R_COLUMNS)
 RANGE_HEADER = ("index", "t_us", "range_m")
+TELEMETRY_HEADER = ("t_us", "message", "fields")
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
@@ -20,6 +21,7 @@ from companion.sources.stream_format import (
     FRAMES_HEADER,
     POSE_HEADER,
     RANGE_HEADER,
+    TELEMETRY_HEADER,
     FrameTruth,
     StreamMeta,
     TruthBox,
@@ -130,6 +132,12 @@ class StreamWriter:
         rng = "" if truth.range_m is None else f"{truth.range_m:.4f}"
         self._open("truth_range.csv", RANGE_HEADER).writerow([frame.index, frame.t_us, rng])
 
+    def write_telemetry(self, t_us: int, message: str, fields: dict[str, Any]) -> None:
+        """Append one autopilot message received at ``t_us`` (the frames' clock) to
+        ``telemetry.csv`` (format version 2): its MAVLink fields as one JSON object."""
+        self._open("telemetry.csv", TELEMETRY_HEADER).writerow(
+            [t_us, message, json.dumps(fields, separators=(",", ":"))])
+
     def close(self) -> None:
         """Flush and close every CSV (idempotent)."""
         for fh, _ in self._files.values():
@@ -227,4 +235,23 @@ def read_truth(folder: Path) -> dict[int, FrameTruth]:
         pose = poses.get(index)
         out[index] = FrameTruth(tuple(boxes.get(index, ())), pose[1] if pose else None,
                                 cameras.get(index), ranges.get(index))
+    return out
+
+
+def read_telemetry(folder: Path) -> list[tuple[int, str, dict[str, Any]]]:
+    """``telemetry.csv`` (format version 2) as (t_us, message name, fields) in file order;
+    empty when absent (a version-1 stream, or one recorded without an autopilot)."""
+    path = Path(folder) / "telemetry.csv"
+    if not path.exists():
+        return []
+    _, rows = _rows(path, TELEMETRY_HEADER)
+    out: list[tuple[int, str, dict[str, Any]]] = []
+    for n, row in enumerate(rows, start=2):
+        try:
+            fields = json.loads(row[2])
+            if not isinstance(fields, dict):
+                raise ValueError(row[2])
+            out.append((int(row[0]), row[1].strip(), fields))
+        except (ValueError, IndexError):
+            raise InputError(f"{path}:{n}: malformed row {row}") from None
     return out

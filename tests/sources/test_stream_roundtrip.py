@@ -22,6 +22,7 @@ from companion.sources.stream_format import (
 )
 from companion.sources.stream_io import (
     StreamWriter,
+    read_telemetry,
     read_truth_boxes,
     read_truth_camera,
     read_truth_pose,
@@ -162,9 +163,24 @@ def test_reader_ignores_unknown_keys_and_refuses_newer_major(tmp_path: Path) -> 
     text = toml.read_text()
     toml.write_text("future_key = 3\n" + text + "\n[future_table]\nx = 1\n")
     assert read_meta(tmp_path / "s").fps == 30.0
-    toml.write_text(text.replace("version = 1", "version = 2"))
+    toml.write_text(text.replace("version = 2", "version = 3"))
     with pytest.raises(InputError, match="newer than this program"):
         read_meta(tmp_path / "s")
+
+
+def test_version_1_streams_still_read_and_telemetry_round_trips(tmp_path: Path) -> None:
+    """Format version 2 adds ``telemetry.csv``; a version-1 folder (no telemetry) reads."""
+    write_stream(tmp_path / "v1", make_frames(2))
+    toml = tmp_path / "v1" / "stream.toml"
+    toml.write_text(toml.read_text().replace("version = 2", "version = 1"))
+    assert read_meta(tmp_path / "v1").version == 1
+    assert read_telemetry(tmp_path / "v1") == []
+    with StreamWriter(tmp_path / "v2", StreamMeta(fps=30.0, camera=CAM)) as writer:
+        writer.write(make_frames(1)[0])
+        writer.write_telemetry(12, "ATTITUDE", {"roll": 0.1, "pitch": -0.2, "yaw": 3.0})
+    assert read_meta(tmp_path / "v2").version == 2
+    assert read_telemetry(tmp_path / "v2") == [
+        (12, "ATTITUDE", {"roll": 0.1, "pitch": -0.2, "yaw": 3.0})]
 
 
 async def test_loop_keeps_index_and_time_increasing(tmp_path: Path) -> None:

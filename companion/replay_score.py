@@ -1,0 +1,142 @@
+"""Scoring a replay against the stream's ``truth_pose.csv`` (``companion replay``).
+
+The keys of ``companion demo --json`` (:func:`companion.demo.summary`: RMSE, NEES share,
+latency ...) plus what a recording needs:
+
+* ``frames_2plus_visible``: frames of the stream on which at least two landmarks are
+  *fully visible* by the truth: each landmark's four corners, projected with the true pose
+  and the stream's camera, in front of the camera and inside the image;
+* ``fix_share_2plus_visible``: the share of those that got a fix (solved, before the
+  bridge; a frame dropped in real time counts as without);
+* ``nees_inside_95_share``: fixes whose 3-DOF NEES lies inside the two-sided 95 % bound;
+* ``fixes_solved``, ``fixes_refused`` by reason (the bridge's), ``attitude_error_deg``: the
+  attitude the solver was given against the true one (RMS per axis, and the mean yaw).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from companion.app import CompanionApp, Frame, FrameResult
+from companion.autopilot import outcome_lines
+from companion.demo import DemoResult, TruthRecorder, print_summary, summary
+from companion.perception import Perception
+from companion.recorded import RecordedTruth
+from companion.sensors import SensorHistory
+from mavlink_bridge.bridge import VisionBridge
+from mavlink_bridge.fake_autopilot import FakeAutopilot
+from tracker.camera import CameraModel
+from tracker.pose.landmarks import landmark_corners_ned
+from tracker.pose.types import MapLandmark
+
+
+class ReplayScorer(TruthRecorder):
+    """The demo's truth recorder on a recording, plus which frames got a fix and the
+    attitude the solver was given; ``done()`` is called as a frame is finished."""
+
+    def __init__(self, perception: Perception, truth: RecordedTruth,
+                 landmarks: Sequence[MapLandmark], sensors: SensorHistory,
+                 done: Callable[[], None]) -> None:
+        super().__init__(perception, lambda f: truth.position(f.t_us),
+                         {lm.landmark_id: lm for lm in landmarks})
+        self.truth = truth
+        self.sensors = sensors
+        self.done = done
+        self.fixed: set[int] = set()
+        self.attitude_errors: list[tuple[float, float, float]] = []
+
+    def process(self, frame: Frame) -> FrameResult:
+        try:
+            result: FrameResult = super().process(frame)
+        finally:
+            self.done()
+        if result.fix is not None:
+            self.fixed.add(frame.index)
+        found = self.truth.pose_at(frame.t_us)
+        given = self.sensors.attitude_at(frame.t_us)
+        if found is not None and given is not None:
+            p = found[1]
+            self.attitude_errors.append(tuple(  # type: ignore[arg-type]
+                math.degrees(math.remainder(g - t, math.tau)) for g, t in
+                ((given.roll_rad, p.roll_rad), (given.pitch_rad, p.pitch_rad),
+                 (given.yaw_rad, p.yaw_rad))))
+        return result
+
+
+def fully_visible(camera: CameraModel, position_ned: Sequence[float],
+                  rpy_rad: tuple[float, float, float], landmark: MapLandmark) -> bool:
+    """All four corners of ``landmark`` in front of the camera and inside the image."""
+    pts = camera.world_to_camera(landmark_corners_ned(landmark), np.asarray(position_ned),
+                                 rpy_rad)
+    if not np.all(pts[:, 2] > 0):
+        return False
+    uv = camera.project_camera_points(pts)
+    return bool(np.all((uv[:, 0] >= 0) & (uv[:, 0] <= camera.width - 1)
+                       & (uv[:, 1] >= 0) & (uv[:, 1] <= camera.height - 1)))
+
+
+def visible_counts(truth: RecordedTruth, camera: CameraModel,
+                   landmarks: Sequence[MapLandmark]) -> dict[int, int]:
+    """Per frame index of ``truth_pose.csv``: how many landmarks are fully visible."""
+    out = {}
+    for index, (_, p) in truth.poses.items():
+        position = truth.to_flight((p.north_m, p.east_m, p.down_m))
+        rpy = (p.roll_rad, p.pitch_rad, p.yaw_rad)
+        out[index] = sum(fully_visible(camera, position, rpy, lm) for lm in landmarks)
+    return out
+
+
+def _attitude_error(errors: list[tuple[float, float, float]]) -> dict[str, float] | None:
+    if not errors:
+        return None
+    e = np.asarray(errors)
+    rms = np.sqrt(np.mean(np.square(e), axis=0))
+    return {"roll_rms": round(float(rms[0]), 3), "pitch_rms": round(float(rms[1]), 3),
+            "yaw_rms": round(float(rms[2]), 3), "yaw_mean": round(float(np.mean(e[:, 2])), 3)}
+
+
+def replay_summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge,
+                   scorer: ReplayScorer, source: Any, cpu_cores_busy: float,
+                   visible: dict[int, int], facts: dict[str, Any]) -> dict[str, Any]:
+    """The demo's summary keys plus the recording's (module doc)."""
+    result: DemoResult = scorer.result
+    s = summary(app, fake, bridge, result, source, cpu_cores_busy, cpu_cores_busy)
+    two = [i for i, n in visible.items() if n >= 2]
+    outcomes = dict(getattr(app.sink, "results", {}))
+    refused = {k: v for k, v in sorted(outcomes.items()) if k != "sent"}
+    return {
+        **facts, **s,
+        "frames_in_stream": len(visible) or None,
+        "frames_2plus_visible": len(two),
+        "fix_share_2plus_visible": round(sum(i in scorer.fixed for i in two) / len(two), 3)
+        if two else None,
+        "nees_inside_95_share": s["nees_inside_95"],
+        "fixes_solved": len(result.fixes),
+        "fixes_refused": refused,
+        "attitude_error_deg": _attitude_error(scorer.attitude_errors),
+        "telemetry_replayed": dict(fake.replay.sent) if fake.replay is not None else {},
+    }
+
+
+def print_replay(s: dict[str, Any], out: Any = sys.stdout) -> None:
+    """The human-readable end of ``companion replay``."""
+    def f(v: Any) -> str:
+        return "-" if v is None else str(v)
+
+    print(f"replay            {s['stream']} ({s['mode']}); attitude from {s['attitude']}",
+          file=out)
+    print_summary(s, out)
+    line, none_sent = outcome_lines({**s["fixes_refused"], "sent": s["fixes_sent"]})
+    lines = [
+        f"fully visible     {s['frames_2plus_visible']} frames with >= 2 landmarks, "
+        f"{f(s['fix_share_2plus_visible'])} of them with a fix",
+        f"fixes solved      {s['fixes_solved']}: {line}",
+        *([f"WARNING           {none_sent}"] if none_sent else []),
+        f"attitude given    {f(s['attitude_error_deg'])} deg against the truth",
+    ]
+    print("\n".join(lines), file=out)
