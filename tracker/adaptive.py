@@ -385,10 +385,11 @@ class AdaptiveTracker:
         matched closely (``template_update_score``).  ``images``: the frame, the window."""
         if self.config.gain_source == "target":
             self._update_gain(raw, state)
-        if score >= self.config.template_update_score:
+        if score >= min(self.config.template_update_score, self.config.scale_update_score):
             frame, image_f32 = images
             box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
-            self._refiner.learn(image_f32, box, frame, (state[:2], self._box_px(state)))
+            in_frame = (state[:2], self._box_px(state))
+            self._refiner.learn(image_f32, box, frame, in_frame, score)
 
     def _refined(
         self,

@@ -120,11 +120,19 @@ class Refiner:
         box_on_patch: tuple[FloatArray, FloatArray],
         frame: Frame,
         box_in_frame: tuple[FloatArray, FloatArray],
+        score: float,
     ) -> None:
-        """The running template and the size filters learn the box (centre, size) given."""
-        centre, box = box_on_patch
-        rate = self.config.template_update_rate
-        self._current = (1.0 - rate) * self._current + rate * crop(patch, centre, box, self._size)
+        """The running template learns the box (centre, size) given where the template matched
+        at ``template_update_score`` or better, the size filters where it matched at
+        ``scale_update_score`` or better."""
+        cfg = self.config
+        if score >= cfg.template_update_score:
+            centre, box = box_on_patch
+            rate = cfg.template_update_rate
+            fresh = crop(patch, centre, box, self._size)
+            self._current = (1.0 - rate) * self._current + rate * fresh
+        if score < cfg.scale_update_score:
+            return
         xy, box_px = box_in_frame
         read = self._read
         if read is not None and bool(np.all(read[0] == xy) and np.all(read[1] == box_px)):
