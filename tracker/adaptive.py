@@ -382,10 +382,11 @@ class AdaptiveTracker:
         score: float,
     ) -> None:
         """After a trusted frame: the gain; the template and size filters where the template
-        matched closely (``template_update_score``).  ``images``: the frame, the window."""
+        matched closely (``template_update_score``; the size filters also need the first
+        frame's template to match, :meth:`Refiner.learn`).  ``images``: the frame, the window."""
         if self.config.gain_source == "target":
             self._update_gain(raw, state)
-        if score >= min(self.config.template_update_score, self.config.scale_update_score):
+        if score >= self.config.template_accept_score:
             frame, image_f32 = images
             box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
             in_frame = (state[:2], self._box_px(state))
@@ -454,6 +455,9 @@ class AdaptiveTracker:
         )
         xy = raw.to_frame(found.centre[None])[0]
         if found.score < cfg.template_accept_score:  # not located: the caller keeps the size
+            return np.array([xy[0], xy[1], self._state[2]]), found.score
+        if self._refiner.slow_score < cfg.scale_read_score:  # size unreliable: keep it
+            self._aspect_step = 1.0
             return np.array([xy[0], xy[1], self._state[2]]), found.score
         change = self._refiner.size_change(image, xy, self._box_px(self._state))
         self._aspect_step = float(np.sqrt(change[0] / change[1]))

@@ -22,7 +22,7 @@ from tracker.scale_filter import (
     sample_size,
     samples,
 )
-from tracker.template import Match, crop, match, template_size
+from tracker.template import Match, crop, match, ncc, template_size
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -58,7 +58,8 @@ class Refiner:
         self.config = config
         self._size = template_size(box)
         self._first = crop(patch, centre, box, self._size)
-        self._current = self._first.copy()
+        self._current = self._first.copy()  # slow: learns where it matches closely
+        self._fast = self._first.copy()  # fast: learns on more frames, locates the centre
         self._shape = sample_size(box_px)
         count, step = config.scale_filter_scales, config.scale_filter_step
         steps = [factor_pairs(count, step, kind) for kind in config.size_filters.split("+")]
@@ -69,6 +70,7 @@ class Refiner:
             _Sizer(f, ScaleFilter.train(part)) for f, part in zip(steps, rows, strict=True)
         ]
         self._read: tuple[FloatArray, FloatArray, list[ComplexArray]] | None = None
+        self.slow_score = 1.0  # the slow template's NCC where :meth:`locate` found the target
 
     def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
         """Each size filter's rows for the box ``box_px`` at ``xy`` (one resampling for all).
@@ -81,10 +83,12 @@ class Refiner:
         count = self.config.scale_filter_scales
         return [rows[i : i + count] for i in range(0, len(rows), count)]
 
-    def template(self) -> Patch:
-        """``template_anchor`` x the first frame's template + the rest x the running one."""
+    def template(self, running: Patch | None = None) -> Patch:
+        """``template_anchor`` x the first frame's template + the rest x a running one (by
+        default the fast one, which locates the target)."""
         a = self.config.template_anchor
-        return np.asarray(a * self._first + (1.0 - a) * self._current, dtype=np.float32)
+        rest = self._fast if running is None else running
+        return np.asarray(a * self._first + (1.0 - a) * rest, dtype=np.float32)
 
     def locate(self, patch: Patch, centres: FloatArray, box: FloatArray) -> Match:
         """The template's best match around ``centres[0]`` (the filter's estimate).
@@ -98,6 +102,8 @@ class Refiner:
         if np.any(np.abs(centres[1] - centres[0]) > frac * box):
             last = match(patch, template, centres[1], box, frac, ((1.0, 1.0),))
             found = last if last.score > found.score else found
+        here = crop(patch, found.centre, box, self._size)
+        self.slow_score = ncc(here, self.template(self._current))
         return found
 
     def size_change(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> FloatArray:
@@ -122,17 +128,26 @@ class Refiner:
         box_in_frame: tuple[FloatArray, FloatArray],
         score: float,
     ) -> None:
-        """The running template learns the box (centre, size) given where the template matched
-        at ``template_update_score`` or better, the size filters where it matched at
-        ``scale_update_score`` or better."""
+        """Learn the box given (centre, size) on a frame where the template matched at ``score``.
+
+        Two running templates: the fast one (which locates the target) learns where ``score >=
+        template_update_score``; the slow one and the size filters only where the slow
+        template matches the box at ``scale_update_score`` or better.  A template that learns
+        on many frames follows a slow change of appearance (Coke's turning can) but also a
+        shadow's edge creeping over the target (Car4 under the bridge): it then matches the lit
+        half at NCC 0.9, and size filters learning from those frames shrank the box to half its
+        height.  The slow template does not follow the shadow, so it keeps the size filters
+        off those frames.
+        """
         cfg = self.config
+        centre, box = box_on_patch
+        fresh = crop(patch, centre, box, self._size)
+        rate = cfg.template_update_rate
         if score >= cfg.template_update_score:
-            centre, box = box_on_patch
-            rate = cfg.template_update_rate
-            fresh = crop(patch, centre, box, self._size)
-            self._current = (1.0 - rate) * self._current + rate * fresh
-        if score < cfg.scale_update_score:
+            self._fast = (1.0 - rate) * self._fast + rate * fresh
+        if self.slow_score < cfg.scale_update_score:
             return
+        self._current = (1.0 - rate) * self._current + rate * fresh
         xy, box_px = box_in_frame
         read = self._read
         if read is not None and bool(np.all(read[0] == xy) and np.all(read[1] == box_px)):

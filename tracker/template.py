@@ -75,6 +75,11 @@ def crop(
     return _resample(image, centre, step, size)
 
 
+def ncc(a: Image, b: Image) -> float:
+    """Normalised cross-correlation of two images of one shape (``TM_CCOEFF_NORMED``)."""
+    return float(cv2.matchTemplate(a, b, cv2.TM_CCOEFF_NORMED)[0, 0])
+
+
 def _subpixel(response: npt.NDArray[np.float32], ix: int, iy: int) -> tuple[float, float]:
     """Parabola through the peak and its neighbours along each axis -> offset in (-0.5, 0.5)."""
     h, w = response.shape
