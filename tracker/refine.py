@@ -70,6 +70,7 @@ class Refiner:
             _Sizer(f, ScaleFilter.train(part)) for f, part in zip(steps, rows, strict=True)
         ]
         self._read: tuple[FloatArray, FloatArray, list[ComplexArray]] | None = None
+        self.rival = -1.0
         self.slow_score = 1.0  # the slow template's NCC where :meth:`locate` found the target
 
     def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
@@ -102,9 +103,23 @@ class Refiner:
         if np.any(np.abs(centres[1] - centres[0]) > frac * box):
             last = match(patch, template, centres[1], box, frac, ((1.0, 1.0),))
             found = last if last.score > found.score else found
+        found = self._nearer_if_ambiguous(found, centres[1])
+        self.rival = found.rival
         here = crop(patch, found.centre, box, self._size)
         self.slow_score = ncc(here, self.template(self._current))
         return found
+
+    def _nearer_if_ambiguous(self, found: Match, last: FloatArray) -> Match:
+        """Where a rival peak scores within ``template_rival_margin`` of the best, the one
+        nearer the last estimate (a look-alike passing by); ``rival`` then marks the frame
+        ambiguous (the fast template does not learn it)."""
+        margin = self.config.template_rival_margin
+        if found.rival_centre is None or found.rival < found.score - margin:
+            return found
+        near = np.hypot(*(found.rival_centre - last)) < np.hypot(*(found.centre - last))
+        if not near:
+            return found
+        return Match(found.rival_centre, found.scale, found.rival, found.score, found.centre)
 
     def size_change(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> FloatArray:
         """(width, height) factors of the box at ``xy``: the product of the filters' peaks."""
@@ -143,7 +158,7 @@ class Refiner:
         centre, box = box_on_patch
         fresh = crop(patch, centre, box, self._size)
         rate = cfg.template_update_rate
-        if score >= cfg.template_update_score:
+        if score >= cfg.template_update_score and self.rival < score - cfg.template_rival_margin:
             self._fast = (1.0 - rate) * self._fast + rate * fresh
         if self.slow_score < cfg.scale_update_score:
             return
