@@ -92,22 +92,38 @@ class Refiner:
         return np.asarray(a * self._first + (1.0 - a) * rest, dtype=np.float32)
 
     def locate(self, patch: Patch, centres: FloatArray, box: FloatArray) -> Match:
-        """The template's best match around ``centres[0]`` (the filter's estimate).
+        """The fast template's best match around ``centres[0]`` (the filter's estimate), or
+        the slow template's where the fast one matches worse than it.
 
         If the filter moved further than the search reaches (``template_search_frac`` of the
         box) from ``centres[1]`` (the last estimate), the template is looked for there too.
+        Where the fast template scores below ``template_update_score`` the slow one is
+        searched as well, and where it matches better it locates the target and the fast
+        template restarts from it: a fast template that followed a shadow's edge (Car4
+        leaving the bridge's shadow) loses the car when the light comes back, and the slow
+        one, which never learnt the shadow, finds it.
         """
+        found = self._search(patch, centres, box, self.template())
+        self.slow_score = ncc(
+            crop(patch, found.centre, box, self._size), self.template(self._current)
+        )
+        if found.score < self.config.template_update_score:
+            slow = self._search(patch, centres, box, self.template(self._current))
+            if slow.score > found.score:
+                found, self._fast = slow, self._current.copy()
+                self.slow_score = slow.score
+        self.rival = found.rival
+        return found
+
+    def _search(self, patch: Patch, centres: FloatArray, box: FloatArray, template: Patch) -> Match:
+        """``template``'s best match near the filter's estimate or the last one (ambiguous
+        peaks: :meth:`_nearer_if_ambiguous`)."""
         frac = self.config.template_search_frac
-        template = self.template()
         found = match(patch, template, centres[0], box, frac, ((1.0, 1.0),))
         if np.any(np.abs(centres[1] - centres[0]) > frac * box):
             last = match(patch, template, centres[1], box, frac, ((1.0, 1.0),))
             found = last if last.score > found.score else found
-        found = self._nearer_if_ambiguous(found, centres[1])
-        self.rival = found.rival
-        here = crop(patch, found.centre, box, self._size)
-        self.slow_score = ncc(here, self.template(self._current))
-        return found
+        return self._nearer_if_ambiguous(found, centres[1])
 
     def _nearer_if_ambiguous(self, found: Match, last: FloatArray) -> Match:
         """Where a rival peak scores within ``template_rival_margin`` of the best, the one
