@@ -71,6 +71,7 @@ class Refiner:
         ]
         self._read: tuple[FloatArray, FloatArray, list[ComplexArray]] | None = None
         self.rival = -1.0
+        self.jumped = False  # the target moved further than template_jump_frac since the last
         self.slow_score = 1.0  # the slow template's NCC where :meth:`locate` found the target
 
     def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
@@ -113,6 +114,9 @@ class Refiner:
                 found, self._fast = slow, self._current.copy()
                 self.slow_score = slow.score
         self.rival = found.rival
+        self.jumped = bool(
+            np.any(np.abs(found.centre - centres[1]) > self.config.template_jump_frac * box)
+        )
         return found
 
     def _search(self, patch: Patch, centres: FloatArray, box: FloatArray, template: Patch) -> Match:
@@ -174,7 +178,8 @@ class Refiner:
         centre, box = box_on_patch
         fresh = crop(patch, centre, box, self._size)
         rate = cfg.template_update_rate
-        if score >= cfg.template_update_score and self.rival < score - cfg.template_rival_margin:
+        clear = self.rival < score - cfg.template_rival_margin and not self.jumped
+        if score >= cfg.template_update_score and clear:
             self._fast = (1.0 - rate) * self._fast + rate * fresh
         if self.slow_score < cfg.scale_update_score:
             return
