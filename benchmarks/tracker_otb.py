@@ -35,8 +35,8 @@ from companion.evaluation.runner import make_tracker, run_frames  # noqa: E402
 from companion.evaluation.sequences import load_sequence  # noqa: E402
 from companion.evaluation.synthetic import SynthSpec, write_otb  # noqa: E402
 from tracker import AdaptiveTracker, TrackerConfig  # noqa: E402
-from tracker.config import check_config  # noqa: E402
 from tracker.baselines import csrt_available  # noqa: E402
+from tracker.config import check_config  # noqa: E402
 
 SEQUENCES = ("Coke", "Tiger1", "Car4", "Crossing", "boat1")
 PEERS = ("mil", "csrt")  # OpenCV peers: one run (the seed only seeds cv2.setRNGSeed)

@@ -51,9 +51,7 @@ def template_size(box_wh: FloatArray) -> tuple[int, int]:
     )
 
 
-def _resample(
-    image: Image, centre: FloatArray, step: FloatArray, out_wh: tuple[int, int]
-) -> Image:
+def _resample(image: Image, centre: FloatArray, step: FloatArray, out_wh: tuple[int, int]) -> Image:
     """``out[v, u] = image(centre + ((u, v) - (out - 1) / 2) * step)``, bilinear, edge copied."""
     ow, oh = out_wh
     m = np.array(
@@ -69,9 +67,7 @@ def _resample(
     )
 
 
-def crop(
-    image: Image, centre: FloatArray, box_wh: FloatArray, size: tuple[int, int]
-) -> Image:
+def crop(image: Image, centre: FloatArray, box_wh: FloatArray, size: tuple[int, int]) -> Image:
     """The box ``centre`` +- ``box_wh`` / 2 (patch pixels) resampled to ``size`` = (w, h)."""
     step = np.asarray(box_wh, dtype=np.float64) / np.array(size, dtype=np.float64)
     return _resample(image, centre, step, size)
