@@ -539,10 +539,10 @@ class AdaptiveTracker:
         planes, lik = self._likelihood(window)
         half = self._half(self._state[2], window)[0]
         positive = np.maximum(lik, 0.0)
-        ksize = (max(1, int(2 * half[0])), max(1, int(2 * half[1])))
+        h, w = positive.shape  # the kernel within the window (a runaway scale: bad_alloc)
+        ksize = (int(np.clip(2 * half[0], 1, w)), int(np.clip(2 * half[1], 1, h)))
         smooth = cv2.boxFilter(positive, -1, ksize)
         iy, ix = np.unravel_index(int(np.argmax(smooth)), smooth.shape)
-        h, w = positive.shape
         scatter = self.rng.random((cfg.particles - 1, 2)) * np.array([w, h])
         centres = np.vstack([[ix + 0.5, iy + 0.5], scatter])
         halves = np.repeat(half[None], len(centres), axis=0)
