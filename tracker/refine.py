@@ -39,7 +39,7 @@ class _Sizer:
 
 
 class Refiner:
-    """Template (first frame's mixed with a running one) and size filters of one target.
+    """Templates (the first frame's mixed with a fast or a slow running one) and size filters.
 
     ``patch`` is the float32 search window, ``centre``/``box`` on it in patch pixels;
     ``frame``, ``xy``/``box_px`` in full-resolution pixels.
