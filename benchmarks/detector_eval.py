@@ -48,26 +48,19 @@ def paired(a: np.ndarray, b: np.ndarray) -> None:
         # two-sided exact binomial (sign) test of only_a vs only_b
         k = min(only_a, only_b)
         p = min(1.0, 2.0 * sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n) if n else 1.0
-        print(
-            f"{name} landmarks found by the first model only: {only_a}, by the second only: "
-            f"{only_b} (sign test p = {p:.3f})"
-        )
+        print(f"{name} landmarks found by the first model only: {only_a}, by the second only: "
+              f"{only_b} (sign test p = {p:.3f})")
 
 
 def main() -> int:
     """Evaluate each model on the same held-out frames and print one block per model."""
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--model", action="append", default=None)
     ap.add_argument("--set", choices=("sim", "procedural"), default="sim")
     ap.add_argument("--frames", type=int, default=400)
-    ap.add_argument(
-        "--seed",
-        type=int,
-        default=None,
-        help=f"first seed (default {SIM_SEED} for sim, 1000 for procedural)",
-    )
+    ap.add_argument("--seed", type=int, default=None,
+                    help=f"first seed (default {SIM_SEED} for sim, 1000 for procedural)")
     ap.add_argument("--threshold", type=float, default=DetectorConfig().score_threshold)
     ap.add_argument("--runs", type=int, default=50, help="timed detect() calls")
     ap.add_argument("--check", action="store_true", help="gate against the baseline file")
@@ -77,29 +70,24 @@ def main() -> int:
     frames = held_out(args.set, args.frames, seed)
     n = sum(len(f.classes) for f in frames)
     h, w = frames[0].image_bgr.shape[:2]
-    print(
-        f"held-out {args.set}: {len(frames)} frames {w}x{h}, {n} landmarks counted, "
-        f"seeds {seed}..{seed + args.frames - 1}",
-        flush=True,
-    )
+    print(f"held-out {args.set}: {len(frames)} frames {w}x{h}, {n} landmarks counted, "
+          f"seeds {seed}..{seed + args.frames - 1}", flush=True)
     results, failed, found = {}, False, []
     base = json.loads(BASELINE.read_text())[args.set] if args.check else {}
     for model in args.model or [None]:
-        det = Detector(model, DetectorConfig(score_threshold=0.01, max_detections=100, threads=1))
+        det = Detector(model, DetectorConfig(score_threshold=0.01, max_detections=100,
+                                             threads=1))
         found.append([])
         m = evaluate(det, frames, args.threshold, found[-1])
         net_ms, full_ms = timing(det, frames[0].image_bgr, args.runs)
         m |= {"network_ms": net_ms, "detect_ms": full_ms}
-        print_block(
-            f"model {det.model_path.name} ({det.model_path.stat().st_size / 1e6:.2f} MB,"
-            f" strides {list(det.info.strides)})",
-            m,
-            args.threshold,
-        )
+        print_block(f"model {det.model_path.name} ({det.model_path.stat().st_size / 1e6:.2f} MB,"
+                    f" strides {list(det.info.strides)})", m, args.threshold)
         results[str(det.model_path)] = m
         for key in ("mAP50", "recall_small"):
             if key in base and m[key] < base[key] - TOLERANCE:
-                print(f"  REGRESSION: {key} {m[key]:.3f} < baseline {base[key]:.3f} - {TOLERANCE}")
+                print(f"  REGRESSION: {key} {m[key]:.3f} < baseline {base[key]:.3f} - "
+                      f"{TOLERANCE}")
                 failed = True
     if len(found) == 2:
         paired(np.array(found[0]), np.array(found[1]))

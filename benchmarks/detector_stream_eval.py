@@ -42,24 +42,16 @@ def load_stream(folder: Path, categories: dict[str, str]) -> list[EvalFrame]:
             keep, ignore, cls = [], [], []
             for t in truth[int(row["index"])]:
                 box = [float(t[k]) for k in ("x", "y", "w", "h")]
-                full = (
-                    float(t.get("in_view_frac", 1)) >= 0.9
-                    and float(t.get("occluded_frac", 0)) <= 0.1
-                )
+                full = (float(t.get("in_view_frac", 1)) >= 0.9
+                        and float(t.get("occluded_frac", 0)) <= 0.1)
                 category = categories.get(t["landmark_id"], "")
                 if full and category in CATEGORIES:
                     keep.append(box)
                     cls.append(CATEGORIES.index(category))
                 else:
                     ignore.append([box[0], box[1], box[0] + box[2], box[1] + box[3]])
-            frames.append(
-                EvalFrame(
-                    image,
-                    np.array(keep, np.float32).reshape(-1, 4),
-                    np.array(cls, np.int64),
-                    np.array(ignore).reshape(-1, 4),
-                )
-            )
+            frames.append(EvalFrame(image, np.array(keep, np.float32).reshape(-1, 4),
+                                    np.array(cls, np.int64), np.array(ignore).reshape(-1, 4)))
     return frames
 
 
@@ -77,9 +69,8 @@ def main() -> None:
     print(f"streams: {', '.join(s.name for s in args.stream)}: {len(frames)} frames")
     for model in args.model or [None]:
         det = Detector(model, DetectorConfig(score_threshold=0.01, max_detections=100))
-        print_block(
-            f"model {det.model_path.name}", evaluate(det, frames, args.threshold), args.threshold
-        )
+        print_block(f"model {det.model_path.name}", evaluate(det, frames, args.threshold),
+                    args.threshold)
 
 
 if __name__ == "__main__":

@@ -41,10 +41,8 @@ SURVEY = Path(__file__).resolve().parents[1] / "config" / "scenarios" / "survey.
 def scenario_at(fps: float, folder: Path) -> str:
     """The survey scenario at ``fps`` frames per second (a file: run_demo takes a file)."""
     text = SURVEY.read_text().replace("fps = 30.0", f"fps = {fps}")
-    text = text.replace(
-        'landmarks = "../landmarks.geojson"',
-        f'landmarks = "{SURVEY.parent.parent / "landmarks.geojson"}"',
-    )
+    text = text.replace('landmarks = "../landmarks.geojson"',
+                        f'landmarks = "{SURVEY.parent.parent / "landmarks.geojson"}"')
     path = folder / "survey.toml"
     path.write_text(text)
     return str(path)
@@ -60,14 +58,9 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
     profile = settings.vehicle.profile
     fake = FakeAutopilot(FakeAutopilotConfig(profile=profile), truth=sim.truth_fn)
     await fake.start()
-    bridge = bridge_for(
-        settings,
-        endpoint=f"udpout:127.0.0.1:{fake.local_port}",
-        origin_lat_deg=o.lat,
-        origin_lon_deg=o.lon,
-        origin_alt_m=o.alt_m,
-        set_origin=True,
-    )
+    bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+                        origin_lat_deg=o.lat, origin_lon_deg=o.lon, origin_alt_m=o.alt_m,
+                        set_origin=True)
     source = FollowCameraSource(sim, bridge, local, profile, request=command_sender(bridge))
     errors: list[float] = []
 
@@ -83,20 +76,15 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
             return result
 
     try:
-        app = await fly(settings, source, bridge, Recorder, pmap, seconds=seconds, prefix="follow")
+        app = await fly(settings, source, bridge, Recorder, pmap, seconds=seconds,
+                        prefix="follow")
     finally:
         await fake.stop()
     assert source.failure is None
     rmse = float(np.sqrt(np.mean(np.square(errors)))) if errors else None
-    return {
-        "fixes": len(errors),
-        "frames": app.counters.frames,
-        "position_rmse_m": rmse,
-        "accepted": len(fake.accepted()),
-        "sent": app.counters.fixes_sent,
-        "refused": app.counters.fixes_refused,
-        "bridge": bridge.stats()["vision"],
-    }
+    return {"fixes": len(errors), "frames": app.counters.frames, "position_rmse_m": rmse,
+            "accepted": len(fake.accepted()), "sent": app.counters.fixes_sent,
+            "refused": app.counters.fixes_refused, "bridge": bridge.stats()["vision"]}
 
 
 async def main() -> None:
@@ -105,18 +93,16 @@ async def main() -> None:
     parser.add_argument("--fps", type=float, default=15.0)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        settings = load_settings(
-            shipped=SIM_LAYERS, sets=["monitor.enabled=false", f'flightlog.dir="{tmp}"']
-        )
+        settings = load_settings(shipped=SIM_LAYERS,
+                                 sets=["monitor.enabled=false", f'flightlog.dir="{tmp}"'])
         scenario = scenario_at(args.fps, Path(tmp))
         scripted = await run_demo(settings, scenario, args.seconds)
         follow = await follow_flight(settings, scenario, args.seconds)
-    print(f"scripted: {scripted['fixes_sent']} fixes sent, RMSE {scripted['position_rmse_m']} m")
-    print(
-        f"follow:   {follow['fixes']} fixes solved ({follow['sent']} sent, "
-        f"{follow['accepted']} accepted by the fake autopilot; bridge {follow['bridge']}), "
-        f"RMSE {follow['position_rmse_m']:.4f} m"
-    )
+    print(f"scripted: {scripted['fixes_sent']} fixes sent, RMSE "
+          f"{scripted['position_rmse_m']} m")
+    print(f"follow:   {follow['fixes']} fixes solved ({follow['sent']} sent, "
+          f"{follow['accepted']} accepted by the fake autopilot; bridge {follow['bridge']}), "
+          f"RMSE {follow['position_rmse_m']:.4f} m")
 
 
 if __name__ == "__main__":

@@ -31,16 +31,10 @@ def run(glitch_m: float, glitch_frame: int, fps: float = 15.0) -> list[float]:
     sim = Simulator(replace(load_scenario("survey"), fps=fps))
     settings = load_settings(shipped=SIM_LAYERS)
     landmarks, references = map_landmarks(sim)
-    perception = Perception(
-        sim.scenario.camera,
-        landmarks,
-        references,
-        config=settings.perception,
-        tracker_config=settings.tracker,
-        pose_config=settings.pose,
-        acquire_config=settings.acquire,
-        gate_config=settings.fixgate,
-    )
+    perception = Perception(sim.scenario.camera, landmarks, references,
+                            config=settings.perception, tracker_config=settings.tracker,
+                            pose_config=settings.pose, acquire_config=settings.acquire,
+                            gate_config=settings.fixgate)
     errors = []
     for k in range(round(6.0 * fps)):
         t_s = 3.0 + k / fps
@@ -65,10 +59,8 @@ def main() -> None:
     args = parser.parse_args()
     for glitch in (0.0, args.glitch_m):
         errors = run(glitch, args.frame)
-        print(
-            f"glitch {glitch:.3f} m at frame {args.frame}: {len(errors)} fixes, median "
-            f"{np.median(errors):.3f} m, max {max(errors):.3f} m"
-        )
+        print(f"glitch {glitch:.3f} m at frame {args.frame}: {len(errors)} fixes, median "
+              f"{np.median(errors):.3f} m, max {max(errors):.3f} m")
 
 
 if __name__ == "__main__":

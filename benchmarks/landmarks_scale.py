@@ -48,23 +48,10 @@ def make_landmarks(n: int, region_km: float, rng: np.random.Generator) -> list[L
     impact = rng.uniform(0.0, 1.0, n)
     facing = rng.uniform(0.0, 360.0, n)
     return [
-        Landmark(
-            f"lm{k:07d}",
-            f"landmark {k}",
-            CATEGORIES[k % 4],
-            float(a),
-            float(o),
-            35.0,
-            1.5,
-            1.0,
-            float(f),
-            "approved",
-            "",
-            Scores(0.8, 0.9, 0.9, float(s)),
-        )
-        for k, (a, o, f, s) in enumerate(
-            zip(lat.tolist(), lon.tolist(), facing.tolist(), impact.tolist(), strict=True)
-        )
+        Landmark(f"lm{k:07d}", f"landmark {k}", CATEGORIES[k % 4], float(a), float(o), 35.0,
+                 1.5, 1.0, float(f), "approved", "", Scores(0.8, 0.9, 0.9, float(s)))
+        for k, (a, o, f, s) in enumerate(zip(lat.tolist(), lon.tolist(), facing.tolist(),
+                                             impact.tolist(), strict=True))
     ]
 
 
@@ -86,38 +73,24 @@ def load() -> str:
     return "load average " + " ".join(f"{x:.1f}" for x in os.getloadavg())
 
 
-def bench_geojson_import(
-    make_repo: Callable[[], LandmarkRepository], records: list[Landmark], tmp: Path, label: str
-) -> None:
+def bench_geojson_import(make_repo: Callable[[], LandmarkRepository], records: list[Landmark],
+                         tmp: Path, label: str) -> None:
     path = tmp / "map.geojson"
     with path.open("w") as out:
-        json.dump(
-            {
-                "type": "FeatureCollection",
-                "features": [landmark_to_feature(lm, None) for lm in records],
-            },
-            out,
-        )
+        json.dump({"type": "FeatureCollection",
+                   "features": [landmark_to_feature(lm, None) for lm in records]}, out)
     repo = make_repo()
     try:
         dt, cpu = timed_cpu(lambda: import_map(repo, path))
     finally:
         repo.close()
-    print(
-        f"{label}: GeoJSON import of {len(records):,} features "
-        f"({path.stat().st_size / 1e6:.0f} MB): {dt:.2f} s = {len(records) / dt:,.0f} records/s "
-        f"(client CPU {cpu:.2f} s; {load()})"
-    )
+    print(f"{label}: GeoJSON import of {len(records):,} features "
+          f"({path.stat().st_size / 1e6:.0f} MB): {dt:.2f} s = {len(records) / dt:,.0f} records/s "
+          f"(client CPU {cpu:.2f} s; {load()})")
 
 
-def bench_select(
-    repo: LandmarkRepository,
-    region_km: float,
-    area_km: float,
-    repeats: int,
-    rng: np.random.Generator,
-    label: str,
-) -> None:
+def bench_select(repo: LandmarkRepository, region_km: float, area_km: float, repeats: int,
+                 rng: np.random.Generator, label: str) -> None:
     config = LandmarksConfig(min_spacing_m=30.0, max_count=50)
     times, cpus, counts, query_times = [], [], [], []
     half = (region_km - area_km) * 500.0
@@ -125,25 +98,19 @@ def bench_select(
         n0, e0 = rng.uniform(-half, half, 2)
         lat, lon, _ = pymap3d.ned2geodetic(
             np.array([n0 - area_km * 500, n0 + area_km * 500]),
-            np.array([e0 - area_km * 500, e0 + area_km * 500]),
-            0.0,
-            *ORIGIN,
-            0.0,
-        )
+            np.array([e0 - area_km * 500, e0 + area_km * 500]), 0.0, *ORIGIN, 0.0)
         box = BBox(float(lon[0]), float(lat[0]), float(lon[1]), float(lat[1]))
         query_times.append(timed(partial(lambda b: counts.append(len(repo.query_area(b))), box)))
         wall, cpu = timed_cpu(partial(select_area, repo, box, config, ()))
         times.append(wall)
         cpus.append(cpu)
     ms = sorted(t * 1000 for t in times)
-    print(
-        f"{label}: select {area_km:g} km x {area_km:g} km (query + greedy, min spacing 30 m, "
-        f"max 50) over {repeats} areas: median {statistics.median(ms):.1f} ms, "
-        f"p90 {ms[int(0.9 * (len(ms) - 1))]:.1f} ms, this process's CPU median "
-        f"{statistics.median(cpus) * 1000:.1f} ms; query_area alone median "
-        f"{statistics.median(query_times) * 1000:.1f} ms; "
-        f"{statistics.mean(counts):,.0f} landmarks per area; {load()}"
-    )
+    print(f"{label}: select {area_km:g} km x {area_km:g} km (query + greedy, min spacing 30 m, "
+          f"max 50) over {repeats} areas: median {statistics.median(ms):.1f} ms, "
+          f"p90 {ms[int(0.9 * (len(ms) - 1))]:.1f} ms, this process's CPU median "
+          f"{statistics.median(cpus) * 1000:.1f} ms; query_area alone median "
+          f"{statistics.median(query_times) * 1000:.1f} ms; "
+          f"{statistics.mean(counts):,.0f} landmarks per area; {load()}")
 
 
 def server_time(repo: Any, region_km: float, area_km: float) -> None:
@@ -154,40 +121,26 @@ def server_time(repo: Any, region_km: float, area_km: float) -> None:
         n0, e0 = rng.uniform(-(region_km - area_km) * 500, (region_km - area_km) * 500, 2)
         lat, lon, _ = pymap3d.ned2geodetic(
             np.array([n0 - area_km * 500, n0 + area_km * 500]),
-            np.array([e0 - area_km * 500, e0 + area_km * 500]),
-            0.0,
-            *ORIGIN,
-            0.0,
-        )
+            np.array([e0 - area_km * 500, e0 + area_km * 500]), 0.0, *ORIGIN, 0.0)
         plan = repo._conn.execute(
             "EXPLAIN (ANALYZE, FORMAT JSON) SELECT id, lat_deg, lon_deg, impact, status, "
             "status_reason FROM landmarks WHERE geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326)",
-            (float(lon[0]), float(lat[0]), float(lon[1]), float(lat[1])),
-        ).fetchone()[0]
+            (float(lon[0]), float(lat[0]), float(lon[1]), float(lat[1]))).fetchone()[0]
         ms.append(plan[0]["Execution Time"] + plan[0]["Planning Time"])
-    print(
-        f"postgis: server planning + execution of the area query (GiST): median "
-        f"{statistics.median(ms):.1f} ms"
-    )
+    print(f"postgis: server planning + execution of the area query (GiST): median "
+          f"{statistics.median(ms):.1f} ms")
 
 
 def run_sqlite(args: argparse.Namespace, records: list[Landmark], tmp: Path) -> None:
-    bench_geojson_import(
-        lambda: SqliteLandmarkRepository(tmp / "geojson.db"),
-        records[: args.geojson_count],
-        tmp,
-        "sqlite",
-    )
+    bench_geojson_import(lambda: SqliteLandmarkRepository(tmp / "geojson.db"),
+                         records[: args.geojson_count], tmp, "sqlite")
     repo = SqliteLandmarkRepository(tmp / "big.db")
     try:
         dt, cpu = timed_cpu(lambda: repo.import_landmarks(records))
-        print(
-            f"sqlite: import_landmarks of {len(records):,} records: {dt:.2f} s = "
-            f"{len(records) / dt:,.0f} records/s (CPU {cpu:.2f} s; {load()})"
-        )
-        bench_select(
-            repo, args.region_km, args.area_km, args.repeats, np.random.default_rng(2), "sqlite"
-        )
+        print(f"sqlite: import_landmarks of {len(records):,} records: {dt:.2f} s = "
+              f"{len(records) / dt:,.0f} records/s (CPU {cpu:.2f} s; {load()})")
+        bench_select(repo, args.region_km, args.area_km, args.repeats,
+                     np.random.default_rng(2), "sqlite")
     finally:
         repo.close()
 
@@ -205,28 +158,16 @@ def run_postgis(args: argparse.Namespace, records: list[Landmark], tmp: Path) ->
                 conn.execute("CREATE DATABASE geo")
                 conn.execute("CREATE DATABASE big")
             base = url.rsplit("/", 1)[0]
-            bench_geojson_import(
-                lambda: PostgisLandmarkRepository(base + "/geo"),
-                records[: args.geojson_count],
-                tmp,
-                "postgis",
-            )
+            bench_geojson_import(lambda: PostgisLandmarkRepository(base + "/geo"),
+                                 records[: args.geojson_count], tmp, "postgis")
             with PostgisLandmarkRepository(base + "/big") as repo:
                 dt, cpu = timed_cpu(lambda: repo.import_landmarks(records))
-                print(
-                    f"postgis: import_landmarks (COPY) of {len(records):,} records: "
-                    f"{dt:.2f} s = {len(records) / dt:,.0f} records/s (client CPU {cpu:.2f} s; "
-                    f"{load()})"
-                )
+                print(f"postgis: import_landmarks (COPY) of {len(records):,} records: "
+                      f"{dt:.2f} s = {len(records) / dt:,.0f} records/s (client CPU {cpu:.2f} s; "
+                      f"{load()})")
                 repo._conn.execute("ANALYZE landmarks")
-                bench_select(
-                    repo,
-                    args.region_km,
-                    args.area_km,
-                    args.repeats,
-                    np.random.default_rng(2),
-                    "postgis",
-                )
+                bench_select(repo, args.region_km, args.area_km, args.repeats,
+                             np.random.default_rng(2), "postgis")
                 server_time(repo, args.region_km, args.area_km)
     except pytest.skip.Exception as err:
         print(f"postgis: skipped ({err})")
@@ -243,10 +184,8 @@ def main() -> None:
     args = parser.parse_args()
     t0 = time.perf_counter()
     records = make_landmarks(args.count, args.region_km, np.random.default_rng(1))
-    print(
-        f"generated {len(records):,} landmarks over {args.region_km:g} km x "
-        f"{args.region_km:g} km in {time.perf_counter() - t0:.1f} s"
-    )
+    print(f"generated {len(records):,} landmarks over {args.region_km:g} km x "
+          f"{args.region_km:g} km in {time.perf_counter() - t0:.1f} s")
     with tempfile.TemporaryDirectory(prefix="lmc-bench-") as tmp:
         if args.backend in ("sqlite", "both"):
             run_sqlite(args, records, Path(tmp))

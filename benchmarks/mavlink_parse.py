@@ -1,6 +1,6 @@
 """Parse cost per incoming datagram (how big a flood the link absorbs), and per bad datagram.
 
-PYTHONPATH=. .venv/bin/python benchmarks/mavlink_parse.py [--n 20000]
+    PYTHONPATH=. .venv/bin/python benchmarks/mavlink_parse.py [--n 20000]
 """
 
 from __future__ import annotations

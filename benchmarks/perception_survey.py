@@ -52,39 +52,24 @@ def main() -> int:
     parser.add_argument("--scenario", default="survey")
     parser.add_argument("--frames", type=int, default=900)
     parser.add_argument("--pixel-sigma", type=float, default=0.15)
-    parser.add_argument(
-        "--one-plate-outline-sigma-rel",
-        type=float,
-        default=0.0,
-        help="pose.one_plate_outline_sigma_rel (0 in both shipped layers: a lone "
-        "plate's corners independent)",
-    )
+    parser.add_argument("--one-plate-outline-sigma-rel", type=float, default=0.0,
+                        help="pose.one_plate_outline_sigma_rel (0 in both shipped layers: a lone "
+                        "plate's corners independent)")
     parser.add_argument("--check", action="store_true", help="exit 1 below issue 6's targets")
-    parser.add_argument(
-        "--exact-attitude",
-        action="store_true",
-        help="feed the true attitude (default: the truth plus the autopilot's "
-        "stated noise, AttitudeSample's sigmas, as the covariance assumes)",
-    )
-    parser.add_argument(
-        "--attitude-sigma-deg",
-        type=float,
-        nargs=2,
-        default=[0.2, 1.0],
-        metavar=("ROLL_PITCH", "YAW"),
-        help="the simulated autopilot's attitude 1-sigma, stated to the solver",
-    )
-    parser.add_argument(
-        "--altitude-sigma-m",
-        type=float,
-        default=None,
-        help="also give the autopilot's height, the truth plus noise of this "
-        "1-sigma, stated to the solver (default: no height)",
-    )
+    parser.add_argument("--exact-attitude", action="store_true",
+                        help="feed the true attitude (default: the truth plus the autopilot's "
+                        "stated noise, AttitudeSample's sigmas, as the covariance assumes)")
+    parser.add_argument("--attitude-sigma-deg", type=float, nargs=2, default=[0.2, 1.0],
+                        metavar=("ROLL_PITCH", "YAW"),
+                        help="the simulated autopilot's attitude 1-sigma, stated to the solver")
+    parser.add_argument("--altitude-sigma-m", type=float, default=None,
+                        help="also give the autopilot's height, the truth plus noise of this "
+                        "1-sigma, stated to the solver (default: no height)")
     args = parser.parse_args()
     sig_rp, sig_yaw = (float(np.deg2rad(v)) for v in args.attitude_sigma_deg)
     cv2.setNumThreads(1)
-    sim = Simulator(dataclasses.replace(load_scenario(args.scenario), seconds=args.frames / 30.0))
+    sim = Simulator(dataclasses.replace(load_scenario(args.scenario),
+                                        seconds=args.frames / 30.0))
     landmarks, references = map_landmarks(sim)
     by_id = {lm.landmark_id: lm for lm in landmarks}
 
@@ -95,20 +80,13 @@ def main() -> int:
         if args.altitude_sigma_m is not None:  # the autopilot's height: truth + its noise
             noise = np.random.default_rng(t_us + 1).normal(0.0, args.altitude_sigma_m)
             alt = AltitudeSample(t_us, float(s.position_ned_m[2]) + noise, args.altitude_sigma_m)
-        return SideSensors(
-            attitude=att if args.exact_attitude else noisy_attitude(att), altitude=alt
-        )
+        return SideSensors(attitude=att if args.exact_attitude else noisy_attitude(att),
+                           altitude=alt)
 
-    perception = Perception(
-        sim.scenario.camera,
-        landmarks,
-        references,
-        sensors=sensors,
-        pose_config=PoseConfig(
-            pixel_sigma_px=args.pixel_sigma,
-            one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel,
-        ),
-    )
+    perception = Perception(sim.scenario.camera, landmarks, references, sensors=sensors,
+                            pose_config=PoseConfig(
+                                pixel_sigma_px=args.pixel_sigma,
+                                one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel))
     process_ms, house_ms, errors, dists, nees, counts, traces = [], [], [], [], [], [], []
     corner_err: dict[str, list[float]] = {b: [] for b in (*WIDTH_BINS, "box centre")}
     for i in range(args.frames):
@@ -127,26 +105,13 @@ def main() -> int:
         err_v = np.asarray(result.fix.position_ned_m) - truth
         errors.append(float(np.linalg.norm(err_v)))
         counts.append(len(result.fix.landmark_ids))
-        dists.append(
-            float(
-                np.mean(
-                    [
-                        np.linalg.norm(truth - by_id[i].position_ned_m)
-                        for i in result.fix.landmark_ids
-                    ]
-                )
-            )
-        )
+        dists.append(float(np.mean([np.linalg.norm(truth - by_id[i].position_ned_m)
+                                    for i in result.fix.landmark_ids])))
         cov = np.asarray(result.fix.covariance)[:3, :3]
         nees.append(float(err_v @ np.linalg.solve(cov, err_v)))
         traces.append(float(np.trace(cov)))
-    fixes = Fixes(
-        np.array(errors),
-        np.array(dists),
-        np.array(nees),
-        np.array(counts, dtype=int),
-        np.array(traces),
-    )
+    fixes = Fixes(np.array(errors), np.array(dists), np.array(nees), np.array(counts, dtype=int),
+                  np.array(traces))
     _report(args, fixes, corner_err, process_ms, house_ms)
     missed = fixes.missed_targets()
     if args.check and missed:
@@ -165,9 +130,8 @@ def noisy_attitude(att: AttitudeSample) -> AttitudeSample:
     sigma = [att.roll_pitch_sigma_rad, att.roll_pitch_sigma_rad, att.yaw_sigma_rad]
     rpy = np.array([att.roll_rad, att.pitch_rad, att.yaw_rad])
     rpy = rpy + np.random.default_rng(att.time_us).normal(0.0, sigma)
-    return dataclasses.replace(
-        att, roll_rad=float(rpy[0]), pitch_rad=float(rpy[1]), yaw_rad=float(rpy[2])
-    )
+    return dataclasses.replace(att, roll_rad=float(rpy[0]), pitch_rad=float(rpy[1]),
+                               yaw_rad=float(rpy[2]))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,12 +150,11 @@ class Fixes:
         r = float(np.sqrt(np.mean(self.err[sel] ** 2)))
         d = float(self.dist[sel].mean())
         ne = self.nees[sel]
-        return (
-            f"RMSE {r:.4f} m at {d:.2f} m ({100 * r / d:.2f} % of distance), promised "
-            f"{np.sqrt(np.mean(self.trace[sel])):.4f} m; NEES inside "
-            f"{100 * np.mean(_inside(ne)):.1f} % (above {100 * np.mean(ne >= NEES_HIGH):.1f}"
-            f" %, median {np.median(ne):.2f})"
-        )
+        return (f"RMSE {r:.4f} m at {d:.2f} m ({100 * r / d:.2f} % of distance), promised "
+                f"{np.sqrt(np.mean(self.trace[sel])):.4f} m; NEES inside "
+                f"{100 * np.mean(_inside(ne)):.1f} % (above {100 * np.mean(ne >= NEES_HIGH):.1f}"
+                f" %, median {np.median(ne):.2f})")
+
 
     def missed_targets(self) -> list[str]:
         """Issue 6's targets this run misses: NEES inside for >= 90 % of all fixes and of the
@@ -213,22 +176,12 @@ def _inside(nees: FloatArray) -> npt.NDArray[np.bool_]:
 
 
 #: plate width on screen (px, mean of the top and bottom edges) -> corner error bins
-WIDTH_BINS = {
-    "< 30 px": (0.0, 30.0),
-    "30-40 px": (30.0, 40.0),
-    "40-60 px": (40.0, 60.0),
-    "60-100 px": (60.0, 100.0),
-    ">= 100 px": (100.0, float("inf")),
-}
+WIDTH_BINS = {"< 30 px": (0.0, 30.0), "30-40 px": (30.0, 40.0), "40-60 px": (40.0, 60.0),
+              "60-100 px": (60.0, 100.0), ">= 100 px": (100.0, float("inf"))}
 
 
-def _corner_errors(
-    perception: Perception,
-    frame_index: int,
-    boxes: tuple[TruthBox, ...],
-    camera: CameraModel,
-    out: dict[str, list[float]],
-) -> None:
+def _corner_errors(perception: Perception, frame_index: int, boxes: tuple[TruthBox, ...],
+                   camera: CameraModel, out: dict[str, list[float]]) -> None:
     """Coordinate errors (px) of the corners the perception hands the pose solver (its
     observations), for plates wholly in view and not occluded; under ``"box centre"`` the
     tracker box centre's error against the plate's true centre (where the diagonals of its
@@ -240,12 +193,9 @@ def _corner_errors(
         if b.corners_px is not None and b.in_view_frac >= 1.0 and b.occluded_frac <= 0.0:
             c = np.asarray(b.corners_px, dtype=np.float64)
             if rectified:
-                c = np.asarray(
-                    cv2.undistortPoints(
-                        c.reshape(-1, 1, 2), camera.matrix, camera.dist_coeffs, P=camera.matrix
-                    ),
-                    dtype=np.float64,
-                ).reshape(-1, 2)
+                c = np.asarray(cv2.undistortPoints(c.reshape(-1, 1, 2), camera.matrix,
+                                                   camera.dist_coeffs, P=camera.matrix),
+                               dtype=np.float64).reshape(-1, 2)
             truth[b.landmark_id] = c
     for t in perception.tracks.values():
         if t.landmark_id in truth:
@@ -270,26 +220,17 @@ def _diagonals_meet(c: FloatArray) -> FloatArray:
     return np.asarray(c[0] + s[0] * d1, dtype=np.float64)
 
 
-def _report(
-    args: argparse.Namespace,
-    fixes: Fixes,
-    corner_err: dict[str, list[float]],
-    process_ms: list[float],
-    house_ms: list[float],
-) -> None:
+def _report(args: argparse.Namespace, fixes: Fixes, corner_err: dict[str, list[float]],
+            process_ms: list[float], house_ms: list[float]) -> None:
     """Print the fixes' accuracy (overall, by landmarks used, 2+), NEES, corners, timing."""
     n = len(fixes.err)
     att = "true attitude" if args.exact_attitude else "attitude with the stated noise"
-    print(
-        f"scenario {args.scenario}: {n} fixes in {args.frames} frames "
-        f"(pixel sigma {args.pixel_sigma} px, {att})"
-    )
+    print(f"scenario {args.scenario}: {n} fixes in {args.frames} frames "
+          f"(pixel sigma {args.pixel_sigma} px, {att})")
     if not n:
         return
-    print(
-        f"all fixes: {fixes.summary(np.ones(n, dtype=bool))}; median error "
-        f"{np.median(fixes.err):.4f} m"
-    )
+    print(f"all fixes: {fixes.summary(np.ones(n, dtype=bool))}; median error "
+          f"{np.median(fixes.err):.4f} m")
     for k in sorted(set(fixes.counts.tolist())):
         sel = fixes.counts == k
         print(f"  {k} landmark(s): {int(sel.sum())} fixes, {fixes.summary(sel)}")
@@ -301,22 +242,16 @@ def _report(
     for name, values in corner_err.items():
         if values and name == "box centre":
             v = np.abs(np.array(values))
-            print(
-                f"tracker box centres vs the plates' true centres: {len(v) // 2} track-frames, "
-                f"error RMS {np.sqrt(np.mean(v**2)):.3f} px, median abs {np.median(v):.3f}"
-            )
+            print(f"tracker box centres vs the plates' true centres: {len(v) // 2} track-frames, "
+                  f"error RMS {np.sqrt(np.mean(v**2)):.3f} px, median abs {np.median(v):.3f}")
         elif values:
             v = np.abs(np.array(values))
-            print(
-                f"corners of plates {name} wide: {len(v) // 8} observations, error RMS "
-                f"{np.sqrt(np.mean(v**2)):.3f} px, median abs {np.median(v):.3f}, "
-                f"p95 abs {np.percentile(v, 95):.3f}"
-            )
-    print(
-        f"process ms median {np.median(process_ms):.2f} p99 {np.percentile(process_ms, 99):.2f}; "
-        f"housekeeping ms median {np.median(house_ms):.2f} p99 "
-        f"{np.percentile(house_ms, 99):.2f}"
-    )
+            print(f"corners of plates {name} wide: {len(v) // 8} observations, error RMS "
+                  f"{np.sqrt(np.mean(v**2)):.3f} px, median abs {np.median(v):.3f}, "
+                  f"p95 abs {np.percentile(v, 95):.3f}")
+    print(f"process ms median {np.median(process_ms):.2f} p99 {np.percentile(process_ms, 99):.2f}; "
+          f"housekeeping ms median {np.median(house_ms):.2f} p99 "
+          f"{np.percentile(house_ms, 99):.2f}")
 
 
 if __name__ == "__main__":

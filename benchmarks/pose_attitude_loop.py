@@ -45,10 +45,8 @@ def main() -> None:
     parser.add_argument("--position-feedback", type=float, default=0.5)
     args = parser.parse_args()
     by_name = {s.name: s for s in scenarios()}
-    print(
-        "| flight | set-up | seed | fixes/frames | att. error end / max deg | "
-        "pos. error median / max m | NEES inside 95 % | prior rejected |"
-    )
+    print("| flight | set-up | seed | fixes/frames | att. error end / max deg | "
+          "pos. error median / max m | NEES inside 95 % | prior rejected |")
     print("|---|---|---|---|---|---|---|---|")
     for name in FLIGHTS:
         flight = replace(by_name[name], duration_s=args.seconds)
@@ -58,19 +56,14 @@ def main() -> None:
                 steps = fly_loop(flight, loop, seed)
                 errors = [s.position_error_m for s in steps if s.position_error_m is not None]
                 nees = [s.nees for s in steps if s.nees is not None]
-                inside = (
-                    np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF for n in nees])
-                    if nees
-                    else float("nan")
-                )
+                inside = np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF for n in nees]) \
+                    if nees else float("nan")
                 late = [s.attitude_error_deg for s in steps if s.t_s >= 10.0]
                 rejected = sum(s.prior == "rejected" for s in steps)
                 med, worst = (np.median(errors), max(errors)) if errors else (np.nan, np.nan)
-                print(
-                    f"| {name} | {label} | {seed} | {len(errors)}/{len(steps)} | "
-                    f"{steps[-1].attitude_error_deg:.1f} / {max(late):.1f} | "
-                    f"{med:.3f} / {worst:.2f} | {inside:.3f} | {rejected} |"
-                )
+                print(f"| {name} | {label} | {seed} | {len(errors)}/{len(steps)} | "
+                      f"{steps[-1].attitude_error_deg:.1f} / {max(late):.1f} | "
+                      f"{med:.3f} / {worst:.2f} | {inside:.3f} | {rejected} |")
 
 
 if __name__ == "__main__":

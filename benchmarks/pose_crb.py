@@ -38,14 +38,8 @@ from tracker.pose.types import PoseFix
 MAX_RATIO = 1.15
 
 #: Noise-free measurements: corners, centres, attitude, altitude and range all exact.
-EXACT = SensorNoise(
-    pixel_sigma_px=0.0,
-    centre_sigma_px=0.0,
-    roll_pitch_sigma_rad=0.0,
-    yaw_sigma_rad=0.0,
-    altitude_sigma_m=0.0,
-    range_sigma_m=0.0,
-)
+EXACT = SensorNoise(pixel_sigma_px=0.0, centre_sigma_px=0.0, roll_pitch_sigma_rad=0.0,
+                    yaw_sigma_rad=0.0, altitude_sigma_m=0.0, range_sigma_m=0.0)
 
 
 def bound(scenario: Scenario) -> tuple[float, float]:
@@ -54,12 +48,10 @@ def bound(scenario: Scenario) -> tuple[float, float]:
     cfg = solver_config(scenario)
     n = scenario.noise
     traces, dists = [], []
-    for frame in fly(replace(scenario, noise=EXACT, misname_rate=0.0), np.random.default_rng(0)):
-        att = replace(
-            frame.attitude,
-            roll_pitch_sigma_rad=n.roll_pitch_sigma_rad,
-            yaw_sigma_rad=n.yaw_sigma_rad,
-        )
+    for frame in fly(replace(scenario, noise=EXACT, misname_rate=0.0),
+                     np.random.default_rng(0)):
+        att = replace(frame.attitude, roll_pitch_sigma_rad=n.roll_pitch_sigma_rad,
+                      yaw_sigma_rad=n.yaw_sigma_rad)
         alt = replace(frame.altitude, sigma_m=n.altitude_sigma_m)
         laser = None if frame.laser is None else replace(frame.laser, sigma_m=n.range_sigma_m)
         frame = replace(frame, attitude=att, altitude=alt, laser=laser)
@@ -69,16 +61,9 @@ def bound(scenario: Scenario) -> tuple[float, float]:
         assert np.allclose(fix.position_ned_m, frame.true_position_ned_m, atol=1e-6)
         traces.append(float(np.trace(fix.covariance[:3, :3])))
         used = [lm for lm in scenario.landmarks if lm.landmark_id in fix.landmark_ids]
-        dists.append(
-            float(
-                np.mean(
-                    [
-                        np.linalg.norm(np.subtract(lm.position_ned_m, frame.true_position_ned_m))
-                        for lm in used
-                    ]
-                )
-            )
-        )
+        dists.append(float(np.mean([np.linalg.norm(np.subtract(lm.position_ned_m,
+                                                                frame.true_position_ned_m))
+                                    for lm in used])))
     return float(np.sqrt(np.mean(traces))), float(np.mean(dists))
 
 
@@ -87,14 +72,10 @@ def main() -> int:
     parser.add_argument("--seed", type=int, nargs="+", default=list(range(1, 11)))
     parser.add_argument("--check", action="store_true", help=f"fail above {MAX_RATIO} x bound")
     args = parser.parse_args()
-    print(
-        f"seeds {args.seed[0]}-{args.seed[-1]} ({len(args.seed)}); noise as calibrated "
-        "(SensorNoise defaults)\n"
-    )
-    print(
-        "| flight | mean dist m | bound m | bound % of dist | RMSE m (all fixes, all seeds) "
-        "| RMSE % of dist | RMSE / bound |"
-    )
+    print(f"seeds {args.seed[0]}-{args.seed[-1]} ({len(args.seed)}); noise as calibrated "
+          "(SensorNoise defaults)\n")
+    print("| flight | mean dist m | bound m | bound % of dist | RMSE m (all fixes, all seeds) "
+          "| RMSE % of dist | RMSE / bound |")
     print("|---|---|---|---|---|---|---|")
     failed = []
     for i, sc in enumerate(reference_flights()):  # i: the seeds pose_accuracy.py uses
@@ -108,10 +89,8 @@ def main() -> int:
             n += r.fixes
         rmse = float(np.sqrt(sq / n))
         ratio = rmse / crb
-        print(
-            f"| {sc.name} | {dist:.1f} | {crb:.4f} | {100 * crb / dist:.2f} % | {rmse:.4f} | "
-            f"{100 * rmse / dist:.2f} % | {ratio:.2f} |"
-        )
+        print(f"| {sc.name} | {dist:.1f} | {crb:.4f} | {100 * crb / dist:.2f} % | {rmse:.4f} | "
+              f"{100 * rmse / dist:.2f} % | {ratio:.2f} |")
         if ratio > MAX_RATIO:
             failed.append(sc.name)
     if args.check and failed:

@@ -55,11 +55,7 @@ DECOY = MapLandmark("X", (30.0, 25.0, 5.0), 1.5, 1.5, 200.0, "sign")
 
 
 def time_fixes(
-    n: int,
-    use_attitude: bool,
-    repeats: int,
-    outlier: bool = False,
-    scale_sigma: float = 0.0,
+    n: int, use_attitude: bool, repeats: int, outlier: bool = False, scale_sigma: float = 0.0,
     config: PoseConfig | None = None,
 ) -> tuple[float, float, float, str]:
     """Median wall, median CPU and minimum wall microseconds per fix, and the solver.
@@ -94,24 +90,15 @@ def time_fixes(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=1000)
-    parser.add_argument(
-        "--check",
-        action="store_true",
-        help=f"exit 1 when a median CPU time exceeds {BUDGET_US:.0f} us",
-    )
+    parser.add_argument("--check", action="store_true",
+                        help=f"exit 1 when a median CPU time exceeds {BUDGET_US:.0f} us")
     parser.add_argument("--cv-threads", type=int, default=1, help="cv2.setNumThreads")
-    parser.add_argument(
-        "--scale-sigma",
-        type=float,
-        default=PerceptionConfig().corner_scale_sigma_px,
-        help="corners' common scale error, px of width (0: none)",
-    )
-    parser.add_argument(
-        "--one-plate-outline-sigma-rel",
-        type=float,
-        default=PoseConfig().one_plate_outline_sigma_rel,
-        help="pose.one_plate_outline_sigma_rel (config/sim.toml: 3)",
-    )
+    parser.add_argument("--scale-sigma", type=float,
+                        default=PerceptionConfig().corner_scale_sigma_px,
+                        help="corners' common scale error, px of width (0: none)")
+    parser.add_argument("--one-plate-outline-sigma-rel", type=float,
+                        default=PoseConfig().one_plate_outline_sigma_rel,
+                        help="pose.one_plate_outline_sigma_rel (config/sim.toml: 3)")
     args = parser.parse_args()
     cv2.setNumThreads(args.cv_threads)
     load = os.getloadavg()[0]
@@ -131,18 +118,13 @@ def main() -> None:
         cells = []
         for use_attitude in (False, True):
             wall, cpu, fastest, solver = time_fixes(
-                n,
-                use_attitude,
-                args.repeats,
-                outlier,
-                args.scale_sigma,
+                n, use_attitude, args.repeats, outlier, args.scale_sigma,
                 PoseConfig(one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel),
             )
             cells.append(f"{solver} | {wall:.0f} | {cpu:.0f} | {fastest:.0f}")
             if cpu > BUDGET_US:
-                over.append(
-                    f"{row} ({'attitude' if use_attitude else 'no attitude'}): {cpu:.0f} us CPU"
-                )
+                over.append(f"{row} ({'attitude' if use_attitude else 'no attitude'}): "
+                            f"{cpu:.0f} us CPU")
         print(f"| {row} | {' | '.join(cells)} |")
     print(f"1-min load average at the end: {os.getloadavg()[0]:.1f}")
     if args.check:

@@ -50,9 +50,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--frames", type=int, default=120)
     parser.add_argument("--live-seconds", type=float, default=4.0)
-    parser.add_argument(
-        "--scenarios", default=",".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
-    )
+    parser.add_argument("--scenarios", default=",".join(
+        sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))))
     args = parser.parse_args()
     cv2.setNumThreads(1)
     print(f"cpu count {os.cpu_count()}, OpenCV threads {cv2.getNumThreads()}")
@@ -62,15 +61,12 @@ def main() -> None:
         ms = time_render(sim, args.frames)
         cam = sim.scenario.camera
         med, p90 = float(np.median(ms)), float(np.percentile(ms, 90))
-        print(
-            f"{name:<18} {cam.width}x{cam.height:<4} {med:>10.2f} {p90:>8.2f} {1000.0 / med:>11.1f}"
-        )
+        print(f"{name:<18} {cam.width}x{cam.height:<4} {med:>10.2f} {p90:>8.2f} "
+              f"{1000.0 / med:>11.1f}")
     sim = Simulator(load_scenario("survey"))
     delivered, late = asyncio.run(live(sim, args.live_seconds))
-    print(
-        f"live survey at {sim.fps:g} fps for {args.live_seconds:g} s: {delivered} frames "
-        f"delivered, {late} dropped as late"
-    )
+    print(f"live survey at {sim.fps:g} fps for {args.live_seconds:g} s: {delivered} frames "
+          f"delivered, {late} dropped as late")
 
 
 if __name__ == "__main__":

@@ -65,11 +65,8 @@ def soak_scenario(tmp: Path, seconds: float, fps: float) -> Path:
     text = (SCENARIO_DIR / "hover.toml").read_text(encoding="utf-8")
     text = re.sub(r"(?m)^seconds = .*$", f"seconds = {seconds:.1f}", text)
     text = re.sub(r"(?m)^fps = .*$", f"fps = {fps:.1f}", text)
-    text = re.sub(
-        r"(?m)^landmarks = .*$",
-        f'landmarks = "{(ROOT / "config" / "landmarks.geojson").as_posix()}"',
-        text,
-    )
+    text = re.sub(r'(?m)^landmarks = .*$',
+                  f'landmarks = "{(ROOT / "config" / "landmarks.geojson").as_posix()}"', text)
     path = tmp / "soak.toml"
     path.write_text(text, encoding="utf-8")
     return path
@@ -77,22 +74,12 @@ def soak_scenario(tmp: Path, seconds: float, fps: float) -> Path:
 
 def run_config(tmp: Path, scenario: Path, port: int) -> Path:
     """``companion run``'s config for the soak (the same builder the scenario tests use)."""
-    return harness_run_config(
-        tmp,
-        port,
-        scenario=scenario.as_posix(),
-        extra='[logging]\nlevel = "warning"\n',
-        name="soak-run.toml",
-    )
+    return harness_run_config(tmp, port, scenario=scenario.as_posix(),
+                              extra="[logging]\nlevel = \"warning\"\n", name="soak-run.toml")
 
 
-async def soak(
-    seconds: float,
-    sample_s: float = 5.0,
-    fps: float = 15.0,
-    tmp: Path | None = None,
-    thread_slack: int = 0,
-) -> dict[str, Any]:
+async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
+               tmp: Path | None = None, thread_slack: int = 0) -> dict[str, Any]:
     """Fly ``seconds`` and return the samples and the verdicts."""
     tmp = tmp or Path(tempfile.mkdtemp(prefix="lmc-soak-"))
     scenario = soak_scenario(tmp, seconds + 60.0, fps)
@@ -101,18 +88,9 @@ async def soak(
     async with FakeAutopilot(FakeAutopilotConfig(), truth=sim.truth_fn) as fake:
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         proc = await asyncio.create_subprocess_exec(
-            sys.executable,
-            "-m",
-            "companion",
-            "--config",
-            str(run_config(tmp, scenario, fake.local_port)),
-            "run",
-            "--seconds",
-            str(seconds),
-            cwd=tmp,
-            env=env,
-            stderr=asyncio.subprocess.PIPE,
-        )
+            sys.executable, "-m", "companion", "--config",
+            str(run_config(tmp, scenario, fake.local_port)), "run", "--seconds",
+            str(seconds), cwd=tmp, env=env, stderr=asyncio.subprocess.PIPE)
         ps = psutil.Process(proc.pid)
         start, seen = time.monotonic(), 0
         try:
@@ -125,28 +103,16 @@ async def soak(
                 fused = sum(1 for r in fake.vision[seen:] if r.accepted)
                 seen = len(fake.vision)
                 mem = ps.memory_info().rss / 2**20
-                samples.append(
-                    Sample(
-                        round(time.monotonic() - start, 1),
-                        round(mem, 2),
-                        ps.num_fds(),
-                        ps.num_threads(),
-                        fused,
-                    )
-                )
+                samples.append(Sample(round(time.monotonic() - start, 1), round(mem, 2),
+                                      ps.num_fds(), ps.num_threads(), fused))
         finally:
             if proc.returncode is None:
                 proc.send_signal(signal.SIGTERM)
             _, err = await proc.communicate()
-    return {
-        "seconds": seconds,
-        "sample_s": sample_s,
-        "fps": fps,
-        "exit_status": proc.returncode,
-        "stderr_tail": err.decode()[-500:],
-        "samples": [asdict(s) for s in samples],
-        "verdict": verdict(samples, seconds, thread_slack),
-    }
+    return {"seconds": seconds, "sample_s": sample_s, "fps": fps,
+            "exit_status": proc.returncode, "stderr_tail": err.decode()[-500:],
+            "samples": [asdict(s) for s in samples],
+            "verdict": verdict(samples, seconds, thread_slack)}
 
 
 def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0) -> dict[str, Any]:
@@ -170,36 +136,28 @@ def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0) -> dic
         "rss_mb_last": after[-1].rss_mb,
         "rss_mb_peak": max(s.rss_mb for s in after),
         "rss_growth_pct": round(100 * (after[-1].rss_mb - base.rss_mb) / base.rss_mb, 2),
-        "rss_peak_growth_pct": round(
-            100 * (max(s.rss_mb for s in after) - base.rss_mb) / base.rss_mb, 2
-        ),
+        "rss_peak_growth_pct": round(100 * (max(s.rss_mb for s in after) - base.rss_mb)
+                                     / base.rss_mb, 2),
         # pools start threads lazily: growth = the last third's peak over the first third's
         "fds_first_last_third": [max(s.fds for s in first), max(s.fds for s in last)],
-        "threads_first_last_third": [max(s.threads for s in first), max(s.threads for s in last)],
-        "fused_per_interval": {
-            "min": min(rates),
-            "median": median,
-            "max": max(rates),
-            "median_first_half": first_half,
-            "median_second_half": second_half,
-        },
+        "threads_first_last_third": [max(s.threads for s in first),
+                                     max(s.threads for s in last)],
+        "fused_per_interval": {"min": min(rates), "median": median, "max": max(rates),
+                               "median_first_half": first_half,
+                               "median_second_half": second_half},
     }
-    out["ok"] = bool(
-        out["rss_growth_pct"] <= 5.0
-        and out["rss_peak_growth_pct"] <= 5.0
-        and max(s.fds for s in last) <= max(s.fds for s in first)
-        and max(s.threads for s in last) <= max(s.threads for s in first) + thread_slack
-        and min(rates) > 0
-        and second_half >= 0.7 * first_half
-    )
+    out["ok"] = bool(out["rss_growth_pct"] <= 5.0 and out["rss_peak_growth_pct"] <= 5.0
+                     and max(s.fds for s in last) <= max(s.fds for s in first)
+                     and max(s.threads for s in last)
+                     <= max(s.threads for s in first) + thread_slack
+                     and min(rates) > 0 and second_half >= 0.7 * first_half)
     return out
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument(
-        "--minutes", type=float, default=float(os.environ.get("LMC_SOAK_MINUTES", "30"))
-    )
+    parser.add_argument("--minutes", type=float,
+                        default=float(os.environ.get("LMC_SOAK_MINUTES", "30")))
     parser.add_argument("--sample-s", type=float, default=10.0)
     parser.add_argument("--fps", type=float, default=15.0)
     parser.add_argument("--json", type=Path, help="write samples and verdict here")
@@ -208,10 +166,8 @@ def main() -> int:
     if args.json:
         args.json.write_text(json.dumps(result, indent=1), encoding="utf-8")
     for s in result["samples"]:
-        print(
-            f"{s['t_s']:8.1f} s  rss {s['rss_mb']:8.2f} MB  fds {s['fds']:3d}  "
-            f"threads {s['threads']:3d}  fused {s['fused']:4d}"
-        )
+        print(f"{s['t_s']:8.1f} s  rss {s['rss_mb']:8.2f} MB  fds {s['fds']:3d}  "
+              f"threads {s['threads']:3d}  fused {s['fused']:4d}")
     print(json.dumps(result["verdict"], indent=1))
     return 0 if result["verdict"]["ok"] and result["exit_status"] == 0 else 1
 

@@ -57,8 +57,7 @@ class Reference:
     colour: npt.NDArray[np.uint8] = field(default_factory=lambda: np.zeros((1, 1, 3), np.uint8))
     #: ``colour`` projected on colour features (see :func:`reference_plane`), made on demand
     planes: dict[tuple[float, float, float], npt.NDArray[np.float32]] = field(
-        default_factory=dict, compare=False, repr=False
-    )
+        default_factory=dict, compare=False, repr=False)
 
 
 Weights = tuple[float, float, float]
@@ -77,10 +76,8 @@ def reference_plane(ref: Reference, weights_bgr: Weights | None) -> npt.NDArray[
 
 def project(image_bgr: npt.NDArray[np.uint8], weights_bgr: Weights) -> npt.NDArray[np.float32]:
     """``w_b B + w_g G + w_r R`` per pixel, float32."""
-    return np.asarray(
-        cv2.transform(image_bgr.astype(np.float32), np.asarray([weights_bgr], np.float32)),
-        np.float32,
-    )
+    return np.asarray(cv2.transform(image_bgr.astype(np.float32),
+                                    np.asarray([weights_bgr], np.float32)), np.float32)
 
 
 @dataclass(frozen=True)
@@ -121,10 +118,8 @@ class ReferenceMatcher:
         check_image(image_bgr, "image_bgr")
         gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
         if float(gray.std()) < MIN_REFERENCE_STD:
-            raise ValueError(
-                f"image_bgr: the reference of {landmark_id!r} is blank (grey "
-                f"level spread {gray.std():.1f}); expected some texture to align"
-            )
+            raise ValueError(f"image_bgr: the reference of {landmark_id!r} is blank (grey "
+                             f"level spread {gray.std():.1f}); expected some texture to align")
         h, w = image_bgr.shape[:2]
         top = min(1.0, self.config.reference_max_side_px / max(h, w))
         pts_all, desc_all = [], []
@@ -143,18 +138,13 @@ class ReferenceMatcher:
         pts = np.concatenate(pts_all) if pts_all else np.zeros((0, 2), np.float32)
         descriptors = np.concatenate(desc_all) if desc_all else np.zeros((0, 32), np.uint8)
         matchable = len(pts) >= self.config.min_inliers
-        ref = Reference(
-            landmark_id, (w, h), pts, descriptors, gray, matchable, np.ascontiguousarray(image_bgr)
-        )
+        ref = Reference(landmark_id, (w, h), pts, descriptors, gray, matchable,
+                        np.ascontiguousarray(image_bgr))
         self.references[landmark_id] = ref
         return ref
 
-    def find(
-        self,
-        image_bgr: npt.NDArray[np.uint8],
-        landmark_ids: list[str] | None = None,
-        roi: tuple[float, float, float, float] | None = None,
-    ) -> list[Match]:
+    def find(self, image_bgr: npt.NDArray[np.uint8], landmark_ids: list[str] | None = None,
+             roi: tuple[float, float, float, float] | None = None) -> list[Match]:
         """Verified matches of the given references (all when None), best first.
 
         ``roi`` (x, y, w, h) limits the search to that part of the frame (cheaper; used to
@@ -179,20 +169,13 @@ class ReferenceMatcher:
         frame_gray = np.asarray(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY), np.uint8)
         ids = self.references if landmark_ids is None else landmark_ids
         frame_desc = np.asarray(desc, np.uint8)
-        found = [
-            self._match_one(self.references[i], frame_pts, frame_desc, frame_gray)
-            for i in ids
-            if i in self.references and self.references[i].matchable
-        ]
+        found = [self._match_one(self.references[i], frame_pts, frame_desc, frame_gray)
+                 for i in ids if i in self.references and self.references[i].matchable]
         return sorted((m for m in found if m is not None), key=lambda m: -m.inliers)
 
-    def _match_one(
-        self,
-        ref: Reference,
-        frame_pts: npt.NDArray[np.float32],
-        frame_desc: npt.NDArray[np.uint8],
-        frame_gray: npt.NDArray[np.uint8],
-    ) -> Match | None:
+    def _match_one(self, ref: Reference, frame_pts: npt.NDArray[np.float32],
+                   frame_desc: npt.NDArray[np.uint8],
+                   frame_gray: npt.NDArray[np.uint8]) -> Match | None:
         cfg = self.config
         pairs = self._matcher.knnMatch(ref.descriptors, frame_desc, k=2)
         good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < cfg.ratio * p[1].distance]
@@ -215,9 +198,8 @@ class ReferenceMatcher:
         refined, _ = cv2.findHomography(src[keep], dst[keep], 0)  # least squares on inliers
         hom = np.asarray(refined if refined is not None else rough, np.float64)
         if cfg.refine_ecc:
-            aligned = refine_ecc(
-                ref, frame_gray, hom, cfg.ecc_iterations, fine_iterations=cfg.ecc_fine_iterations
-            )
+            aligned = refine_ecc(ref, frame_gray, hom, cfg.ecc_iterations,
+                                 fine_iterations=cfg.ecc_fine_iterations)
             hom = hom if aligned is None else aligned
         corners = project_corners(ref, hom)
         if not plausible_quad(corners, (w, h), cfg):
@@ -225,26 +207,21 @@ class ReferenceMatcher:
         x0, y0 = corners.min(axis=0)
         x1, y1 = corners.max(axis=0)
         box = (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
-        return Match(
-            ref.landmark_id, corners, box, inliers, inliers / len(good), np.asarray(hom, np.float64)
-        )
+        return Match(ref.landmark_id, corners, box, inliers, inliers / len(good),
+                     np.asarray(hom, np.float64))
 
 
-def search_template(
-    ref: Reference,
-    frame_bgr: npt.NDArray[np.uint8],
-    widths_px: tuple[float, ...],
-    downscale: float = 0.5,
-) -> tuple[float, FloatArray] | None:
+def search_template(ref: Reference, frame_bgr: npt.NDArray[np.uint8],
+                    widths_px: tuple[float, ...], downscale: float = 0.5
+                    ) -> tuple[float, FloatArray] | None:
     """Best normalised cross-correlation of the reference over the frame at a few sizes.
 
     For references with too few keypoints to match (plain plates, simple graphics) and
     for small, distant landmarks.  Returns (score, homography reference -> frame) of the
     best fronto-parallel placement; :func:`refine_ecc` then fits the perspective.
     """
-    small = cv2.resize(
-        frame_bgr, None, fx=downscale, fy=downscale, interpolation=cv2.INTER_AREA
-    ).astype(np.float32)
+    small = cv2.resize(frame_bgr, None, fx=downscale, fy=downscale,
+                       interpolation=cv2.INTER_AREA).astype(np.float32)
     w, h = ref.size_px
     best: tuple[float, FloatArray] | None = None
     for width in widths_px:
@@ -271,9 +248,8 @@ def reference_quad(ref: Reference) -> FloatArray:
     (measured: the aligned corners of the simulated world's plates were ~0.5 px off).
     """
     w, h = ref.size_px
-    return np.array(
-        [[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]], np.float64
-    )
+    return np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]],
+                    np.float64)
 
 
 def project_corners(ref: Reference, hom: FloatArray) -> FloatArray:
@@ -285,18 +261,14 @@ def project_corners(ref: Reference, hom: FloatArray) -> FloatArray:
 def homography_to(ref: Reference, corners_px: FloatArray) -> FloatArray:
     """The homography taking the reference's corners to ``corners_px`` (TL, TR, BR, BL)."""
     src = reference_quad(ref).astype(np.float32)
-    return np.asarray(cv2.getPerspectiveTransform(src, corners_px.astype(np.float32)), np.float64)
+    return np.asarray(cv2.getPerspectiveTransform(src, corners_px.astype(np.float32)),
+                      np.float64)
 
 
-def refine_ecc(
-    ref: Reference,
-    frame: npt.NDArray[np.uint8],
-    hom: FloatArray,
-    iterations: int = 40,
-    min_correlation: float = 0.6,
-    fine_iterations: int = 10,
-    weights_bgr: Weights | None = None,
-) -> FloatArray | None:
+def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
+               iterations: int = 40, min_correlation: float = 0.6,
+               fine_iterations: int = 10, weights_bgr: Weights | None = None
+               ) -> FloatArray | None:
     """Sub-pixel homography (reference -> frame) by ECC alignment, from an estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
@@ -331,10 +303,8 @@ def refine_ecc(
     quad_area = float(cv2.contourArea(corners.astype(np.float32)))
     scale = float(np.clip(np.sqrt(max(quad_area, 1.0) / (w * h)), 0.05, 1.0))
     size = (max(8, round(w * scale)), max(8, round(h * scale)))
-    template = np.asarray(
-        cv2.resize(reference_plane(ref, weights_bgr), size, interpolation=cv2.INTER_AREA),
-        np.float32,
-    )
+    template = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
+                                     interpolation=cv2.INTER_AREA), np.float32)
     s_ref = resize_map((w, h), template.shape[1::-1])  # ref -> template
     t_roi = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # roi -> frame
     warp = np.linalg.inv(t_roi) @ hom @ np.linalg.inv(s_ref)  # template -> roi
@@ -369,42 +339,29 @@ def resize_map(size: tuple[int, int], new_size: tuple[int, int]) -> FloatArray:
     return np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
 
 
-def _ecc_coarse(
-    template: npt.NDArray[np.float32],
-    roi: npt.NDArray[np.float32],
-    warp: FloatArray,
-    iterations: int,
-) -> tuple[float, FloatArray]:
+def _ecc_coarse(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32],
+                warp: FloatArray, iterations: int) -> tuple[float, FloatArray]:
     """The smoothed stage, on both images halved when the template is large enough."""
     if min(template.shape) < HALVE_FROM_PX:
         return _ecc(template, roi, warp, iterations, 1e-4, 5)
-    half_t = np.asarray(
-        cv2.resize(template, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA), np.float32
-    )
-    half_r = np.asarray(
-        cv2.resize(roi, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA), np.float32
-    )
+    half_t = np.asarray(cv2.resize(template, None, fx=0.5, fy=0.5,
+                                   interpolation=cv2.INTER_AREA), np.float32)
+    half_r = np.asarray(cv2.resize(roi, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA),
+                        np.float32)
     to_t = resize_map(template.shape[1::-1], half_t.shape[1::-1])
     to_r = resize_map(roi.shape[1::-1], half_r.shape[1::-1])
     cc, half = _ecc(half_t, half_r, to_r @ warp @ np.linalg.inv(to_t), iterations, 1e-4, 5)
     return cc, np.linalg.inv(to_r) @ half @ to_t
 
 
-def _ecc(
-    template: npt.NDArray[np.float32],
-    roi: npt.NDArray[np.float32],
-    warp: FloatArray,
-    iterations: int,
-    eps: float,
-    blur: int,
-) -> tuple[float, FloatArray]:
+def _ecc(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32], warp: FloatArray,
+         iterations: int, eps: float, blur: int) -> tuple[float, FloatArray]:
     """One cv2.findTransformECC run (homography template -> roi); raises cv2.error."""
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, eps)
     start = (warp / warp[2, 2]).astype(np.float32)
     # the stubs want a mask before gaussFiltSize; OpenCV takes None (no mask)
     cc, found = cv2.findTransformECC(  # type: ignore[call-overload]
-        template, roi, start, cv2.MOTION_HOMOGRAPHY, criteria, None, blur
-    )
+        template, roi, start, cv2.MOTION_HOMOGRAPHY, criteria, None, blur)
     return float(cc), np.asarray(found, np.float64)
 
 
@@ -413,10 +370,8 @@ def plausible_quad(corners: FloatArray, ref_size: tuple[int, int], cfg: AcquireC
     if not np.all(np.isfinite(corners)):
         return False
     edges = np.roll(corners, -1, axis=0) - corners
-    cross = (
-        edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1]
-        - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
-    )
+    cross = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(
+        edges, -1, axis=0)[:, 0]
     if not np.all(cross > 0):  # image y points down: a clockwise-drawn quad has cross > 0
         return False
     sides = np.linalg.norm(edges, axis=1)

@@ -382,8 +382,8 @@ class AdaptiveTracker:
         score: float,
     ) -> None:
         """After a trusted frame: the gain; the template and size filters where the template
-        matched closely (``template_update_score``; the size filters also need the first
-        frame's template to match, :meth:`Refiner.learn`).  ``images``: the frame, the window."""
+        located the target; :meth:`Refiner.learn` decides which of its templates and whether
+        the size filters learn.  ``images``: the frame, the window."""
         if self.config.gain_source == "target":
             self._update_gain(raw, state)
         if score >= self.config.template_accept_score:

@@ -39,11 +39,8 @@ def box_corners(box: Box) -> FloatArray:
 
 def inside(corners: FloatArray, width: int, height: int, margin: float) -> bool:
     """All corners at least ``margin`` px inside the image."""
-    return bool(
-        np.all(corners >= margin)
-        and np.all(corners[:, 0] <= width - margin)
-        and np.all(corners[:, 1] <= height - margin)
-    )
+    return bool(np.all(corners >= margin) and np.all(corners[:, 0] <= width - margin)
+                and np.all(corners[:, 1] <= height - margin))
 
 
 def in_view_share(corners: FloatArray, width: int, height: int) -> float:
@@ -52,9 +49,8 @@ def in_view_share(corners: FloatArray, width: int, height: int) -> float:
     area = abs(float(cv2.contourArea(quad)))
     if area <= 0.0:
         return 0.0
-    frame = np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float32).reshape(
-        -1, 1, 2
-    )
+    frame = np.array([[0, 0], [width, 0], [width, height], [0, height]],
+                     np.float32).reshape(-1, 1, 2)
     try:
         common, _ = cv2.intersectConvexConvex(quad, frame)
     except cv2.error:  # not convex: no trustworthy corners either

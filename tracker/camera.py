@@ -80,19 +80,13 @@ class Rectifier:
         self.source = camera
         self.camera = replace(camera, distortion=(0.0,) * len(camera.distortion))
         self._maps = cv2.initUndistortRectifyMap(
-            camera.matrix,
-            camera.dist_coeffs,
-            None,
-            camera.matrix,
-            (camera.width, camera.height),
-            cv2.CV_16SC2,
-        )
+            camera.matrix, camera.dist_coeffs, None, camera.matrix,
+            (camera.width, camera.height), cv2.CV_16SC2)
 
     def __call__(self, image: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
         """``image`` (the camera's size) as the undistorted camera would have seen it."""
-        return np.asarray(
-            cv2.remap(image, self._maps[0], self._maps[1], cv2.INTER_LINEAR), np.uint8
-        )
+        return np.asarray(cv2.remap(image, self._maps[0], self._maps[1], cv2.INTER_LINEAR),
+                          np.uint8)
 
     def scale_at(self, point_px: tuple[float, float]) -> float:
         """Rectified pixels per raw (distorted) pixel at a rectified point: the RMS over
@@ -104,9 +98,8 @@ class Rectifier:
         h = 0.5
         rect = np.array([[u - h, v], [u + h, v], [u, v - h], [u, v + h]], np.float64)
         k = self.camera.matrix
-        rays = np.column_stack(
-            [(rect[:, 0] - k[0, 2]) / k[0, 0], (rect[:, 1] - k[1, 2]) / k[1, 1], np.ones(4)]
-        )
+        rays = np.column_stack([(rect[:, 0] - k[0, 2]) / k[0, 0], (rect[:, 1] - k[1, 2]) / k[1, 1],
+                                np.ones(4)])
         raw = self.source.project_camera_points(rays)
         jac = np.column_stack([raw[1] - raw[0], raw[3] - raw[2]]) / (2 * h)  # d raw / d rect
         sv = np.linalg.svd(jac, compute_uv=False)

@@ -82,10 +82,8 @@ def _load_error(path: Path, err: Exception) -> DetectorError:
     text = str(err)
     m = re.search(r"Opset (\d+) is under development.*?till opset (\d+)", text, re.S)
     if m:
-        return DetectorError(
-            f"{path}: unsupported ONNX opset {m.group(1)} "
-            f"(this onnxruntime supports ai.onnx opset <= {m.group(2)})"
-        )
+        return DetectorError(f"{path}: unsupported ONNX opset {m.group(1)} "
+                             f"(this onnxruntime supports ai.onnx opset <= {m.group(2)})")
     if "opset" in text.lower():
         return DetectorError(f"{path}: unsupported ONNX opset ({_first_line(text)})")
     if "ir version" in text.lower() or "ir_version" in text.lower():
@@ -108,45 +106,33 @@ def _model_info(path: Path, session: object) -> ModelInfo:
     if len(inputs) != 1:
         raise DetectorError(f"{path}: expected one image input, the model has {len(inputs)}")
     shape = list(inputs[0].shape)
-    ok = (
-        len(shape) == 4
-        and (shape[0] == 1 or not isinstance(shape[0], int))
-        and shape[1] == 3
-        and isinstance(shape[2], int)
-        and shape[2] == shape[3]
-        and shape[2] > 0
-        and shape[2] % 32 == 0
-    )
+    ok = (len(shape) == 4 and (shape[0] == 1 or not isinstance(shape[0], int))
+          and shape[1] == 3 and isinstance(shape[2], int) and shape[2] == shape[3]
+          and shape[2] > 0 and shape[2] % 32 == 0)
     if not ok:
-        raise DetectorError(
-            f"{path}: wrong input shape {shape}, expected [1, 3, S, S] with S a multiple of 32"
-        )
+        raise DetectorError(f"{path}: wrong input shape {shape}, expected [1, 3, S, S] "
+                            "with S a multiple of 32")
     meta = session.get_modelmeta().custom_metadata_map  # type: ignore[attr-defined]
     try:
         names = tuple(json.loads(meta["names"]))
         strides = tuple(int(s) for s in json.loads(meta["strides"]))
-        anchors = tuple(
-            np.asarray(a, np.float32).reshape(-1, 2) for a in json.loads(meta["anchors"])
-        )
+        anchors = tuple(np.asarray(a, np.float32).reshape(-1, 2)
+                        for a in json.loads(meta["anchors"]))
     except (KeyError, ValueError, TypeError) as err:
-        raise DetectorError(
-            f"{path}: missing or bad detector metadata (names, strides, anchors): {err}"
-        ) from err
+        raise DetectorError(f"{path}: missing or bad detector metadata (names, strides, "
+                            f"anchors): {err}") from err
     outputs = session.get_outputs()  # type: ignore[attr-defined]
     if len(outputs) != len(strides) or len(anchors) != len(strides):
-        raise DetectorError(
-            f"{path}: {len(outputs)} outputs for {len(strides)} strides "
-            f"and {len(anchors)} anchor sets"
-        )
+        raise DetectorError(f"{path}: {len(outputs)} outputs for {len(strides)} strides "
+                            f"and {len(anchors)} anchor sets")
     size = int(shape[2])
     for out, s, anc in zip(outputs, strides, anchors, strict=True):
         expect = [len(anc) * (5 + len(names)), size // s, size // s]
         if list(out.shape[1:]) != expect:
-            raise DetectorError(
-                f"{path}: output {out.name} has shape {out.shape}, "
-                f"expected [1, {', '.join(map(str, expect))}]"
-            )
-    return ModelInfo(inputs[0].name, size, tuple(o.name for o in outputs), names, strides, anchors)
+            raise DetectorError(f"{path}: output {out.name} has shape {out.shape}, "
+                                f"expected [1, {', '.join(map(str, expect))}]")
+    return ModelInfo(inputs[0].name, size, tuple(o.name for o in outputs), names, strides,
+                     anchors)
 
 
 class Detector:
@@ -156,9 +142,8 @@ class Detector:
     >>> dets = det.detect(frame_bgr)          # list[Detection], best score first
     """
 
-    def __init__(
-        self, model_path: str | Path | None = None, config: DetectorConfig | None = None
-    ) -> None:
+    def __init__(self, model_path: str | Path | None = None,
+                 config: DetectorConfig | None = None) -> None:
         import onnxruntime as ort
 
         self.config = config or DetectorConfig()
@@ -174,9 +159,8 @@ class Detector:
         opts.inter_op_num_threads = 1
         opts.log_severity_level = 3
         try:
-            self._session = ort.InferenceSession(
-                str(path), sess_options=opts, providers=["CPUExecutionProvider"]
-            )
+            self._session = ort.InferenceSession(str(path), sess_options=opts,
+                                                 providers=["CPUExecutionProvider"])
         except Exception as err:  # onnxruntime raises its own unexported exception types
             raise _load_error(path, err) from err
         self.info = _model_info(path, self._session)
@@ -198,9 +182,8 @@ class Detector:
         """Detect landmarks in a BGR uint8 frame; best score first."""
         raws, lb = self.raw_outputs(image_bgr)
         cfg = self.config
-        boxes, scores, classes = decode(
-            raws, list(self.info.anchors_px), list(self.info.strides), cfg.score_threshold
-        )
+        boxes, scores, classes = decode(raws, list(self.info.anchors_px),
+                                        list(self.info.strides), cfg.score_threshold)
         keep = class_aware_nms(boxes, scores, classes, cfg.nms_iou, cfg.max_detections)
         h, w = image_bgr.shape[:2]
         img_boxes = to_image_boxes(boxes[keep], lb, w, h)
@@ -208,24 +191,15 @@ class Detector:
         for (x0, y0, x1, y1), s, c in zip(img_boxes, scores[keep], classes[keep], strict=True):
             if x1 - x0 < 1 or y1 - y0 < 1:
                 continue
-            dets.append(
-                Detection(
-                    (float(x0), float(y0), float(x1 - x0), float(y1 - y0)),
-                    self.info.names[int(c)],
-                    float(s),
-                )
-            )
+            dets.append(Detection((float(x0), float(y0), float(x1 - x0), float(y1 - y0)),
+                                  self.info.names[int(c)], float(s)))
         return dets
 
 
 def _check_image(image_bgr: np.ndarray) -> None:
     """Raise ValueError unless ``image_bgr`` is an (H, W, 3) uint8 array."""
-    if (
-        not isinstance(image_bgr, np.ndarray)
-        or image_bgr.ndim != 3
-        or image_bgr.shape[2] != 3
-        or image_bgr.dtype != np.uint8
-    ):
+    if not isinstance(image_bgr, np.ndarray) or image_bgr.ndim != 3 or \
+            image_bgr.shape[2] != 3 or image_bgr.dtype != np.uint8:
         shape = getattr(image_bgr, "shape", None)
         dtype = getattr(image_bgr, "dtype", type(image_bgr).__name__)
         raise ValueError(f"image_bgr: expected an (H, W, 3) uint8 array, got {shape} {dtype}")
@@ -233,12 +207,9 @@ def _check_image(image_bgr: np.ndarray) -> None:
         raise ValueError(f"image_bgr: empty image {image_bgr.shape}")
 
 
-def match_detection(
-    detections: list[Detection],
-    category: str,
-    expected_centre_px: tuple[float, float] | None = None,
-    gate_px: float = float("inf"),
-) -> Detection | None:
+def match_detection(detections: list[Detection], category: str,
+                    expected_centre_px: tuple[float, float] | None = None,
+                    gate_px: float = float("inf")) -> Detection | None:
     """The detection to (re)start a tracker on a landmark of ``category``.
 
     Among detections of that category whose centre lies within ``gate_px`` of the landmark's

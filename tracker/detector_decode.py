@@ -36,20 +36,16 @@ def letterbox(image_bgr: np.ndarray, size: int) -> tuple[np.ndarray, Letterbox]:
     h, w = image_bgr.shape[:2]
     scale = min(size / w, size / h)
     nw, nh = round(w * scale), round(h * scale)
-    resized = (
-        image_bgr
-        if (nw, nh) == (w, h)
-        else cv2.resize(
-            image_bgr, (nw, nh), interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
-        )
-    )
+    resized = image_bgr if (nw, nh) == (w, h) else cv2.resize(
+        image_bgr, (nw, nh), interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
     pad_x, pad_y = (size - nw) // 2, (size - nh) // 2
     out = np.full((size, size, 3), PAD_VALUE, np.uint8)
-    out[pad_y : pad_y + nh, pad_x : pad_x + nw] = resized
+    out[pad_y:pad_y + nh, pad_x:pad_x + nw] = resized
     return out, Letterbox(scale, float(pad_x), float(pad_y))
 
 
-def to_image_boxes(boxes_xyxy: np.ndarray, lb: Letterbox, width: int, height: int) -> np.ndarray:
+def to_image_boxes(boxes_xyxy: np.ndarray, lb: Letterbox, width: int,
+                   height: int) -> np.ndarray:
     """Map (N, 4) x0, y0, x1, y1 boxes from network input to image pixels, clipped to it."""
     out = np.empty_like(boxes_xyxy, dtype=np.float64)
     out[:, [0, 2]] = (boxes_xyxy[:, [0, 2]] - lb.pad_x_px) / lb.scale  # x = (x_in - pad) / s
@@ -72,9 +68,8 @@ def sigmoid(x: np.ndarray) -> np.ndarray:
     return 0.5 * (1.0 + np.tanh(0.5 * x))
 
 
-def decode_head(
-    raw: np.ndarray, anchors_px: np.ndarray, stride: int
-) -> tuple[np.ndarray, np.ndarray]:
+def decode_head(raw: np.ndarray, anchors_px: np.ndarray,
+                stride: int) -> tuple[np.ndarray, np.ndarray]:
     """Decode one head.
 
     raw: (A*(5+C), H, W) logits for one image; anchors_px: (A, 2) anchor w, h in input px.
@@ -95,9 +90,8 @@ def decode_head(
     return boxes, scores
 
 
-def decode(
-    raws: list[np.ndarray], anchors_px: list[np.ndarray], strides: list[int], score_threshold: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def decode(raws: list[np.ndarray], anchors_px: list[np.ndarray], strides: list[int],
+           score_threshold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Decode every head; keep (box, class) pairs scoring >= ``score_threshold``.
 
     Returns boxes (N, 4) x0, y0, x1, y1 input px, scores (N,), class ids (N,).
@@ -109,11 +103,8 @@ def decode(
         all_boxes.append(boxes[idx])
         all_scores.append(scores[idx, cls])
         all_cls.append(cls)
-    return (
-        np.concatenate(all_boxes).reshape(-1, 4),
-        np.concatenate(all_scores),
-        np.concatenate(all_cls).astype(np.int64),
-    )
+    return (np.concatenate(all_boxes).reshape(-1, 4), np.concatenate(all_scores),
+            np.concatenate(all_cls).astype(np.int64))
 
 
 def iou_one_to_many(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
@@ -138,14 +129,9 @@ def nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> np.ndarr
     return np.array(keep, np.int64)
 
 
-def class_aware_nms(
-    boxes: np.ndarray,
-    scores: np.ndarray,
-    classes: np.ndarray,
-    iou_threshold: float,
-    max_detections: int,
-    max_candidates: int = 1000,
-) -> np.ndarray:
+def class_aware_nms(boxes: np.ndarray, scores: np.ndarray, classes: np.ndarray,
+                    iou_threshold: float, max_detections: int,
+                    max_candidates: int = 1000) -> np.ndarray:
     """NMS within each class only (boxes of different classes never suppress each other).
 
     Only the ``max_candidates`` best-scoring boxes enter NMS (bounds the time on a frame full
@@ -153,11 +139,8 @@ def class_aware_nms(
     ``max_detections``.
     """
     cand = np.argsort(-scores, kind="stable")[:max_candidates]
-    keep = [
-        cand[classes[cand] == c][
-            nms(boxes[cand][classes[cand] == c], scores[cand][classes[cand] == c], iou_threshold)
-        ]
-        for c in np.unique(classes[cand])
-    ]
+    keep = [cand[classes[cand] == c][nms(boxes[cand][classes[cand] == c],
+                                         scores[cand][classes[cand] == c], iou_threshold)]
+            for c in np.unique(classes[cand])]
     kept = np.concatenate(keep) if keep else np.zeros(0, np.int64)
     return kept[np.argsort(-scores[kept], kind="stable")][:max_detections]

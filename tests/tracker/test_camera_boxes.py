@@ -22,15 +22,8 @@ def test_rectified_frame_puts_a_point_where_the_pinhole_camera_would() -> None:
     pinhole = rect.camera.project_camera_points(point)[0]
     assert np.linalg.norm(distorted - pinhole) > 10.0  # the lens really moves it
     image = np.zeros((cam.height, cam.width, 3), np.uint8)
-    cv2.circle(
-        image,
-        (round(distorted[0] * 16), round(distorted[1] * 16)),
-        5 * 16,
-        (255, 255, 255),
-        -1,
-        cv2.LINE_AA,
-        4,
-    )
+    cv2.circle(image, (round(distorted[0] * 16), round(distorted[1] * 16)), 5 * 16,
+               (255, 255, 255), -1, cv2.LINE_AA, 4)
     grey = rect(image)[:, :, 0].astype(np.float64)
     ys, xs = np.mgrid[: grey.shape[0], : grey.shape[1]]
     centre = np.array([(xs * grey).sum(), (ys * grey).sum()]) / grey.sum()
@@ -44,17 +37,15 @@ def test_rectifier_scale_is_how_far_a_raw_pixel_step_moves_in_the_rectified_fram
     cam = CameraModel(distortion=(-0.28, 0.09, 0.0005, -0.0005, 0.0))
     rect = Rectifier(cam)
     assert rect.scale_at((cam.cx, cam.cy)) == pytest.approx(1.0, abs=1e-3)
-    assert Rectifier(CameraModel(distortion=(0.0,) * 5)).scale_at((600.0, 450.0)) == pytest.approx(
-        1.0, abs=1e-9
-    )
+    assert Rectifier(CameraModel(distortion=(0.0,) * 5)).scale_at((600.0, 450.0)) == \
+        pytest.approx(1.0, abs=1e-9)
     edge = (600.0, 450.0)  # a rectified point near the lower-right corner
     ray = np.array([[(edge[0] - cam.cx) / cam.fx, (edge[1] - cam.cy) / cam.fy, 1.0]])
     raw = cam.project_camera_points(ray)[0]
     steps = raw + np.array([[0.0, 0.0], [0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5]])
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-    back = cv2.undistortPoints(
-        steps.reshape(-1, 1, 2), cam.matrix, cam.dist_coeffs, None, None, cam.matrix, criteria
-    ).reshape(-1, 2)
+    back = cv2.undistortPoints(steps.reshape(-1, 1, 2), cam.matrix, cam.dist_coeffs, None, None,
+                               cam.matrix, criteria).reshape(-1, 2)
     assert np.linalg.norm(back[0] - edge) < 1e-3  # the round trip lands where it started
     # the raw -> rectified Jacobian from the two unit steps; its RMS gain over directions
     jac = np.column_stack([back[1] - back[2], back[3] - back[4]])

@@ -73,20 +73,12 @@ def fly_loop(scenario: Scenario, loop: LoopConfig, seed: int = 0) -> list[LoopSt
     steps: list[LoopStep] = []
     for k in range(int(scenario.duration_s * scenario.rate_hz)):
         t = k * dt
-        frame = simulate_frame(
-            scenario.landmarks,
-            scenario.camera,
-            scenario.trajectory,
-            t,
-            rng,
-            scenario.noise,
-            scenario.laser_axis_body,
-        )
+        frame = simulate_frame(scenario.landmarks, scenario.camera, scenario.trajectory, t, rng,
+                               scenario.noise, scenario.laser_axis_body)
         truth = np.asarray(frame.true_attitude_rpy_rad)
         rpy = wrap_angle(truth + err)
-        att = AttitudeSample(
-            frame.time_us, float(rpy[0]), float(rpy[1]), float(rpy[2]), sig_rp, sig_yaw
-        )
+        att = AttitudeSample(frame.time_us, float(rpy[0]), float(rpy[1]), float(rpy[2]),
+                             sig_rp, sig_yaw)
         fix = solve_frame(scenario, replace(frame, attitude=att), cfg)
         pos_err = nees = None
         prior = ""

@@ -98,9 +98,8 @@ def make_groups(
         if len(who) == 1:
             best[lm.landmark_id] = (i, lm)
         elif i == who[0]:  # one landmark, several detections: at least one is misnamed
-            notes.append(
-                f"landmark {lm.landmark_id!r} claimed by observations {who}: {CLAIM_CONFLICT}"
-            )
+            notes.append(f"landmark {lm.landmark_id!r} claimed by observations {who}: "
+                         f"{CLAIM_CONFLICT}")
     cfg = ctx.config
     centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
     groups = []
@@ -116,9 +115,8 @@ def make_groups(
         ideal = _undistort(ctx, px) if ctx.distorted else px
         scale = obs.corner_scale_sigma_px if obs.corners_px is not None else None
         outline = cfg.one_plate_outline_sigma_rel * sig if obs.corners_px is not None else 0.0
-        groups.append(
-            Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale), outline)
-        )
+        groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale),
+                            outline))
     return groups
 
 
@@ -157,21 +155,9 @@ def _outline_modes(g: Group) -> tuple[FloatArray, FloatArray]:
     d = g.pixels_ideal - g.pixels_ideal.mean(axis=0)
     x, y = d[:, 0], d[:, 1]
     one, zero = np.ones_like(x), np.zeros_like(x)
-    basis = np.column_stack(
-        [
-            np.column_stack(pair).ravel()
-            for pair in (
-                (one, zero),
-                (zero, one),
-                (-y, x),
-                (x, y),
-                (x, -y),
-                (y, x),
-                (x * x, x * y),
-                (x * y, y * y),
-            )
-        ]
-    )
+    basis = np.column_stack([np.column_stack(pair).ravel() for pair in (
+        (one, zero), (zero, one), (-y, x), (x, y), (x, -y), (y, x), (x * x, x * y),
+        (x * y, y * y))])
     q = np.linalg.qr(basis)[0][:, 3:]  # scale, aspect, shear, perspective across, along
     sig = g.sigma_px
     var = np.full(5, g.outline_sigma_px**2)
@@ -184,31 +170,18 @@ def point_set(groups: list[Group]) -> PointSet:
     """Stack every landmark's points for the refinement.  One plate alone (its corners
     all the fix has) also gets its outline's common scale and perspective errors
     (:func:`_outline_modes`): one plate cannot average them out."""
-    if (
-        len(groups) == 1
-        and groups[0].outline_sigma_px > 0.0
-        and (groups[0].observation.corners_px is not None)
-    ):
+    if len(groups) == 1 and groups[0].outline_sigma_px > 0.0 and (
+            groups[0].observation.corners_px is not None):
         g = groups[0]
         dirs, betas = _outline_modes(g)
         k = g.points_ned.shape[0]
-        return PointSet(
-            g.points_ned,
-            g.pixels_ideal,
-            np.full(k, g.sigma_px),
-            np.zeros(k, dtype=np.int64),
-            dirs,
-            np.tile(betas, (k, 1)),
-        )
+        return PointSet(g.points_ned, g.pixels_ideal, np.full(k, g.sigma_px),
+                        np.zeros(k, dtype=np.int64), dirs, np.tile(betas, (k, 1)))
     counts = [g.points_ned.shape[0] for g in groups]
     scale_dir = scale_beta = None
     if any(g.scale_beta > 0.0 for g in groups):
-        scale_dir = np.vstack(
-            [
-                np.zeros((n, 2)) if g.scale_dir is None else g.scale_dir
-                for g, n in zip(groups, counts, strict=True)
-            ]
-        )
+        scale_dir = np.vstack([np.zeros((n, 2)) if g.scale_dir is None else g.scale_dir
+                               for g, n in zip(groups, counts, strict=True)])
         scale_beta = np.repeat([g.scale_beta for g in groups], counts)
     return PointSet(
         np.vstack([g.points_ned for g in groups]),

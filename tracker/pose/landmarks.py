@@ -49,12 +49,8 @@ def landmark_normal_ned(landmark: MapLandmark) -> FloatArray:
     return n
 
 
-def corners_about(
-    centre_ned: FloatArray | tuple[float, float, float],
-    width_m: float,
-    height_m: float,
-    facing_deg: float | None,
-) -> FloatArray:
+def corners_about(centre_ned: FloatArray | tuple[float, float, float], width_m: float,
+                  height_m: float, facing_deg: float | None) -> FloatArray:
     """4x3 NED corners of a face centred at ``centre_ned``: ``c_i = centre + R_ned_face p_i``.
 
     The one definition of a landmark's corners: the pose solver, the simulated world and
@@ -68,8 +64,7 @@ def corners_about(
 @lru_cache(maxsize=4096)
 def landmark_corners_ned(landmark: MapLandmark) -> FloatArray:
     """4x3 NED corners of a map landmark (read-only, cached)."""
-    out = corners_about(
-        landmark.position_ned_m, landmark.width_m, landmark.height_m, landmark.facing_deg
-    )
+    out = corners_about(landmark.position_ned_m, landmark.width_m, landmark.height_m,
+                        landmark.facing_deg)
     out.setflags(write=False)
     return out

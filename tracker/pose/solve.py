@@ -151,9 +151,8 @@ def solve_pose(
     if len(groups) == 1 and any(n.endswith(CLAIM_CONFLICT) for n in notes):
         # a misnamed detection was seen in this frame: the one landmark left may be the
         # misnamed one, and alone it cannot be cross-checked
-        return NoFix(
-            time_us, "after a landmark claimed twice only one is left: not trusted", tuple(notes)
-        )
+        return NoFix(time_us, "after a landmark claimed twice only one is left: not trusted",
+                     tuple(notes))
     before = list(notes)
     fix = _solve_robust(ctx, groups, time_us, reset_counter, notes)
     if attitude is None:
@@ -199,11 +198,8 @@ def _check_attitude(
             return replace(fix, attitude_prior="used")
         why = f"adding it raises the chi-square by {rise:.1f} > {ctx.config.attitude_gate_chi2:g}"
     else:
-        why = (
-            "with it the landmarks do not fit"
-            if isinstance(fix, NoFix)
-            else "with it a landmark is dropped that fits without it"
-        )
+        why = "with it the landmarks do not fit" if isinstance(fix, NoFix) else \
+            "with it a landmark is dropped that fits without it"
     assert ctx.attitude is not None
     a = ctx.attitude
     d = wrap_angle(np.asarray(alone.attitude_rpy_rad) - (a.roll_rad, a.pitch_rad, a.yaw_rad))
@@ -355,11 +351,8 @@ def _solve_with_attitude(ctx: Context, groups: list[Group], pts: PointSet) -> _S
             x0[:3] = size.point_ned - size.distance_m * b[0]
     if not single:
         rng = laser_for(ctx, groups, x0)
-    solver = (
-        "bearing_ls"
-        if not single
-        else ("range_bearing" if rng else "altitude_bearing" if ctx.altitude else "size_bearing")
-    )
+    solver = "bearing_ls" if not single else (
+        "range_bearing" if rng else "altitude_bearing" if ctx.altitude else "size_bearing")
     out = _as_outcome(solver, _refine(ctx, pts, make_priors(ctx, rng, size), x0), pts, groups)
     if single:
         return out
@@ -387,7 +380,9 @@ def _consensus_outlier(ctx: Context, pts: PointSet, b: FloatArray) -> int:
     return worst if per_group[worst] >= thr else -1
 
 
-def _outlier(groups: list[Group], gi: int, why: str, hint: FloatArray | None = None) -> _Failure:
+def _outlier(
+    groups: list[Group], gi: int, why: str, hint: FloatArray | None = None
+) -> _Failure:
     """Drop landmark ``gi`` for ``why`` (``hint``: a pose every other landmark fits)."""
     return _Failure(f"landmark {groups[gi].landmark.landmark_id!r}: {why}", gi, hint)
 
@@ -413,16 +408,8 @@ def _solve_without_attitude(
     if hint is not None:
         return _refine_pnp(ctx, groups, pts, "pnp_ransac", hint)
     dist_px = np.vstack([g.pixels_distorted for g in groups])
-    res = pnp_ransac(
-        pts.points_ned,
-        dist_px,
-        ctx.k,
-        ctx.dist,
-        ctx.r_body_cam,
-        thr,
-        cfg.ransac_iterations,
-        cfg.ransac_confidence,
-    )
+    res = pnp_ransac(pts.points_ned, dist_px, ctx.k, ctx.dist, ctx.r_body_cam, thr,
+                     cfg.ransac_iterations, cfg.ransac_confidence)
     named = agreeing = -1
     if res is not None:
         cand, inlier = res

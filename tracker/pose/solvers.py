@@ -179,9 +179,8 @@ def bearing_least_squares(
         nrm = range_prior.plane_normal
         na = float(nrm @ (r_ned_body @ range_prior.axis_body))
         ata += 100.0 * np.outer(nrm, nrm)
-        atb += (
-            100.0 * (nrm @ (range_prior.plane_point - origin) - range_prior.distance_m * na) * nrm
-        )
+        atb += 100.0 * (nrm @ (range_prior.plane_point - origin)
+                        - range_prior.distance_m * na) * nrm
     lam, vec = np.linalg.eigh(ata)  # lam: squared singular values of the stacked rows
     if lam[0] <= 0.0 or lam[0] < min_singular**2 * lam[-1]:
         return None
