@@ -1,7 +1,7 @@
 """Tracker benchmark: accuracy and speed of adaptive vs pf, meanshift and MIL.
 
     PYTHONPATH=. python benchmarks/tracker_otb.py [--data ../shared/data/otb] [--seeds 0,1,2]
-        [--ablation]
+        [--ablation] [--trackers adaptive,pf] [--set template_update_score=0.5 ...]
 
 Runs on one core (OMP/OpenBLAS/MKL threads = 1, cv2.setNumThreads(1)); image decoding is
 excluded from timing.  Sequences: Coke, Tiger1, Car4, Crossing, boat1 (when present) and the
@@ -9,7 +9,10 @@ simulated illumination-change sequence (written to a temporary OTB folder and re
 the others).  Prints a markdown table (mean over seeds for the particle trackers; one run of
 the OpenCV peers MIL and, where opencv-contrib is installed, CSRT) with updates/s measured in
 the same run.  ``--ablation`` adds the adaptive tracker with all particles mean-shifted
-(Shan et al.) and with none.
+(Shan et al.) and with none.  ``--trackers`` runs only the named rows (exploring: our tracker
+alone, CSRT once for the table); ``--set NAME=VALUE`` overrides a ``TrackerConfig`` field of
+every adaptive row (a candidate measured on all sequences before it becomes a default);
+``--per-seed`` adds each seed's AUC and mean centre error.
 """
 
 from __future__ import annotations
@@ -33,14 +36,33 @@ from companion.evaluation.sequences import load_sequence  # noqa: E402
 from companion.evaluation.synthetic import SynthSpec, write_otb  # noqa: E402
 from tracker import AdaptiveTracker, TrackerConfig  # noqa: E402
 from tracker.baselines import csrt_available  # noqa: E402
+from tracker.config import check_config  # noqa: E402
 
 SEQUENCES = ("Coke", "Tiger1", "Car4", "Crossing", "boat1")
 PEERS = ("mil", "csrt")  # OpenCV peers: one run (the seed only seeds cv2.setRNGSeed)
 
 
-def _variants(ablation: bool) -> dict[str, TrackerConfig | None]:
+def _override(sets: list[str]) -> TrackerConfig:
+    """``TrackerConfig`` with ``NAME=VALUE`` fields replaced (the value parsed as the field's
+    type)."""
+    base = TrackerConfig()
+    changes: dict[str, object] = {}
+    for item in sets:
+        name, _, text = item.partition("=")
+        if not hasattr(base, name):
+            raise SystemExit(f"--set {item}: TrackerConfig has no field {name!r}")
+        old = getattr(base, name)
+        changes[name] = (
+            text.lower() in ("1", "true", "yes") if isinstance(old, bool) else type(old)(text)
+        )
+    config = dataclasses.replace(base, **changes)
+    check_config(config)
+    return config
+
+
+def _variants(ablation: bool, base: TrackerConfig) -> dict[str, TrackerConfig | None]:
     out: dict[str, TrackerConfig | None] = {
-        "adaptive": None,
+        "adaptive": base,
         "pf": None,
         "meanshift": None,
         "mil": None,
@@ -48,8 +70,8 @@ def _variants(ablation: bool) -> dict[str, TrackerConfig | None]:
     if csrt_available():  # opencv-contrib only: run from a separate venv (docs/benchmarks.md)
         out["csrt"] = None
     if ablation:
-        out["adaptive-allshift"] = dataclasses.replace(TrackerConfig(), mean_shift_fraction=1.0)
-        out["adaptive-noshift"] = dataclasses.replace(TrackerConfig(), mean_shift_fraction=0.0)
+        out["adaptive-allshift"] = dataclasses.replace(base, mean_shift_fraction=1.0)
+        out["adaptive-noshift"] = dataclasses.replace(base, mean_shift_fraction=0.0)
     return out
 
 
@@ -68,6 +90,9 @@ def main() -> int:
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--ablation", action="store_true")
     parser.add_argument("--only", default="", help="comma-separated sequence names")
+    parser.add_argument("--trackers", default="", help="comma-separated rows (default: all)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--per-seed", action="store_true")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -86,7 +111,10 @@ def main() -> int:
         seq = load_sequence(folder)
         images = list(seq.images())
         size = f"{images[0].shape[1]}x{images[0].shape[0]}"
-        for name, config in _variants(args.ablation).items():
+        variants = _variants(args.ablation, _override(args.set))
+        for name, config in variants.items():
+            if args.trackers and name not in args.trackers.split(","):
+                continue
             runs = []
             for seed in seeds if name not in PEERS else seeds[:1]:
                 tracker = (
@@ -106,6 +134,15 @@ def main() -> int:
                 f"{ms:.2f} | {1e3 / ms:.0f} | {runs[0].particles} | {runs[0].cue} |",
                 flush=True,
             )
+            if args.per_seed and len(runs) > 1:
+                print(
+                    "|  | per seed | "
+                    + " ".join(f"{a:.3f}" for a in auc)
+                    + " | | "
+                    + " ".join(f"{r.scores.mean_centre_error_px:.1f}" for r in runs)
+                    + " | | | | | | |",
+                    flush=True,
+                )
     return 0
 
 

@@ -382,13 +382,15 @@ class AdaptiveTracker:
         score: float,
     ) -> None:
         """After a trusted frame: the gain; the template and size filters where the template
-        matched closely (``template_update_score``).  ``images``: the frame, the window."""
+        located the target; :meth:`Refiner.learn` decides which of its templates and whether
+        the size filters learn.  ``images``: the frame, the window."""
         if self.config.gain_source == "target":
             self._update_gain(raw, state)
-        if score >= self.config.template_update_score:
+        if score >= self.config.template_accept_score:
             frame, image_f32 = images
             box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
-            self._refiner.learn(image_f32, box, frame, (state[:2], self._box_px(state)))
+            in_frame = (state[:2], self._box_px(state))
+            self._refiner.learn(image_f32, box, frame, in_frame, score)
 
     def _refined(
         self,
@@ -453,6 +455,9 @@ class AdaptiveTracker:
         )
         xy = raw.to_frame(found.centre[None])[0]
         if found.score < cfg.template_accept_score:  # not located: the caller keeps the size
+            return np.array([xy[0], xy[1], self._state[2]]), found.score
+        if self._refiner.slow_score < cfg.scale_read_score:  # size unreliable: keep it
+            self._aspect_step = 1.0
             return np.array([xy[0], xy[1], self._state[2]]), found.score
         change = self._refiner.size_change(image, xy, self._box_px(self._state))
         self._aspect_step = float(np.sqrt(change[0] / change[1]))
@@ -534,10 +539,10 @@ class AdaptiveTracker:
         planes, lik = self._likelihood(window)
         half = self._half(self._state[2], window)[0]
         positive = np.maximum(lik, 0.0)
-        ksize = (max(1, int(2 * half[0])), max(1, int(2 * half[1])))
+        h, w = positive.shape  # the kernel within the window (a runaway scale: bad_alloc)
+        ksize = (int(np.clip(2 * half[0], 1, w)), int(np.clip(2 * half[1], 1, h)))
         smooth = cv2.boxFilter(positive, -1, ksize)
         iy, ix = np.unravel_index(int(np.argmax(smooth)), smooth.shape)
-        h, w = positive.shape
         scatter = self.rng.random((cfg.particles - 1, 2)) * np.array([w, h])
         centres = np.vstack([[ix + 0.5, iy + 0.5], scatter])
         halves = np.repeat(half[None], len(centres), axis=0)

@@ -65,7 +65,11 @@ class TrackerConfig:
     template_refine: bool = True
     template_search_frac: float = field(default=0.3, metadata={"gt": 0.0, "le": 2.0})
     template_accept_score: float = field(default=0.5, metadata={"ge": -1.0, "le": 1.0})
-    template_update_score: float = field(default=0.7, metadata={"ge": -1.0, "le": 1.0})
+    template_update_score: float = field(default=0.5, metadata={"ge": -1.0, "le": 1.0})
+    scale_update_score: float = field(default=0.7, metadata={"ge": -1.0, "le": 1.0})
+    scale_read_score: float = field(default=0.5, metadata={"ge": -1.0, "le": 1.0})
+    template_rival_margin: float = field(default=0.1, metadata={"ge": 0.0, "le": 2.0})
+    template_jump_frac: float = field(default=0.25, metadata={"gt": 0.0})
     template_update_rate: float = field(default=0.1, metadata={"ge": 0.0, "le": 1.0})
     template_anchor: float = field(default=0.3, metadata={"ge": 0.0, "le": 1.0})
     size_filters: Literal["scale", "scale+aspect", "width+height"] = "width+height"

@@ -22,7 +22,7 @@ from tracker.scale_filter import (
     sample_size,
     samples,
 )
-from tracker.template import Match, crop, match, template_size
+from tracker.template import Match, crop, match, ncc, template_size
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -39,7 +39,7 @@ class _Sizer:
 
 
 class Refiner:
-    """Template (first frame's mixed with a running one) and size filters of one target.
+    """Templates (the first frame's mixed with a fast or a slow running one) and size filters.
 
     ``patch`` is the float32 search window, ``centre``/``box`` on it in patch pixels;
     ``frame``, ``xy``/``box_px`` in full-resolution pixels.
@@ -58,7 +58,8 @@ class Refiner:
         self.config = config
         self._size = template_size(box)
         self._first = crop(patch, centre, box, self._size)
-        self._current = self._first.copy()
+        self._current = self._first.copy()  # slow: learns where it matches closely
+        self._fast = self._first.copy()  # fast: learns on more frames, locates the centre
         self._shape = sample_size(box_px)
         count, step = config.scale_filter_scales, config.scale_filter_step
         steps = [factor_pairs(count, step, kind) for kind in config.size_filters.split("+")]
@@ -69,6 +70,9 @@ class Refiner:
             _Sizer(f, ScaleFilter.train(part)) for f, part in zip(steps, rows, strict=True)
         ]
         self._read: tuple[FloatArray, FloatArray, list[ComplexArray]] | None = None
+        self.rival = -1.0
+        self.jumped = False  # the target moved further than template_jump_frac since the last
+        self.slow_score = 1.0  # the slow template's NCC where :meth:`locate` found the target
 
     def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
         """Each size filter's rows for the box ``box_px`` at ``xy`` (one resampling for all).
@@ -81,24 +85,61 @@ class Refiner:
         count = self.config.scale_filter_scales
         return [rows[i : i + count] for i in range(0, len(rows), count)]
 
-    def template(self) -> Patch:
-        """``template_anchor`` x the first frame's template + the rest x the running one."""
+    def template(self, running: Patch | None = None) -> Patch:
+        """``template_anchor`` x the first frame's template + the rest x a running one (by
+        default the fast one, which locates the target)."""
         a = self.config.template_anchor
-        return np.asarray(a * self._first + (1.0 - a) * self._current, dtype=np.float32)
+        rest = self._fast if running is None else running
+        return np.asarray(a * self._first + (1.0 - a) * rest, dtype=np.float32)
 
     def locate(self, patch: Patch, centres: FloatArray, box: FloatArray) -> Match:
-        """The template's best match around ``centres[0]`` (the filter's estimate).
+        """The fast template's best match around ``centres[0]`` (the filter's estimate), or
+        the slow template's where the fast one matches worse than it.
 
         If the filter moved further than the search reaches (``template_search_frac`` of the
         box) from ``centres[1]`` (the last estimate), the template is looked for there too.
+        Where the fast template scores below ``template_update_score`` the slow one is
+        searched as well, and where it matches better it locates the target and the fast
+        template restarts from it: a fast template that followed a shadow's edge (Car4
+        leaving the bridge's shadow) loses the car when the light comes back, and the slow
+        one, which never learnt the shadow, finds it.
         """
+        found = self._search(patch, centres, box, self.template())
+        self.slow_score = ncc(
+            crop(patch, found.centre, box, self._size), self.template(self._current)
+        )
+        if found.score < self.config.template_update_score:
+            slow = self._search(patch, centres, box, self.template(self._current))
+            if slow.score > found.score:
+                found, self._fast = slow, self._current.copy()
+                self.slow_score = slow.score
+        self.rival = found.rival
+        self.jumped = bool(
+            np.any(np.abs(found.centre - centres[1]) > self.config.template_jump_frac * box)
+        )
+        return found
+
+    def _search(self, patch: Patch, centres: FloatArray, box: FloatArray, template: Patch) -> Match:
+        """``template``'s best match near the filter's estimate or the last one (ambiguous
+        peaks: :meth:`_nearer_if_ambiguous`)."""
         frac = self.config.template_search_frac
-        template = self.template()
         found = match(patch, template, centres[0], box, frac, ((1.0, 1.0),))
         if np.any(np.abs(centres[1] - centres[0]) > frac * box):
             last = match(patch, template, centres[1], box, frac, ((1.0, 1.0),))
             found = last if last.score > found.score else found
-        return found
+        return self._nearer_if_ambiguous(found, centres[1])
+
+    def _nearer_if_ambiguous(self, found: Match, last: FloatArray) -> Match:
+        """Where a rival peak scores within ``template_rival_margin`` of the best, the one
+        nearer the last estimate (a look-alike passing by); ``rival`` then marks the frame
+        ambiguous (the fast template does not learn it)."""
+        margin = self.config.template_rival_margin
+        if found.rival_centre is None or found.rival < found.score - margin:
+            return found
+        near = np.hypot(*(found.rival_centre - last)) < np.hypot(*(found.centre - last))
+        if not near:
+            return found
+        return Match(found.rival_centre, found.scale, found.rival, found.score, found.centre)
 
     def size_change(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> FloatArray:
         """(width, height) factors of the box at ``xy``: the product of the filters' peaks."""
@@ -120,11 +161,29 @@ class Refiner:
         box_on_patch: tuple[FloatArray, FloatArray],
         frame: Frame,
         box_in_frame: tuple[FloatArray, FloatArray],
+        score: float,
     ) -> None:
-        """The running template and the size filters learn the box (centre, size) given."""
+        """Learn the box given (centre, size) on a frame where the template matched at ``score``.
+
+        Two running templates: the fast one (which locates the target) learns where ``score >=
+        template_update_score``; the slow one and the size filters only where the slow
+        template matches the box at ``scale_update_score`` or better.  A template that learns
+        on many frames follows a slow change of appearance (Coke's turning can) but also a
+        shadow's edge creeping over the target (Car4 under the bridge): it then matches the lit
+        half at NCC 0.9, and size filters learning from those frames shrank the box to half its
+        height.  The slow template does not follow the shadow, so it keeps the size filters
+        off those frames.
+        """
+        cfg = self.config
         centre, box = box_on_patch
-        rate = self.config.template_update_rate
-        self._current = (1.0 - rate) * self._current + rate * crop(patch, centre, box, self._size)
+        fresh = crop(patch, centre, box, self._size)
+        rate = cfg.template_update_rate
+        clear = self.rival < score - cfg.template_rival_margin and not self.jumped
+        if score >= cfg.template_update_score and clear:
+            self._fast = (1.0 - rate) * self._fast + rate * fresh
+        if self.slow_score < cfg.scale_update_score:
+            return
+        self._current = (1.0 - rate) * self._current + rate * fresh
         xy, box_px = box_in_frame
         read = self._read
         if read is not None and bool(np.all(read[0] == xy) and np.all(read[1] == box_px)):

@@ -32,6 +32,8 @@ class Match:
     centre: FloatArray
     scale: tuple[float, float]
     score: float
+    rival: float = -1.0  # the best other local maximum of the response (-1: none)
+    rival_centre: FloatArray | None = None  # where it is (integer peak), None: none
 
 
 def as_float(patch_bgr: npt.NDArray[np.uint8], grey: bool) -> Image:
@@ -49,9 +51,7 @@ def template_size(box_wh: FloatArray) -> tuple[int, int]:
     )
 
 
-def _resample(
-    image: Image, centre: FloatArray, step: FloatArray, out_wh: tuple[int, int]
-) -> Image:
+def _resample(image: Image, centre: FloatArray, step: FloatArray, out_wh: tuple[int, int]) -> Image:
     """``out[v, u] = image(centre + ((u, v) - (out - 1) / 2) * step)``, bilinear, edge copied."""
     ow, oh = out_wh
     m = np.array(
@@ -67,12 +67,30 @@ def _resample(
     )
 
 
-def crop(
-    image: Image, centre: FloatArray, box_wh: FloatArray, size: tuple[int, int]
-) -> Image:
+def crop(image: Image, centre: FloatArray, box_wh: FloatArray, size: tuple[int, int]) -> Image:
     """The box ``centre`` +- ``box_wh`` / 2 (patch pixels) resampled to ``size`` = (w, h)."""
     step = np.asarray(box_wh, dtype=np.float64) / np.array(size, dtype=np.float64)
     return _resample(image, centre, step, size)
+
+
+def ncc(a: Image, b: Image) -> float:
+    """Normalised cross-correlation of two images of one shape (``TM_CCOEFF_NORMED``)."""
+    return float(cv2.matchTemplate(a, b, cv2.TM_CCOEFF_NORMED)[0, 0])
+
+
+def _rival(
+    response: npt.NDArray[np.float32], ix: int, iy: int, reach: tuple[int, int]
+) -> tuple[float, tuple[int, int] | None]:
+    """The highest local maximum of ``response`` more than ``reach`` (x, y) from the peak, and
+    where it is; (-1, None) when there is none."""
+    kernel = np.ones((2 * reach[1] + 1, 2 * reach[0] + 1), np.uint8)
+    maxima = response >= cv2.dilate(response, kernel)
+    ys, xs = np.nonzero(maxima)
+    far = (np.abs(xs - ix) > reach[0]) | (np.abs(ys - iy) > reach[1])
+    if not far.any():
+        return -1.0, None
+    k = int(np.argmax(np.where(far, response[ys, xs], -np.inf)))
+    return float(response[ys[k], xs[k]]), (int(xs[k]), int(ys[k]))
 
 
 def _subpixel(response: npt.NDArray[np.float32], ix: int, iy: int) -> tuple[float, float]:
@@ -114,5 +132,9 @@ def match(
         if peak > best.score:
             dx, dy = _subpixel(response, ix, iy)
             offset = np.array([ix + dx - mx, iy + dy - my]) * step
-            best = Match(np.asarray(centre, dtype=np.float64) + offset, s, float(peak))
+            reach = (max(1, tw // 4), max(1, th // 4))
+            rival, at = _rival(response, ix, iy, reach)
+            origin = np.asarray(centre, dtype=np.float64)
+            where = None if at is None else origin + (np.array(at) - (mx, my)) * step
+            best = Match(origin + offset, s, float(peak), rival, where)
     return best

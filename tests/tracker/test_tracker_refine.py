@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import numpy.typing as npt
 import pytest
 
-from tracker import AdaptiveTracker
+from tracker import AdaptiveTracker, TrackerConfig
+from tracker.refine import Refiner
 from tracker.scale_filter import ScaleFilter, factor_pairs, grey_region, sample_size, samples
 from tracker.template import as_float, crop, match
 
@@ -116,3 +119,73 @@ def test_box_follows_a_change_of_aspect() -> None:
     assert last is not None
     aspect, truth = last[2] / last[3], boxes[-1][2] / boxes[-1][3]
     assert aspect / truth == pytest.approx(1.0, abs=0.08)  # it started 1.56x off the end's
+
+
+def _two_copies(gap_px: int) -> tuple[npt.NDArray[np.uint8], np.ndarray, np.ndarray]:
+    """A background with one textured card pasted twice, side by side ``gap_px`` apart; the
+    cards' centres (x, y)."""
+    image = _texture(120, 200, 5).astype(np.uint8)
+    card = _texture(24, 30, 11).astype(np.uint8)
+    left = np.array([60.0, 60.0])
+    right = left + np.array([30.0 + gap_px, 0.0])
+    for c in (left, right):
+        x0, y0 = int(c[0]) - 15, int(c[1]) - 12
+        image[y0 : y0 + 24, x0 : x0 + 30] = card
+    return image, left, right
+
+
+def _refiner(image: npt.NDArray[np.uint8], centre: np.ndarray, **changes: float) -> Refiner:
+    config = dataclasses.replace(TrackerConfig(), template_search_frac=1.2, **changes)
+    box = np.array([30.0, 24.0])
+    return Refiner(config, as_float(image, grey=False), centre, box, image, centre, box)
+
+
+def test_match_reports_a_look_alike_as_a_rival() -> None:
+    image, left, right = _two_copies(4)
+    patch = as_float(image, grey=False)
+    box = np.array([30.0, 24.0])
+    template = crop(patch, left, box, (30, 24))
+    found = match(patch, template, left, box, 1.2, ((1.0, 1.0),))
+    assert found.score > 0.95 and found.rival > 0.95
+    assert found.rival_centre is not None
+    both = sorted([found.centre[0], found.rival_centre[0]])
+    assert np.allclose(both, [left[0], right[0]], atol=1.0)
+    alone = match(patch, template, left, box, 0.3, ((1.0, 1.0),))  # the copy out of reach
+    assert alone.rival < alone.score - 0.3
+
+
+def test_ambiguous_match_takes_the_copy_nearer_the_last_estimate() -> None:
+    """Two equal peaks: the one nearer the last estimate wins (OpenCV's first maximum, the
+    left copy, without the rule), and the frame is marked ambiguous for learning."""
+    image, left, right = _two_copies(4)
+    refiner = _refiner(image, left)
+    patch = as_float(image, grey=False)
+    found = refiner.locate(
+        patch,
+        np.stack([left + np.array([10.0, 0.0]), right + np.array([2.0, 0.0])]),
+        np.array([30.0, 24.0]),
+    )
+    assert np.allclose(found.centre, right, atol=1.0)
+    assert refiner.rival > found.score - refiner.config.template_rival_margin
+
+
+def test_fast_template_and_size_filters_learn_only_reliable_frames() -> None:
+    """The fast template skips an ambiguous or jumping frame; the slow template and the size
+    filters skip a frame the slow template does not match (a shadow the fast one followed)."""
+    image, left, _ = _two_copies(40)
+    patch = as_float(image, grey=False)
+    box = np.array([30.0, 24.0])
+    other = left + np.array([3.0, 2.0])
+    cases = {  # (rival, jumped, slow score) -> (fast learns, size filters learn)
+        (-1.0, False, 0.9): (True, True),
+        (0.85, False, 0.9): (False, True),
+        (-1.0, True, 0.9): (False, True),
+        (-1.0, False, 0.3): (True, False),
+    }
+    for (rival, jumped, slow), (fast_learns, size_learns) in cases.items():
+        refiner = _refiner(image, left)
+        refiner.rival, refiner.jumped, refiner.slow_score = rival, jumped, slow
+        fast, num = refiner.template().copy(), refiner._sizers[0].model.num.copy()
+        refiner.learn(patch, (other, box), image, (other, box), 0.9)
+        assert (not np.allclose(refiner.template(), fast)) == fast_learns, (rival, jumped, slow)
+        assert (not np.allclose(refiner._sizers[0].model.num, num)) == size_learns
