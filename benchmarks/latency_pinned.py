@@ -99,6 +99,10 @@ def child(args: argparse.Namespace) -> None:
             gc_pauses.append((time.perf_counter() - started.pop()) * 1000.0)
 
     class Recorded(demo.SimCameraSource):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            kwargs.pop("own_process", None)  # nothing to render: no process for it
+            super().__init__(*args, **kwargs)
+
         def _render_async(self, index: int) -> Any:
             future = asyncio.get_running_loop().create_future()
             k = index % len(frames)
@@ -152,12 +156,14 @@ def watch_threads(seen: dict[int, tuple[str, float]], stop: threading.Event) -> 
     pools end their threads before the run returns)."""
     tick = os.sysconf("SC_CLK_TCK")
     while not stop.wait(0.2):
+        names = {t.native_id: t.name for t in threading.enumerate()}
         for task in Path("/proc/self/task").iterdir():
             try:
                 stat = (task / "stat").read_text()
             except OSError:
                 continue
-            name = stat[stat.index("(") + 1:stat.rindex(")")]
+            name = names.get(int(task.name)) or stat[stat.index("(") + 1:stat.rindex(")")]
+            name = name.rstrip("_0123456789") or name  # pools number their threads
             fields = stat[stat.rindex(")") + 2:].split()
             seen[int(task.name)] = (name, (int(fields[11]) + int(fields[12])) / tick)
 

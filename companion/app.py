@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import logging
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +34,12 @@ from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
 
 log = logging.getLogger(__name__)
+
+#: The interpreter's GIL switch interval while the pipeline runs (CPython's default: 5 ms).
+#: A thread that wants the GIL waits up to this long for the holder to let go; the worker
+#: waiting 5 ms behind the background lane's or the event loop's Python code was one of
+#: the causes of issue 23's latency tail (docs/benchmarks.md, "Latency tail").
+SWITCH_INTERVAL_S = 0.001
 
 
 def now_us() -> int:
@@ -196,6 +203,8 @@ class CompanionApp:
             asyncio.create_task(self._status_loop(), name="status"),
         ]
         started_s = self.clock_s()
+        switch_interval_s = sys.getswitchinterval()
+        sys.setswitchinterval(min(switch_interval_s, SWITCH_INTERVAL_S))
         try:
             if seconds is None:
                 await self._stop.wait()
@@ -206,6 +215,7 @@ class CompanionApp:
         finally:
             self.run_s = self.clock_s() - started_s
             await self._shutdown()
+            sys.setswitchinterval(switch_interval_s)
 
     # -- tasks ------------------------------------------------------------------------
 
