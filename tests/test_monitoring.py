@@ -93,7 +93,7 @@ def test_preview_is_wanted_only_while_someone_subscribes(
     pair: tuple[MonitorPublisher, MonitorWatcher],
 ) -> None:
     """A preview nobody watches is not drawn (issue 23: its encoding costs the frame's core)."""
-    pub, watcher = pair
+    pub, _watcher = pair
     assert pub.preview_wanted(now_s=100.0)  # the watcher subscribes to every topic
     assert pub.publish_preview(b"a", now_s=100.0)
     assert not pub.preview_wanted(now_s=100.2)  # not due yet
