@@ -78,9 +78,11 @@ class MonitorPublisher:
         if not self.preview_due(now_s):
             return False
         try:
-            return bool(self._publishers["preview"].matching_status.matching)
+            status = self._publishers["preview"].matching_status
         except zenoh.ZError:  # cannot tell: draw it
             return True
+        # zenoh 1.x returns a MatchingStatus (its stubs say bool)
+        return bool(getattr(status, "matching", status))
 
     def publish_preview(self, jpeg: bytes, now_s: float | None = None) -> bool:
         """Publish a JPEG preview unless one went out less than 1/rate ago."""
