@@ -42,6 +42,9 @@ HERE = Path(__file__).resolve()
 ROOT = HERE.parents[1]
 BASELINE = HERE.with_name("latency_baseline.json")
 STAGES = ("capture_to_worker", "process", "capture_to_wire")
+HOUSEKEEPING_STEPS = ("_acquire", "_predict_acquire", "_detect_acquire", "_search")
+PROBED = ("gc", "threads_cpu_s", "process", "housekeeping", *HOUSEKEEPING_STEPS,
+          "slowest_process")
 BUSY_CODE = "import os, sys\nos.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True:\n    pass\n"
 
 
@@ -78,7 +81,6 @@ def child(args: argparse.Namespace) -> None:
     """One pinned run of the demo's pipeline on the recording; prints one JSON line."""
     os.sched_setaffinity(0, {args.core})  # before any thread starts: they all inherit it
     import asyncio
-    import gc
 
     import numpy as np
 
@@ -89,14 +91,6 @@ def child(args: argparse.Namespace) -> None:
     with (Path(args.stream) / "truth.pkl").open("rb") as f:
         meta = pickle.load(f)
     frames = np.ascontiguousarray(frames)  # into memory: the camera costs nothing
-    gc_pauses: list[float] = []
-    started: list[float] = []
-
-    def on_gc(phase: str, info: dict[str, int]) -> None:
-        if phase == "start":
-            started.append(time.perf_counter())
-        elif started:
-            gc_pauses.append((time.perf_counter() - started.pop()) * 1000.0)
 
     class Recorded(demo.SimCameraSource):
         def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -118,37 +112,106 @@ def child(args: argparse.Namespace) -> None:
 
     demo.SimCameraSource = Recorded  # type: ignore[misc]
     demo.summary = summary  # type: ignore[assignment]
-    if args.profile:
-        gc.callbacks.append(on_gc)
+    probe = Probe(demo) if args.profile else None
     settings = load_settings(shipped=("sim",))  # as `companion demo` reads them
-    threads: dict[int, tuple[str, float]] = {}
-    stop = threading.Event()
-    watcher = threading.Thread(target=watch_threads, args=(threads, stop), daemon=True)
-    if args.profile:
-        watcher.start()
-    cpu0 = os.times()
     s = asyncio.run(demo.run_demo(settings, meta["scenario"], meta["seconds"]))
-    cpu1 = os.times()
-    stop.set()
-    app = captured["app"]
-    st = app.stats
+    st = captured["app"].stats
     stages = {"capture_to_worker": st.queue_ms, "process": st.process_ms,
               "capture_to_wire": st.capture_to_wire_ms}
     out = {"frames": s["frames"], "dropped": s["dropped_frames"],
            "cores": s["cpu_cores_busy"], "fixes_sent": s["fixes_sent"],
            "fixes_accepted": s["fixes_accepted"], "rmse_m": s["position_rmse_m"],
            "nees_inside_95": s["nees_inside_95"],
-           "cpu_s": round(cpu1.user + cpu1.system - cpu0.user - cpu0.system, 2),
            "stages": {k: {"p50": r.percentile(50), "p99": r.percentile(99),
                           "max": r.percentile(100), "n": r.count} for k, r in stages.items()}}
-    if args.profile:
-        out["gc"] = {"count": len(gc_pauses), "max_ms": max(gc_pauses, default=0.0),
-                     "total_ms": sum(gc_pauses)}
-        per: dict[str, float] = {}
-        for name, cpu_s in threads.values():
-            per[name] = round(per.get(name, 0.0) + cpu_s, 2)
-        out["threads_cpu_s"] = dict(sorted(per.items(), key=lambda kv: -kv[1]))
+    if probe is not None:
+        out.update(probe.report())
     print("RESULT " + json.dumps(out), flush=True)
+
+
+class Probe:
+    """Where a frame's time goes: each ``process`` and ``housekeeping`` call's wall and
+    thread CPU time, the garbage collector's pauses, every thread's CPU."""
+
+    def __init__(self, demo: Any) -> None:
+        import gc
+
+        self.calls: dict[str, list[tuple[float, float, float]]] = {"process": [],
+                                                                    "housekeeping": []}
+        self.gc: list[tuple[float, float]] = []
+        self._gc_start: list[float] = []
+        self.threads: dict[int, tuple[str, float]] = {}
+        self._stop = threading.Event()
+        gc.callbacks.append(self._on_gc)
+        threading.Thread(target=watch_threads, args=(self.threads, self._stop),
+                         daemon=True).start()
+        for name in ("process", "housekeeping"):
+            self._wrap(demo.TruthRecorder, name)
+        for name in HOUSEKEEPING_STEPS:  # the steps of housekeeping, where they exist
+            if hasattr(demo.Perception, name):
+                self.calls[name] = []
+                self._wrap(demo.Perception, name)
+
+    def _wrap(self, cls: Any, name: str) -> None:
+        inner = getattr(cls, name)
+        calls = self.calls[name]
+
+        def timed(obj: Any, *args: Any) -> Any:
+            t0, c0 = time.perf_counter(), time.thread_time()
+            try:
+                return inner(obj, *args)
+            finally:
+                calls.append((t0, time.perf_counter(), time.thread_time() - c0))
+
+        setattr(cls, name, timed)
+
+    def _on_gc(self, phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            self._gc_start.append(time.perf_counter())
+        elif self._gc_start:
+            self.gc.append((self._gc_start.pop(), time.perf_counter()))
+
+    def report(self) -> dict[str, Any]:
+        self._stop.set()
+        per: dict[str, float] = {}
+        for name, cpu_s in self.threads.values():
+            per[name] = round(per.get(name, 0.0) + cpu_s, 2)
+        out: dict[str, Any] = {"gc": {"count": len(self.gc), "max_ms": round(max(
+            ((b - a) * 1e3 for a, b in self.gc), default=0.0), 2)},
+            "threads_cpu_s": dict(sorted(per.items(), key=lambda kv: -kv[1]))}
+        for name, calls in self.calls.items():
+            wall = [(b - a) * 1e3 for a, b, _ in calls]
+            cpu = [c * 1e3 for _, _, c in calls]
+            out[name] = {"n": len(calls), "wall_p50_p99_max": pcts(wall),
+                         "cpu_p50_p99_max": pcts(cpu)}
+        out["slowest_process"] = self._slowest()
+        return out
+
+    def _slowest(self) -> dict[str, Any]:
+        """The slowest 2 % of ``process`` calls: their CPU, and how many overlapped a
+        housekeeping call or a garbage collection."""
+        calls = sorted(self.calls["process"], key=lambda c: c[0] - c[1])
+        worst = calls[:max(1, len(calls) // 50)]
+        house = self.calls["housekeeping"]
+
+        def overlaps(a: float, b: float, spans: list[tuple[float, float]]) -> bool:
+            return any(x < b and y > a for x, y in spans)
+
+        return {"n": len(worst), "wall_ms_mean": round(
+            sum((b - a) * 1e3 for a, b, _ in worst) / len(worst), 2) if worst else None,
+            "cpu_ms_mean": round(sum(c * 1e3 for *_, c in worst) / len(worst), 2)
+            if worst else None,
+            "with_housekeeping": sum(overlaps(a, b, [(x, y) for x, y, _ in house])
+                                     for a, b, _ in worst),
+            "with_gc": sum(overlaps(a, b, self.gc) for a, b, _ in worst)}
+
+
+def pcts(values: list[float]) -> list[float] | None:
+    if not values:
+        return None
+    ordered = sorted(values)
+    return [round(ordered[min(len(ordered) - 1, int(q * len(ordered)))], 2)
+            for q in (0.5, 0.99)] + [round(ordered[-1], 2)]
 
 
 def watch_threads(seen: dict[int, tuple[str, float]], stop: threading.Event) -> None:
@@ -226,7 +289,7 @@ def line(label: str, r: dict[str, Any]) -> str:
     parts.append(f"dropped {r['dropped']:3d}/{r['frames'] + r['dropped']}  cores "
                  f"{r['cores']:.2f}  rmse {r['rmse_m']} m  nees95 {r['nees_inside_95']}  "
                  f"load {r['load']}")
-    extra = "".join(f"\n    {k}: {r[k]}" for k in ("gc", "threads_cpu_s") if k in r)
+    extra = "".join(f"\n    {k}: {r[k]}" for k in PROBED if k in r)
     return "  ".join(parts) + extra
 
 

@@ -52,7 +52,7 @@ class BackgroundLane:
     """Runs jobs one at a time on its own thread; at most one more waits (the newest)."""
 
     def __init__(self, name: str, on_error: Callable[[BaseException], None],
-                 nice: int = 10) -> None:
+                 nice: int = 3) -> None:
         self._executor = concurrent.futures.ThreadPoolExecutor(
             1, name, initializer=lower_thread_priority, initargs=(nice,))
         self._on_error = on_error
