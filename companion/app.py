@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import gc
 import logging
 import sys
 import time
@@ -196,15 +197,22 @@ class CompanionApp:
         return self._slot.dropped
 
     async def run(self, seconds: float | None = None) -> None:
-        """Run until the source ends, ``seconds`` pass or :meth:`request_stop`."""
+        """Run until the source ends, ``seconds`` pass or :meth:`request_stop`.
+
+        While it runs, the GIL's switch interval is :data:`SWITCH_INTERVAL_S` and what
+        start-up made (maps, models, modules) is frozen out of the garbage collector's
+        walks (``gc.freeze``); both are undone when it returns.
+        """
+        switch_interval_s = sys.getswitchinterval()
+        sys.setswitchinterval(min(switch_interval_s, SWITCH_INTERVAL_S))
+        gc.collect()
+        gc.freeze()
         self._tasks = [
             asyncio.create_task(self._reader(), name="reader"),
             asyncio.create_task(self._worker(), name="worker"),
             asyncio.create_task(self._status_loop(), name="status"),
         ]
         started_s = self.clock_s()
-        switch_interval_s = sys.getswitchinterval()
-        sys.setswitchinterval(min(switch_interval_s, SWITCH_INTERVAL_S))
         try:
             if seconds is None:
                 await self._stop.wait()
@@ -216,6 +224,7 @@ class CompanionApp:
             self.run_s = self.clock_s() - started_s
             await self._shutdown()
             sys.setswitchinterval(switch_interval_s)
+            gc.unfreeze()
 
     # -- tasks ------------------------------------------------------------------------
 
