@@ -127,25 +127,25 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     pmap = PracticalMap(tuple(landmarks), references, LocalFrame(o.lat, o.lon, o.alt_m),
                         described=f"the simulated world of scenario {scenario!r}")
     detector_for(settings)  # load the detector now, not on the camera's clock (and fail early)
-    # the fake autopilot flies what the camera sees, on one clock: its start is t = 0
-    drift = AttitudeErrorConfig() if attitude_error else None
-    fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                             endpoint="udpin:127.0.0.1:0",
-                                             attitude_error=drift),
-                         truth=sim.truth_fn)
     # rendered in a process of its own, started before the clock: a camera exposes without
     # the companion's interpreter (docs/benchmarks.md, "Latency tail")
     source = SimCameraSource(sim, realtime=True, seconds=seconds, own_process=True)
-    try:
+    try:  # fly() closes the source; until then, whatever fails here closes it
         await source.start()
+        # the fake autopilot flies what the camera sees, on one clock: its creation is t = 0
+        drift = AttitudeErrorConfig() if attitude_error else None
+        fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
+                                                 endpoint="udpin:127.0.0.1:0",
+                                                 attitude_error=drift),
+                             truth=sim.truth_fn)
         await fake.start()
+        source.anchor(fake.start_ns // 1000)
+        bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+                            origin_lat_deg=o.lat, origin_lon_deg=o.lon, origin_alt_m=o.alt_m,
+                            set_origin=True)
     except BaseException:
         source.close()
         raise
-    source.anchor(fake.start_ns // 1000)
-    bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
-                        origin_lat_deg=o.lat, origin_lon_deg=o.lon, origin_alt_m=o.alt_m,
-                        set_origin=True)
     recorders: list[TruthRecorder] = []
 
     def processor(sensors: SensorHistory) -> TruthRecorder:
