@@ -2,8 +2,9 @@
 
 The demo's pipeline (fake autopilot on UDP loopback, MAVLink bridge, Zenoh monitoring, flight
 log, perception) runs on a stream recorded beforehand: the scenario's frames are rendered once
-into a raw recording in a temporary folder (``frames.u8``, memory-mapped, and ``truth.pkl``)
-and served from memory at the camera's rate, so the camera costs nothing.  Each run is a
+into a raw recording in a temporary folder (``frames.npy`` and ``truth.pkl``; ``--stream``
+keeps and reuses one), read into memory and served at the camera's rate (30 fps, >= 900
+frames), so the camera costs nothing.  Each run is a
 child process pinned to one core (``os.sched_setaffinity``), optionally with a competing busy
 process pinned to the same core.  It prints p50 / p99 / max of capture -> worker, processing
 and capture -> wire, dropped frames, the cores the companion used and its accuracy::
@@ -17,9 +18,12 @@ and capture -> wire, dropped frames, the cores the companion used and its accura
 Each ``--checkout`` runs with that checkout's ``.venv/bin/python`` and its code on
 ``PYTHONPATH`` (this file's child mode uses only what the code before issue 23 had too).
 ``--check`` compares the median over ``--runs`` with ``benchmarks/latency_baseline.json``:
-exit 1 when a p99 exceeds the issue's target (33 ms) or the baseline by more than its stated
-tolerance, or when frames were dropped on the quiet core.  ``--profile`` adds the garbage
-collector's pauses and the CPU time of every thread (from ``/proc/self/task``).
+exit 1 when a case's capture -> wire p99 exceeds the baseline's times its tolerance or more
+frames dropped than it allows; it also prints whether issue 23's target (p99 <= 33 ms, none
+dropped) is met.  ``--write-baseline NOTE`` rewrites the baseline from this run's medians
+(do it on a quiet machine).  ``--profile`` adds the garbage collector's pauses, the CPU time
+of every thread (``/proc/self/task``), wall and CPU time of ``process``, ``housekeeping``
+and each housekeeping step, and what the slowest 2 % of ``process`` calls overlapped.
 Figures and their reading: docs/benchmarks.md, "Latency tail (issue 23)".
 """
 
@@ -307,7 +311,7 @@ def medians(results: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def gate(summary: dict[str, dict[str, Any]]) -> list[str]:
-    """Regressions against the committed baseline (and the issue's targets)."""
+    """Regressions against the committed baseline; the issue's targets are printed beside."""
     base = json.loads(BASELINE.read_text())
     problems = []
     for case, got in summary.items():
@@ -315,12 +319,27 @@ def gate(summary: dict[str, dict[str, Any]]) -> list[str]:
         if want is None:
             continue
         p99 = got["stages"]["capture_to_wire"]["p99"]
-        limit = min(base["target_p99_ms"], want["capture_to_wire_p99_ms"] * base["tolerance"])
+        limit = want["capture_to_wire_p99_ms"] * base["tolerance"]
         if p99 is None or p99 > limit:
-            problems.append(f"{case}: capture -> wire p99 {p99} ms > {limit:.1f} ms")
-        if got["dropped"] is not None and got["dropped"] > want["dropped_max"]:
+            problems.append(f"{case}: capture -> wire p99 {p99} ms > {limit:.1f} ms "
+                            f"(baseline {want['capture_to_wire_p99_ms']} x {base['tolerance']})")
+        if got["dropped"] is None or got["dropped"] > want["dropped_max"]:
             problems.append(f"{case}: {got['dropped']} frames dropped > {want['dropped_max']}")
+        met = p99 is not None and p99 <= base["target_p99_ms"] and got["dropped"] == 0
+        print(f"{case}: issue 23's target (p99 <= {base['target_p99_ms']} ms, 0 dropped) "
+              f"{'met' if met else 'NOT met'}")
     return problems
+
+
+def write_baseline(summary: dict[str, dict[str, Any]], note: str) -> None:
+    """The measured medians as the new baseline (keeps the tolerance and the target)."""
+    base = json.loads(BASELINE.read_text()) if BASELINE.exists() else {
+        "tolerance": 1.25, "target_p99_ms": 33.0}
+    base["measured"] = note
+    base["cases"] = {case: {"capture_to_wire_p99_ms": m["stages"]["capture_to_wire"]["p99"],
+                            "dropped_max": int(m["dropped"] * base["tolerance"] + 3)}
+                     for case, m in summary.items()}
+    BASELINE.write_text(json.dumps(base, indent=2) + "\n")
 
 
 def parse() -> argparse.Namespace:
@@ -338,6 +357,8 @@ def parse() -> argparse.Namespace:
                     help="run `companion demo --json` of each checkout instead (not pinned)")
     ap.add_argument("--profile", action="store_true", help="GC pauses and CPU per thread")
     ap.add_argument("--check", action="store_true", help="gate against the baseline")
+    ap.add_argument("--write-baseline", metavar="NOTE",
+                    help="write the medians as the baseline, with NOTE (date, load, commit)")
     ap.add_argument("--json", type=Path, help="write every run's figures here")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     return ap.parse_args()
@@ -375,8 +396,11 @@ def main() -> int:
             for k in STAGES) + f"  dropped {m['dropped']}  cores {m['cores']}")
     if args.json is not None:
         args.json.write_text(json.dumps({"runs": results, "medians": summary}, indent=1))
+    by_case = {label.split(":", 1)[1]: m for label, m in summary.items()}
+    if args.write_baseline:
+        write_baseline(by_case, args.write_baseline)
     if args.check:
-        problems = gate({label.split(":", 1)[1]: m for label, m in summary.items()})
+        problems = gate(by_case)
         for p in problems:
             print("REGRESSION: " + p)
         return 1 if problems else 0
