@@ -20,7 +20,6 @@ import asyncio
 import concurrent.futures
 import gc
 import logging
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -35,12 +34,6 @@ from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
 
 log = logging.getLogger(__name__)
-
-#: The interpreter's GIL switch interval while the pipeline runs (CPython's default: 5 ms).
-#: A thread that wants the GIL waits up to this long for the holder to let go; the worker
-#: waiting 5 ms behind the background lane's or the event loop's Python code was one of
-#: the causes of issue 23's latency tail (docs/benchmarks.md, "Latency tail").
-SWITCH_INTERVAL_S = 0.001
 
 
 def now_us() -> int:
@@ -199,12 +192,11 @@ class CompanionApp:
     async def run(self, seconds: float | None = None) -> None:
         """Run until the source ends, ``seconds`` pass or :meth:`request_stop`.
 
-        While it runs, the GIL's switch interval is :data:`SWITCH_INTERVAL_S` and what
-        start-up made (maps, models, modules) is frozen out of the garbage collector's
-        walks (``gc.freeze``); both are undone when it returns.
+        While it runs, what start-up made (maps, models, modules) is frozen out of the
+        garbage collector's walks (``gc.freeze``, undone when it returns).  The GIL's
+        switch interval stays CPython's 5 ms: 1 ms was tried for issue 23 and did no
+        better on a loaded core (docs/benchmarks.md, "Latency tail").
         """
-        switch_interval_s = sys.getswitchinterval()
-        sys.setswitchinterval(min(switch_interval_s, SWITCH_INTERVAL_S))
         # no gc.collect() first: the flight's clock runs already, and a full collection
         # took 80-330 ms here under load (start-up's little garbage stays, frozen)
         gc.freeze()
@@ -224,7 +216,6 @@ class CompanionApp:
         finally:
             self.run_s = self.clock_s() - started_s
             await self._shutdown()
-            sys.setswitchinterval(switch_interval_s)
             gc.unfreeze()
 
     # -- tasks ------------------------------------------------------------------------
