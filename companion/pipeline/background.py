@@ -9,11 +9,11 @@ acquisition on a stale frame is worth less than acquisition on the newest.
 Results and errors come back on the event loop (``on_done`` / ``on_error`` are called
 there), so whoever consumes them needs no locks.  Only for use on one event loop.
 
-The lane's thread runs at a lower scheduling priority (``nice``, default +10 over the
-process): on a core shared with the worker, the kernel then runs the lane when the worker
-waits (for a frame or for the GIL), not in the middle of a frame's processing.  Its native
-work (feature matching, template search, the detector) releases the GIL, so a lowered
-lane does not hold the worker up.  Issue 23's measurements: docs/benchmarks.md.
+The lane's thread runs at a lower scheduling priority (``nice``, default +3 over the
+process): on a core shared with the worker, the kernel gives the worker the larger share
+(about 2:1) while both want it.  Not more: at +10 a busy process on the same core starved
+acquisition (half the fixes).  Its native work (feature matching, template search, the
+detector) releases the GIL.  Issue 23's measurements: docs/benchmarks.md.
 """
 
 from __future__ import annotations
