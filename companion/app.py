@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import gc
 import logging
 import time
 from collections.abc import Callable
@@ -189,7 +190,16 @@ class CompanionApp:
         return self._slot.dropped
 
     async def run(self, seconds: float | None = None) -> None:
-        """Run until the source ends, ``seconds`` pass or :meth:`request_stop`."""
+        """Run until the source ends, ``seconds`` pass or :meth:`request_stop`.
+
+        While it runs, what start-up made (maps, models, modules) is frozen out of the
+        garbage collector's walks (``gc.freeze``, undone when it returns).  The GIL's
+        switch interval stays CPython's 5 ms: 1 ms was tried for issue 23 and did no
+        better on a loaded core (docs/benchmarks.md, "Latency tail").
+        """
+        # no gc.collect() first: the flight's clock runs already, and a full collection
+        # took 80-330 ms here under load (start-up's little garbage stays, frozen)
+        gc.freeze()
         self._tasks = [
             asyncio.create_task(self._reader(), name="reader"),
             asyncio.create_task(self._worker(), name="worker"),
@@ -206,6 +216,7 @@ class CompanionApp:
         finally:
             self.run_s = self.clock_s() - started_s
             await self._shutdown()
+            gc.unfreeze()
 
     # -- tasks ------------------------------------------------------------------------
 

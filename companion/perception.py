@@ -130,6 +130,8 @@ class Perception:
         self._last_fix_us = -(2**62)
         self._acquired_frame = -(2**62)
         self._search_turn = 0
+        self._lost_turn = False  # features (first) and the lost search take turns
+        self._search_next = False  # the template search's turn after a fruitless detector
         self.detect = detect
         self._seed = seed
         #: fixes for which the autopilot's attitude disagreed with the landmarks' (not used)
@@ -205,18 +207,39 @@ class Perception:
                 del self._rectified[old]
         image = self._rectified_image(frame) if rectified is None else rectified
         starts: list[Start] = []
-        if self._should_acquire(frame.index):
+        if fix is not None:
+            self._last_fix_us = fix.time_us
+        acquire = self._should_acquire(frame.index)
+        lost = fix is None and frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6
+        # While tracks run, one heavy step per call (they take turns, issue 23): a call that
+        # runs several holds a one-core board's next frame up by their sum.  With no track
+        # the frames carry no fix to delay: then all at once, for the quickest start.
+        spread = bool(self.tracks)
+        if acquire and lost and spread:
+            self._lost_turn = not self._lost_turn
+            acquire, lost = self._lost_turn, not self._lost_turn
+        if acquire:
             self._acquired_frame = frame.index
             starts += self._acquire(image)
         if fix is not None:
-            self._last_fix_us = fix.time_us
             starts += self._predict_acquire(image, fix, starts)
-        elif frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6:
-            found = self._detect_acquire(image) if self.detect is not None else []
-            starts += found or self._search(image)  # the search when the detector finds none
+        elif lost:
+            starts += self._find_while_lost(image, spread)
         if starts:
             with self._lock:
                 self._pending += starts
+
+    def _find_while_lost(self, image: npt.NDArray[np.uint8], spread: bool) -> list[Start]:
+        """Without a fix: the detector's hits, and the template search when they start
+        nothing -- with ``spread``, on the next call (each costs 20-45 ms of CPU)."""
+        if self.detect is not None and not self._search_next:
+            found = self._detect_acquire(image)
+            if found or not spread:
+                return found or self._search(image)
+            self._search_next = True
+            return found
+        self._search_next = False
+        return self._search(image)
 
     def _rectified_image(self, frame: Frame) -> npt.NDArray[np.uint8]:
         """The frame as tracking sees it: rectified for a distorted camera.  Housekeeping

@@ -55,8 +55,9 @@ class Reporter:
             log.warning("monitor publish failed: %s", err)
 
     def preview_due(self) -> bool:
-        """True when a preview would be published now (so it is only drawn when needed)."""
-        return self.monitor is not None and self.monitor.preview_due()
+        """True when a preview would be published now and someone watches it (so it is
+        only drawn when needed)."""
+        return self.monitor is not None and self.monitor.preview_wanted()
 
     def preview(self, jpeg: bytes) -> None:
         """Publish a preview JPEG (rate-limited by the publisher)."""

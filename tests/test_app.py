@@ -223,3 +223,23 @@ async def test_a_failing_processor_stops_the_flight_with_a_reason() -> None:
     assert app.counters.worker_errors == 1
     failed = [e for e in rec.topic("events") if e["event"] == "worker-failed"]
     assert failed and failed[0]["reason"] == "RuntimeError: boom"
+
+
+async def test_the_run_freezes_start_up_for_the_gc_and_thaws_at_the_end() -> None:
+    """Issue 23: frames are processed with start-up's objects out of the collector's walks;
+    undone when the run returns."""
+    import gc
+
+    seen: list[int] = []
+
+    class Probe(Processor):
+        def process(self, frame: Any) -> FrameResult:
+            seen.append(gc.get_freeze_count())
+            return super().process(frame)
+
+    start_up = [object() for _ in range(100)]  # what start-up made and keeps
+    app = CompanionApp(ListSource(3, period_s=0.01), Probe(), Sink(), Recorder(), "v1")
+    await asyncio.wait_for(app.run(), timeout=10)
+    assert len(seen) == 3
+    assert all(frozen >= len(start_up) for frozen in seen)
+    assert gc.get_freeze_count() == 0

@@ -87,3 +87,19 @@ def test_client_mode_without_a_router_is_a_one_line_link_error() -> None:
         MonitorPublisher(MonitorConfig(mode="client", connect=(endpoint,)), "v1")
     assert str(info.value).startswith(f"zenoh (client, {endpoint}): Unable to connect")
     assert "\n" not in str(info.value)
+
+
+def test_preview_is_wanted_only_while_someone_subscribes(
+    pair: tuple[MonitorPublisher, MonitorWatcher],
+) -> None:
+    """A preview nobody watches is not drawn (issue 23: its encoding costs the frame's core)."""
+    pub, _watcher = pair
+    assert pub.preview_wanted(now_s=100.0)  # the watcher subscribes to every topic
+    assert pub.publish_preview(b"a", now_s=100.0)
+    assert not pub.preview_wanted(now_s=100.2)  # not due yet
+    alone = MonitorPublisher(MonitorConfig(listen=(f"tcp/127.0.0.1:{free_port()}",)), "v3")
+    try:
+        assert alone.preview_due(now_s=100.0)
+        assert not alone.preview_wanted(now_s=100.0)
+    finally:
+        alone.close()

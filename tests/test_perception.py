@@ -236,3 +236,32 @@ def test_housekeeping_sees_rectified_frames_even_ones_process_let_go() -> None:
     assert len(seen) == 1 and np.array_equal(seen[0], rectified)
     assert not np.array_equal(rectified, raw)
     perception.close()
+
+
+def test_with_tracks_running_housekeeping_takes_one_heavy_step_per_call() -> None:
+    """Feature matching, the detector and the template search cost 6-45 ms of CPU each:
+    while tracks run (their frames carry fixes), one per housekeeping call, in turns
+    (issue 23); with no track, all at once for the quickest start."""
+    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=60))
+    landmarks, references = map_landmarks(sim)
+    image = sim.render(3)[0]
+
+    def run(tracks: dict[str, Any], calls_n: int) -> list[list[str]]:
+        perception = Perception(sim.scenario.camera, landmarks, references,
+                                detect=lambda _img: [])
+        calls: list[str] = []
+        for step, name in (("_acquire", "features"), ("_detect_acquire", "detector"),
+                           ("_search", "search")):
+            setattr(perception, step, lambda _img, name=name: calls.append(name) or [])
+        perception.tracks = tracks  # type: ignore[assignment]
+        per_call = []
+        for i in range(calls_n):
+            before = len(calls)
+            perception.housekeeping(Frame(i, 1_000_000 + i * 33_333, image))
+            per_call.append(calls[before:])
+        perception.close()
+        return per_call
+
+    spread = run({"running": object()}, 5)  # no fix: lost, and features are due at once
+    assert spread == [["features"], ["detector"], ["search"], ["detector"], ["search"]]
+    assert run({}, 1) == [["features", "detector", "search"]]

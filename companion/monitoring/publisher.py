@@ -72,6 +72,18 @@ class MonitorPublisher:
         now_s = time.monotonic() if now_s is None else now_s
         return now_s - self._last_preview_s >= 1.0 / self.cfg.preview_rate_hz
 
+    def preview_wanted(self, now_s: float | None = None) -> bool:
+        """Due (:meth:`preview_due`) and someone subscribes to the preview: a preview
+        nobody watches is not drawn (its resize and JPEG encoding cost the frame's cores)."""
+        if not self.preview_due(now_s):
+            return False
+        try:
+            status = self._publishers["preview"].matching_status
+        except zenoh.ZError:  # cannot tell: draw it
+            return True
+        # zenoh 1.x returns a MatchingStatus (its stubs say bool)
+        return bool(getattr(status, "matching", status))
+
     def publish_preview(self, jpeg: bytes, now_s: float | None = None) -> bool:
         """Publish a JPEG preview unless one went out less than 1/rate ago."""
         now_s = time.monotonic() if now_s is None else now_s

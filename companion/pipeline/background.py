@@ -8,18 +8,38 @@ acquisition on a stale frame is worth less than acquisition on the newest.
 
 Results and errors come back on the event loop (``on_done`` / ``on_error`` are called
 there), so whoever consumes them needs no locks.  Only for use on one event loop.
+
+The lane's thread runs at a lower scheduling priority (``nice``, default +3 over the
+process): on a core shared with the worker, the kernel gives the worker the larger share
+(about 2:1) while both want it.  Not more: at +10 a busy process on the same core starved
+acquisition (half the fixes).  Its native work (feature matching, template search, the
+detector) releases the GIL.  Issue 23's measurements: docs/benchmarks.md.
 """
 
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import logging
+import os
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 log = logging.getLogger(__name__)
+
+
+def lower_thread_priority(nice: int) -> None:
+    """Lower the calling thread's scheduling priority by ``nice`` (Linux schedules threads
+    one by one: ``setpriority`` on the thread's id); a no-op where that is not possible."""
+    if nice <= 0 or not hasattr(os, "setpriority"):
+        return
+    tid = threading.get_native_id()
+    with contextlib.suppress(OSError):
+        current = os.getpriority(os.PRIO_PROCESS, tid)
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, current + nice))
 
 
 @dataclass(frozen=True)
@@ -31,8 +51,10 @@ class _Job:
 class BackgroundLane:
     """Runs jobs one at a time on its own thread; at most one more waits (the newest)."""
 
-    def __init__(self, name: str, on_error: Callable[[BaseException], None]) -> None:
-        self._executor = concurrent.futures.ThreadPoolExecutor(1, name)
+    def __init__(self, name: str, on_error: Callable[[BaseException], None],
+                 nice: int = 3) -> None:
+        self._executor = concurrent.futures.ThreadPoolExecutor(
+            1, name, initializer=lower_thread_priority, initargs=(nice,))
         self._on_error = on_error
         self._running: asyncio.Future[Any] | None = None
         self._waiting: _Job | None = None

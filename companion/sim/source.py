@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
+import multiprocessing
 import time
 from collections import OrderedDict
 
+from companion.sim.scenario import ScenarioConfig
 from companion.sim.simulator import Simulator
 from companion.sources.base import EndOfStream, Frame, ImageU8, SourceStatus, monotonic_us
 from companion.sources.stream_format import FrameTruth
@@ -34,6 +37,13 @@ class SimCameraSource:
     camera and the fake autopilot share one clock: pass the autopilot's start time
     (``FakeAutopilot._start_ns // 1000`` or the app's equivalent).  The first frame is then
     the one due now.
+
+    ``own_process``: render in a process of its own (started here, stopped by
+    :meth:`close`), as a real camera exposes without the companion's interpreter.  In this
+    process the renderer (mostly Python) holds the GIL for 5-10 ms per frame against the
+    companion's threads; issue 23's profile found a third of the demo's samples there
+    (docs/benchmarks.md, "Latency tail").  Its CPU is then not the companion's, and
+    ``render_cpu_s`` stays 0 and ``render_cpu_elsewhere_s`` adds it up.
     """
 
     def __init__(
@@ -44,6 +54,7 @@ class SimCameraSource:
         loop: bool = False,
         seconds: float | None = None,
         t0_us: int | None = None,
+        own_process: bool = False,
     ) -> None:
         self.sim = simulator
         self.realtime = realtime
@@ -59,6 +70,23 @@ class SimCameraSource:
         self._prefetch: tuple[int, asyncio.Future[tuple[ImageU8, FrameTruth]]] | None = None
         self.render_cpu_s = 0.0
         self._render_wall_s = 1.0 / simulator.fps  # expected render time (decaying max)
+        self.render_cpu_elsewhere_s = 0.0
+        self._process: concurrent.futures.ProcessPoolExecutor | None = None
+        if own_process:  # spawned, not forked: this process runs threads (Zenoh's too)
+            self._process = concurrent.futures.ProcessPoolExecutor(
+                1, multiprocessing.get_context("spawn"), initializer=_start_renderer,
+                initargs=(simulator.scenario,))
+
+    async def start(self) -> None:
+        """Wait until the rendering process renders (it imports and builds its world
+        first): call before the camera's clock starts.  Nothing to do in this process."""
+        if self._process is not None:
+            loop = asyncio.get_running_loop()
+            await loop.run_in_executor(self._process, _render_elsewhere, 0, 0.0)
+
+    def anchor(self, t0_us: int) -> None:
+        """Scenario time 0 is ``t0_us`` on the monotonic clock (see ``t0_us`` above)."""
+        self.t0_us = t0_us
 
     def truth(self, index: int) -> FrameTruth | None:
         """Truth of a recent frame (the last few hundred are kept)."""
@@ -98,7 +126,19 @@ class SimCameraSource:
 
     def _render_async(self, index: int) -> asyncio.Future[tuple[ImageU8, FrameTruth]]:
         t_s = (index % self._frames_per_pass) / self.sim.fps
-        return asyncio.get_running_loop().run_in_executor(None, self._render_timed, index, t_s)
+        loop = asyncio.get_running_loop()
+        if self._process is not None:
+            return asyncio.ensure_future(self._render_there(loop, index, t_s))
+        return loop.run_in_executor(None, self._render_timed, index, t_s)
+
+    async def _render_there(self, loop: asyncio.AbstractEventLoop, index: int, t_s: float
+                            ) -> tuple[ImageU8, FrameTruth]:
+        assert self._process is not None
+        image, truth, took, cpu_s = await loop.run_in_executor(
+            self._process, _render_elsewhere, index, t_s)
+        self.render_cpu_elsewhere_s += cpu_s
+        self._render_wall_s = max(RENDER_TIME_DECAY * self._render_wall_s, took)
+        return image, truth
 
     async def _render_when_due(self, index: int) -> tuple[ImageU8, FrameTruth]:
         """Render frame ``index``, starting just early enough to have it when it is due."""
@@ -152,5 +192,21 @@ class SimCameraSource:
         return index
 
     def close(self) -> None:
-        """Stop delivering."""
+        """Stop delivering (and the rendering process)."""
         self._closed = True
+        if self._process is not None:
+            self._process.shutdown(wait=False, cancel_futures=True)
+
+
+_RENDERER: list[Simulator] = []  # the rendering process's own simulator
+
+
+def _start_renderer(scenario: ScenarioConfig) -> None:
+    _RENDERER[:] = [Simulator(scenario)]
+
+
+def _render_elsewhere(index: int, t_s: float) -> tuple[ImageU8, FrameTruth, float, float]:
+    """In the rendering process: frame ``index``, the wall and CPU time it took."""
+    wall, cpu = time.monotonic(), time.process_time()
+    image, truth = _RENDERER[0].render(index, t_s)
+    return image, truth, time.monotonic() - wall, time.process_time() - cpu

@@ -184,3 +184,18 @@ def test_any_pose_renders_without_error(
 @functools.cache
 def _distorted_sim() -> Simulator:
     return Simulator(load_scenario("survey_distorted"))
+
+
+async def test_sim_source_in_its_own_process_renders_the_same_frames() -> None:
+    """Rendering out of the companion's process (issue 23) gives the in-process frames."""
+    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=2.0, fps=30.0))
+    source = SimCameraSource(sim, realtime=False, own_process=True)
+    try:
+        await source.start()
+        frames = [await source.recv() for _ in range(3)]
+    finally:
+        source.close()
+    for frame in frames:
+        image, _ = sim.render(frame.index)
+        assert np.array_equal(frame.image, image)
+    assert source.render_cpu_s == 0.0 and source.render_cpu_elsewhere_s > 0.0
