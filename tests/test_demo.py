@@ -137,10 +137,10 @@ def _fake_config_of(argv: list[str], monkeypatch: pytest.MonkeyPatch) -> Any:
     return seen[0]
 
 
-def test_the_fake_autopilot_attitude_is_an_ekfs_unless_exact_attitude(
+def test_attitude_error_flag_makes_the_fake_autopilot_drift(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """By default the demo's fake autopilot reports an attitude with a real EKF's error
-    (``AttitudeErrorConfig``'s defaults); ``--exact-attitude`` gives the old exact one."""
-    drift = _fake_config_of([], monkeypatch).attitude_error
+    """`--attitude-error` hands the fake autopilot a real EKF's error (the fake's default
+    ``AttitudeErrorConfig``); without it the demo's attitude is exact."""
+    assert _fake_config_of([], monkeypatch).attitude_error is None
+    drift = _fake_config_of(["--attitude-error"], monkeypatch).attitude_error
     assert drift == AttitudeErrorConfig() and drift.yaw_sigma_deg >= 3.0
-    assert _fake_config_of(["--exact-attitude"], monkeypatch).attitude_error is None

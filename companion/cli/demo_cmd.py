@@ -25,14 +25,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--scenario", default="survey",
                         help="scenario name in config/scenarios/ or a TOML file (default survey)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    parser.add_argument("--exact-attitude", action="store_true",
-                        help="the fake autopilot reports the simulator's exact attitude; "
-                        "default: a real EKF's error (1 deg roll/pitch, 3 deg yaw, 1 deg/min "
-                        "yaw drift)")
+    parser.add_argument("--attitude-error", action="store_true",
+                        help="the fake autopilot's attitude carries a real EKF's error (1 deg "
+                        "roll/pitch, 3 deg yaw, 1 deg/min yaw drift); default: the exact one")
     parser.add_argument("--deployment-prior", action="store_true",
                         help="state the autopilot's attitude to the pose solver with the "
                         "configured sigmas (pose.attitude_*_sigma_deg, a few degrees); "
-                        "default: the fake autopilot's real error, as --exact-attitude sets it")
+                        "default: the fake autopilot's real error (0.2 / 1 deg when exact)")
     parser.set_defaults(handler=run, shipped=SIM_LAYERS)
 
 
@@ -46,7 +45,7 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         sys.stderr.flush()
 
     result = asyncio.run(run_demo(settings, args.scenario, args.seconds,
-                                  progress if live else None, args.exact_attitude,
+                                  progress if live else None, args.attitude_error,
                                   args.deployment_prior))
     if live:
         sys.stderr.write("\n")
