@@ -64,6 +64,7 @@ from tracker.boxes import (
     saturated_share,
 )
 from tracker.camera import CameraModel, Rectifier
+from tracker.pose.attitude_bias import AttitudeBias
 from tracker.pose.config import PoseConfig
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.solve import solve_pose
@@ -136,6 +137,9 @@ class Perception:
         self._seed = seed
         #: fixes for which the autopilot's attitude disagreed with the landmarks' (not used)
         self.attitude_rejections = 0
+        #: the autopilot's attitude error learnt from the fixes (tracker/pose/attitude_bias.py)
+        self.attitude_bias = AttitudeBias(self.pose_config) \
+            if self.pose_config.learn_attitude_bias else None
         self._frames = 0
 
     def process(self, frame: Frame) -> FrameResult:
@@ -527,9 +531,13 @@ class Perception:
                                tuple(events))
         particles = {t.landmark_id: t.tracker.particle_centres for t in self.tracks.values()}
         side = self.sensors(frame.t_us)
+        bias = self.attitude_bias
+        attitude = side.attitude if bias is None else bias.correct(side.attitude)
         fix = solve_pose(self.observations(frame.index), self.landmarks, self.camera,
-                         frame.t_us, attitude=side.attitude, altitude=side.altitude,
+                         frame.t_us, attitude=attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
+        if bias is not None:
+            bias.learn(side.attitude, fix)
         if isinstance(fix, NoFix):
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
                                particles=particles)

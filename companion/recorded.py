@@ -134,9 +134,9 @@ class RecordedTruth:
 
 class TruthAttitude:
     """Frames' attitude from a recorded stream's ``truth_pose.csv``, plus the error an
-    autopilot's estimate has (``AttitudeErrorConfig`` defaults: 0.2 deg roll/pitch, 1 deg
-    yaw, a Gauss-Markov process with a 20 s correlation time, the pose solver's stated
-    attitude noise), for checking a recording offline without an autopilot."""
+    autopilot's estimate has (``AttitudeErrorConfig`` defaults: a real EKF's 1 deg
+    roll/pitch and 3 deg yaw Gauss-Markov error with a 1 deg/min yaw drift), for checking a
+    recording offline without an autopilot."""
 
     def __init__(self, truth: RecordedTruth, error: AttitudeErrorConfig | None = None,
                  seed: int = 0) -> None:

@@ -99,9 +99,10 @@ class FakeAutopilotConfig:
     send_truth: bool = True
     # where truth NED (0, 0, 0) is (lat_deg, lon_deg, alt_m); None: the EKF origin once set
     home: tuple[float, float, float] | None = None
-    # an extra slowly varying error on ATTITUDE (and the heading of GLOBAL_POSITION_INT) on
-    # top of the estimator's; None: none.  Truth streams (SIM_STATE ...) stay exact.
-    attitude_error: AttitudeErrorConfig | None = None
+    # the slowly varying error a real EKF's ATTITUDE (and GLOBAL_POSITION_INT's heading)
+    # carries, on top of the estimator's coupled one (fake_drift: 1 deg roll/pitch, 3 deg yaw,
+    # 1 deg/min yaw drift); None: the exact attitude.  Truth streams (SIM_STATE ...) stay exact.
+    attitude_error: AttitudeErrorConfig | None = field(default_factory=AttitudeErrorConfig)
     # DISTANCE_SENSOR's orientation (MAV_SENSOR_ORIENTATION): 25 (PITCH_270) a downward
     # range finder, ArduPilot's RNGFND1_ORIENT default; 0 (NONE) a forward one
     rangefinder_orientation: int = 25
@@ -127,8 +128,9 @@ class FakeAutopilotConfig:
 
     @classmethod
     def permissive(cls, **kw: Any) -> FakeAutopilotConfig:
-        """The old fake: every stream without asking, fixes judged against the truth."""
-        return cls(**{"streams": "all", "judge": "truth", **kw})
+        """The old fake: every stream without asking, fixes judged against the truth, the
+        exact attitude."""
+        return cls(**{"streams": "all", "judge": "truth", "attitude_error": None, **kw})
 
 
 _TRUTH_BY_PROFILE: dict[str, tuple[str, ...]] = {

@@ -50,6 +50,7 @@ from companion.sim.source import SimCameraSource
 from companion.sources.base import Frame
 from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.fake_drift import AttitudeErrorConfig
 from mavlink_bridge.fake_rules import VisionRecord
 from tracker.pose.types import PoseFix
 
@@ -231,14 +232,16 @@ Script = Callable[["Flight"], Awaitable[None]]
 
 
 def sitl_settings(tmp: Path, *, profile: str = "ardupilot", monitor: bool = False,
-                  deployment_prior: bool = False, **sections: dict[str, Any]) -> Settings:
+                  deployment_prior: bool = False, stated_for_s: float = 60.0,
+                  **sections: dict[str, Any]) -> Settings:
     """The default configuration, flight logs in ``tmp``, monitoring off unless asked, and
-    ``section={key: value}`` overrides.  The attitude prior states the fake autopilot's own
-    accuracy (0.2 deg / 1 deg, as ``companion demo`` does) unless ``deployment_prior``:
+    ``section={key: value}`` overrides.  The attitude prior states the default fake
+    autopilot's real attitude error over a flight of ``stated_for_s`` (as ``companion demo``
+    does: 1 deg roll/pitch, 3.2 deg yaw with a minute's drift) unless ``deployment_prior``:
     then the configured default (2.5 deg / 5 deg, docs/decisions.md)."""
     s = load_settings(sets=[f"vehicle.profile={profile}"], shipped=SIM_LAYERS)
     if not deployment_prior:
-        s = with_fake_attitude_sigmas(s)
+        s = with_fake_attitude_sigmas(s, AttitudeErrorConfig(), stated_for_s)
     s = dataclasses.replace(s, flightlog=dataclasses.replace(s.flightlog, dir=str(tmp)),
                             monitor=dataclasses.replace(s.monitor, enabled=monitor))
     for name, values in sections.items():

@@ -45,7 +45,8 @@ def coupled() -> FakeAutopilotConfig:
     model = AttitudeModel(initial_deg=(5.0, 5.0, 5.0), yaw_drift_deg_min=2.0, coupled=True)
     return FakeAutopilotConfig(
         vehicle="guided", guided_start=(3.0, 0.0, 0.0, 90.0), guided_airborne_m=4.0,
-        estimator=EstimatorConfig(attitude=model))
+        estimator=EstimatorConfig(attitude=model),
+        attitude_error=None)  # the error exactly: the coupled model's, nothing on top
 
 
 def hover_errors(tmp_path: Path, *extra: str, seconds: float = FLIGHT_S

@@ -4,7 +4,8 @@ On ArduPilot SITL's square, the leg from (6, 0) to (6, 6) sees one landmark with
 corners, and the companion gave no fix for 6-7 s ("one landmark without corners and no
 attitude: pose unobservable"): the EKF dropped its position.  Here the companion hovers
 10 m in front of wall-04 alone (config/scenarios/one_landmark.toml) with the fake
-autopilot's attitude (exact, stated with the deployment default 2.5 deg / 5 deg), height
+autopilot's attitude (its default EKF error, 1 deg / 3 deg, stated with the deployment
+default 2.5 deg / 5 deg), height
 (LOCAL_POSITION_NED) and, when configured, a forward
 range finder (DISTANCE_SENSOR orientation 0) -- the side sensors of
 :class:`companion.sensors.SensorHistory`:
@@ -17,8 +18,8 @@ range finder (DISTANCE_SENSOR orientation 0) -- the side sensors of
 Each proves that the only landmark in view is wall-04 for at least 10 s, that fixes then
 come on >= 80 % of the frames with no gap over 1 s, and that the NEES of >= 90 % of them
 stays below the 95 % bound of chi-square with 3 DOF (7.815): the covariance says how weak
-they are.  (One-sided: the fake autopilot's attitude is exact while the solver is told
-2.5 deg / 5 deg, so the box fixes' errors are far inside their sigma, NEES ~0.1-0.7; a
+they are.  (One-sided: the fake autopilot's attitude error is smaller than the 2.5 deg /
+5 deg the solver is told, so the box fixes' errors are inside their sigma; a
 covariance too cautious is not the danger, one that hides the error is.)
 
 The corner case does not hold: one plate's corners are not independent:

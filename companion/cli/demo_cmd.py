@@ -26,12 +26,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="scenario name in config/scenarios/ or a TOML file (default survey)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     parser.add_argument("--attitude-error", action="store_true",
-                        help="the fake autopilot's attitude drifts as a real estimate does "
-                        "(0.2 deg roll/pitch, 1 deg yaw); default: the exact attitude")
+                        help="the fake autopilot's attitude carries a real EKF's error (1 deg "
+                        "roll/pitch, 3 deg yaw, 1 deg/min yaw drift); default: the exact one")
     parser.add_argument("--deployment-prior", action="store_true",
                         help="state the autopilot's attitude to the pose solver with the "
                         "configured sigmas (pose.attitude_*_sigma_deg, a few degrees); "
-                        "default: the fake autopilot's own accuracy, 0.2 deg / 1 deg")
+                        "default: the fake autopilot's real error (0.2 / 1 deg when exact)")
     parser.set_defaults(handler=run, shipped=SIM_LAYERS)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -19,7 +20,8 @@ def test_error_has_the_stated_sigma_and_correlation_time() -> None:
     """Over 40 correlation times the error's spread is the configured sigma per axis, its
     autocorrelation at one correlation time is exp(-1), and it is continuous (a frame
     later it has barely moved, unlike white noise)."""
-    cfg = AttitudeErrorConfig(roll_pitch_sigma_deg=0.2, yaw_sigma_deg=1.0, correlation_s=5.0)
+    cfg = AttitudeErrorConfig(roll_pitch_sigma_deg=0.2, yaw_sigma_deg=1.0, correlation_s=5.0,
+                              yaw_correlation_s=5.0, yaw_drift_deg_min=0.0)
     drift = AttitudeDrift(cfg, seed=3)
     t = np.arange(0.0, 4000.0, 0.5)
     e = np.degrees(np.array([drift.error(float(x)) for x in t]))
@@ -39,8 +41,32 @@ def test_error_is_a_function_of_time_and_seed() -> None:
     assert a.error(2.0) == b.error(2.0)  # b asked in another order
     assert b.error(30.0) == late and a.error(30.0) == late
     assert AttitudeDrift(cfg, seed=2).error(30.0) != late
-    none = AttitudeDrift(AttitudeErrorConfig(roll_pitch_sigma_deg=0.0, yaw_sigma_deg=0.0))
+    none = AttitudeDrift(AttitudeErrorConfig(roll_pitch_sigma_deg=0.0, yaw_sigma_deg=0.0,
+                                             yaw_drift_deg_min=0.0))
     assert none.error(12.0) == (0.0, 0.0, 0.0)
+
+
+def test_the_default_is_a_real_ekfs_error_with_a_slow_yaw_drift() -> None:
+    """The fake autopilot's default attitude is not exact: 1 deg roll/pitch, 3 deg yaw
+    (stationary, slow) plus 1 deg/min of yaw drift -- what the harness and the demo state."""
+    from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
+
+    cfg = FakeAutopilotConfig().attitude_error
+    assert cfg is not None and FakeAutopilotConfig.permissive().attitude_error is None
+    only_drift = AttitudeDrift(AttitudeErrorConfig(roll_pitch_sigma_deg=0.0,
+                                                   yaw_sigma_deg=0.0), seed=0)
+    assert math.degrees(only_drift.error(300.0)[2]) == pytest.approx(5.0)  # 1 deg/min
+    coarse = dataclasses.replace(cfg, step_s=1.0)  # the same process on a 1 s grid
+    t = np.arange(0.0, 3600.0, 1.0)
+    drifts = [AttitudeDrift(coarse, seed=k) for k in range(6)]
+    runs = [np.degrees([d.error(float(x)) for x in t]) for d in drifts]
+    wander = np.concatenate([r - np.outer(t, [0.0, 0.0, cfg.yaw_drift_deg_min / 60.0])
+                             for r in runs])
+    assert np.std(wander, axis=0) == pytest.approx([1.0, 1.0, 3.0], rel=0.2)
+    yaw_step = np.abs(np.diff(runs[0][:, 2]))  # a second apart: slow, not white noise
+    assert np.percentile(yaw_step, 95) < 1.0
+    assert cfg.stated_sigmas_deg(0.0) == (1.0, 3.0)
+    assert cfg.stated_sigmas_deg(240.0)[1] == pytest.approx(5.0)  # hypot(3, 4 min drift)
 
 
 def test_yaw_wraps() -> None:
