@@ -239,7 +239,9 @@ def _attitude(settings: Settings, truth: RecordedTruth, telemetry: TelemetryRepl
     if attitude is not None:
         from companion.demo import with_fake_attitude_sigmas
 
-        settings = with_fake_attitude_sigmas(settings)  # the solver is told that noise
+        seconds = max((t for t, _ in truth.poses.values()), default=0) / 1e6
+        # the solver is told that noise, drift over the recording included
+        settings = with_fake_attitude_sigmas(settings, attitude.config, seconds)
     said = ("the recording's ATTITUDE (telemetry.csv), replayed by the fake autopilot"
             if uses_telemetry else "truth_pose.csv with an autopilot's stated noise "
             "(no recorded telemetry)" if attitude is not None else "the fake autopilot's")
