@@ -146,6 +146,9 @@ class TruthAttitude:
         self.truth = truth
         self.config = error or AttitudeErrorConfig()
         self.drift = AttitudeDrift(self.config, seed)
+        # the error's clock starts with the recording (a live recording keeps the recorder's
+        # monotonic times: its yaw drift must not count the recorder's uptime)
+        self.t0_us = min((t for t, _ in truth.poses.values()), default=0)
         log.warning("attitude from %s with a simulated autopilot error (1-sigma %g deg "
                     "roll/pitch, %g deg yaw, correlation %g s), not from the autopilot",
                     Path(truth.folder) / "truth_pose.csv", self.config.roll_pitch_sigma_deg,
@@ -160,6 +163,6 @@ class TruthAttitude:
         if found is None:
             return None
         recorded_us, pose = found
-        er, ep, ey = self.drift.error(recorded_us / 1e6)
+        er, ep, ey = self.drift.error((recorded_us - self.t0_us) / 1e6)
         return AttitudeSample(t_us, pose.roll_rad + er, pose.pitch_rad + ep,
                               math.remainder(pose.yaw_rad + ey, math.tau))

@@ -40,7 +40,9 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
         return dataclasses.replace(s, attitude_rpy_rad=(r, p, y + math.radians(YAW_OFFSET_DEG)))
 
     out = base / "v2"
-    with fake_in_thread(FakeAutopilotConfig(endpoint="udpin:127.0.0.1:0"), offset) as fake:
+    # the exact attitude plus the offset (no EKF-sized error): what is recorded is known
+    config = FakeAutopilotConfig(endpoint="udpin:127.0.0.1:0", attitude_error=None)
+    with fake_in_thread(config, offset) as fake:
         assert main(["record", "--config", str(SIM_LAYER), "--source", "sim:hover",
                      "--seconds", "3", "--out", str(out),
                      "--autopilot", f"udpout:127.0.0.1:{fake.local_port}"]) == 0
