@@ -169,6 +169,10 @@ def run_once(folder: Path, args: argparse.Namespace, seed: int) -> dict[str, Any
                                          for i in fix.landmark_ids])))
         cov = np.asarray(fix.covariance)[:3, :3]
         score.nees.append(float(err @ np.linalg.solve(cov, err)))
+        if args.dump:
+            print(f"frame {frame.index} fix {','.join(fix.landmark_ids)} error "
+                  f"{score.err[-1]:.3f} m sigma {np.sqrt(np.trace(cov)):.3f} m NEES "
+                  f"{score.nees[-1]:.1f}")
     perception.close()
     return score.summary()
 
@@ -186,6 +190,7 @@ def main() -> int:
                         help="a track whose box overlaps its landmark's truth box less is "
                         "on a wrong place")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--dump", action="store_true", help="print every fix")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     results = [run_once(args.stream, args, seed) for seed in range(args.runs)]

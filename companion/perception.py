@@ -74,7 +74,7 @@ from tracker.pose.types import (
     PoseFix,
 )
 from tracker.types import Box, TrackResult
-from tracker.verify import appearance_ncc, fit_corner_sigma, quad_iou
+from tracker.verify import check_appearance, detail_ncc, quad_iou
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -184,8 +184,9 @@ class Perception:
         events: list[dict[str, Any]] = []
         cfg = self.config
         for track in list(self.tracks.values()):
-            ncc = 0.0 if track.homography is None else appearance_ncc(
+            ncc, fit = (0.0, None) if track.homography is None else check_appearance(
                 self.matcher.references[track.landmark_id], image, track.homography)
+            track.fit_sigma = fit if cfg.corner_sigma_from_fit else None
             track.verify_failures = 0 if ncc >= cfg.track_appearance_ncc \
                 else track.verify_failures + 1
             if track.verify_failures >= cfg.max_verify_failures:
@@ -277,11 +278,6 @@ class Perception:
         if track.homography is None or track.misses >= self.config.max_corner_misses:
             self._recover_corners(track, image)
         track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
-        track.fit_sigma = None
-        if track.corners is not None and track.homography is not None \
-                and self.config.corner_sigma_from_fit:
-            track.fit_sigma = fit_corner_sigma(self.matcher.references[track.landmark_id],
-                                               image, track.homography)
         return True
 
     def _align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
@@ -377,7 +373,7 @@ class Perception:
                corners: FloatArray, by: str, starts: Sequence[Start]) -> list[Start]:
         """A tracker for landmark ``lid`` in ``box`` with a homography, verified first by
         the appearance it warps onto the frame (none when that does not match)."""
-        ncc = appearance_ncc(self.matcher.references[lid], image, hom)
+        ncc = detail_ncc(self.matcher.references[lid], image, hom)
         if ncc < self.config.min_appearance_ncc:
             return []
         busy = self._busy(starts)

@@ -57,9 +57,10 @@ class PerceptionConfig:
     #: The corners' 1-sigma is the larger of the size model above and the alignment's own
     #: fit (tracker.verify.fit_corner_sigma: residual and gradient of the warped appearance).
     corner_sigma_from_fit: bool = True
-    #: Every new track is verified by its appearance warped by the homography found: its
-    #: normalised correlation with the frame (light-normalised) must reach this.
-    min_appearance_ncc: float = field(default=0.6, metadata={"gt": 0, "le": 1})
+    #: Every new track is verified by its appearance warped by the homography found: the
+    #: normalised correlation of its detail with the frame's (light-normalised,
+    #: tracker.verify.detail_ncc) must reach this.
+    min_appearance_ncc: float = field(default=0.65, metadata={"gt": 0, "le": 1})
     #: Every this many frames each track is checked the same way; under
     #: ``track_appearance_ncc`` (or without corners) it is unverified: left out of the fix,
     #: and dropped after ``max_verify_failures`` checks in a row.
@@ -125,7 +126,7 @@ class Track:
     #: the colour feature the corners are aligned on: the tracker's best at acquisition,
     #: when the box was verified (None: grey levels)
     align_weights: Weights | None = None
-    #: corner 1-sigma (px) from the last alignment's fit (None: not known)
+    #: corner 1-sigma (px) from the alignment's fit at the last check (None: not known)
     fit_sigma: float | None = None
     #: appearance checks failed in a row (0: the last check found the landmark)
     verify_failures: int = 0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tracker.acquire import ReferenceMatcher, homography_to
-from tracker.verify import appearance_ncc, fit_corner_sigma, quad_iou
+from tracker.verify import appearance_ncc, detail_ncc, fit_corner_sigma, quad_iou
 
 
 def textured(rng: np.random.Generator, w: int, h: int, cell: int) -> np.ndarray:
@@ -68,3 +68,22 @@ def test_outlines_are_compared_as_quadrilaterals() -> None:
     assert quad_iou(corners, corners) == pytest.approx(1.0)
     assert quad_iou(corners, corners + np.array([45.0, 0.0])) < 0.6
     assert quad_iou(corners, corners + np.array([400.0, 0.0])) == 0.0
+
+
+def test_broad_shading_alone_is_not_the_plate() -> None:
+    """Ground whose shading follows the plate's broad light and dark areas (what an
+    alignment fitted to plain ground makes of it) correlates with the plate; its detail
+    does not."""
+    rng = np.random.default_rng(3)
+    broad = np.tile(np.linspace(40.0, 210.0, 120), (80, 1))  # dark left, bright right
+    plate = np.clip(broad + rng.normal(0, 25, (80, 120)), 0, 255).astype(np.uint8)
+    ground = np.clip(broad + rng.normal(0, 25, (80, 120)), 0, 255).astype(np.uint8)
+    frame = np.full((240, 320, 3), 120, np.uint8)
+    frame[80:160, 100:220] = ground[..., None]
+    ref = ReferenceMatcher().add("p", cv2.cvtColor(plate, cv2.COLOR_GRAY2BGR))
+    hom = homography_to(ref, np.array([[99.5, 79.5], [219.5, 79.5], [219.5, 159.5],
+                                       [99.5, 159.5]]))
+    assert appearance_ncc(ref, frame, hom) > 0.6
+    assert detail_ncc(ref, frame, hom) < 0.3
+    frame[80:160, 100:220] = plate[..., None]
+    assert detail_ncc(ref, frame, hom) > 0.9
