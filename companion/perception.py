@@ -491,7 +491,7 @@ class Perception:
         tracks = [t for t in self.tracks.values() if t.verify_failures == 0]
         usable = {t.landmark_id: t.corners is not None
                   and in_view_share(t.corners, *size) >= cfg.min_corner_in_view
-                  and t.saturated <= cfg.max_corner_saturated
+                  and t.saturated <= cfg.max_corner_saturated and self._fits(t)
                   for t in tracks}
         if any(usable.values()):
             tracks = [t for t in tracks if usable[t.landmark_id]]
@@ -513,6 +513,14 @@ class Perception:
                                                                       t.fit_sigma),
                                    corner_scale_sigma_px=scale))
         return out
+
+    def _fits(self, track: Track) -> bool:
+        """The alignment's fit sigma is within ``max_fit_sigma_ratio`` of the size model's."""
+        if track.fit_sigma is None or track.corners is None:
+            return True
+        corners = [(float(u), float(v)) for u, v in track.corners]
+        model = self._corner_sigma(corners) or 0.0
+        return track.fit_sigma <= self.config.max_fit_sigma_ratio * model
 
     def _stretch(self, corners: Sequence[tuple[float, float]]) -> float:
         """Rectified px per raw px at the plate's centre (1 without rectification)."""

@@ -57,6 +57,10 @@ class PerceptionConfig:
     #: The corners' 1-sigma is the larger of the size model above and the alignment's own
     #: fit (tracker.verify.fit_corner_sigma: residual and gradient of the warped appearance).
     corner_sigma_from_fit: bool = True
+    #: ... and a track's corners are not used when the fit's sigma exceeds the size model's
+    #: by this factor: the alignment sits wrong on the plate (a real crop's corners 2-8 px
+    #: off with a fit sigma 3-9x the model's, where the plates aligned right had <= 1.2x).
+    max_fit_sigma_ratio: float = field(default=2.5, metadata={"gt": 1})
     #: Every new track is verified by its appearance warped by the homography found: the
     #: normalised correlation of its detail with the frame's (light-normalised,
     #: tracker.verify.detail_ncc) must reach this.

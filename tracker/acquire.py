@@ -37,6 +37,9 @@ class AcquireConfig:
     """
 
     features: Literal["sift", "orb"] = "sift"
+    #: SIFT's contrast threshold (OpenCV's default 0.04 finds half as many keypoints on
+    #: plates in 55 % light; 0.02 found 67 of 142 plates in view, 0.04 44, none wrong)
+    sift_contrast_threshold: float = field(default=0.02, metadata={"gt": 0})
     max_features: int = field(default=1500, metadata={"ge": 100})
     reference_max_side_px: int = field(default=320, metadata={"ge": 32})
     ratio: float = field(default=0.8, metadata={"gt": 0, "lt": 1})
@@ -105,7 +108,9 @@ class ReferenceMatcher:
     def __init__(self, config: AcquireConfig | None = None) -> None:
         self.config = config or AcquireConfig()
         if self.config.features == "sift":
-            self._features: cv2.Feature2D = cv2.SIFT.create(nfeatures=self.config.max_features)
+            self._features: cv2.Feature2D = cv2.SIFT.create(
+                nfeatures=self.config.max_features,
+                contrastThreshold=self.config.sift_contrast_threshold)
             self._matcher = cv2.BFMatcher(cv2.NORM_L2)
         else:
             self._features = cv2.ORB.create(nfeatures=self.config.max_features, fastThreshold=10)
