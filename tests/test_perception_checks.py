@@ -71,12 +71,16 @@ def test_a_track_on_its_landmark_passes_the_check_and_states_the_fit_sigma() -> 
     track = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
     p.tracks["p"] = track
     assert p._verify_tracks(frame) == [] and track.verify_failures == 0
-    track.fit_sigma = 5.0
-    (obs,) = p.observations(0)
-    assert obs.corner_sigma_px == 5.0  # larger than the size model's
     track.fit_sigma = 1e-4
     (obs,) = p.observations(0)
-    assert obs.corner_sigma_px == p._corner_sigma(obs.corners_px)
+    model = p._corner_sigma(obs.corners_px)
+    assert model is not None and obs.corner_sigma_px == model
+    track.fit_sigma = 2.0 * model
+    (obs,) = p.observations(0)
+    assert obs.corner_sigma_px == 2.0 * model  # the fit's, larger than the size model's
+    track.fit_sigma = 3.0 * model  # beyond max_fit_sigma_ratio: the alignment sits wrong
+    (obs,) = p.observations(0)
+    assert obs.corners_px is None
 
 
 def test_a_light_step_is_noticed_and_makes_acquisition_due() -> None:
