@@ -466,6 +466,13 @@ class Perception:
             starts += self._start(lid, image, box, aligned, quad, "prediction", starts)
         return starts[len(earlier):]
 
+    def _distance(self, fix: PoseFix) -> float:
+        """Mean distance (m) from the fix to the landmarks it used."""
+        pos = np.asarray(fix.position_ned_m)
+        used = [lm for lm in self.landmarks if lm.landmark_id in fix.landmark_ids]
+        return float(np.mean([np.linalg.norm(pos - np.asarray(lm.position_ned_m))
+                              for lm in used])) if used else 0.0
+
     def _project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
         """The landmark's corners in the image for the vehicle pose of ``fix``."""
         corners_ned = landmark_corners_ned(lm)
@@ -547,7 +554,7 @@ class Perception:
         width = max(float(np.ptp(quad[:, 0])), 1.0)
         model = float(s * self.pose_config.pixel_sigma_px
                       * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
-        return model if fit is None else max(model, fit)
+        return model if fit is None else max(model, cfg.fit_sigma_scale * fit)
 
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
         tracks = tuple(
@@ -572,6 +579,10 @@ class Perception:
             why = next(n for n in fix.notes if n.startswith("attitude prior rejected"))
             events.append({"event": "attitude prior rejected", "detail": why,
                            "count": self.attitude_rejections})
+        if not self.gate.precise(fix, self._distance(fix)):
+            return FrameResult(frame.index, frame.t_us, tracks, None,
+                               "held back: too vague for its distance", tuple(events),
+                               particles=particles)
         if not self.gate.admit(fix):
             return FrameResult(frame.index, frame.t_us, tracks, None,
                                "held back: inconsistent with recent fixes", tuple(events),

@@ -61,6 +61,9 @@ class PerceptionConfig:
     #: by this factor: the alignment sits wrong on the plate (a real crop's corners 2-8 px
     #: off with a fit sigma 3-9x the model's, where the plates aligned right had <= 1.2x).
     max_fit_sigma_ratio: float = field(default=2.5, metadata={"gt": 1})
+    #: The fit sigma times this is stated: the fit knows the noise, not the bias JPEG and
+    #: resampling leave (real crops' corner errors were ~1.5x the fit sigma, RMS).
+    fit_sigma_scale: float = field(default=2.0, metadata={"ge": 1})
     #: Every new track is verified by its appearance warped by the homography found: the
     #: normalised correlation of its detail with the frame's (light-normalised,
     #: tracker.verify.detail_ncc) must reach this.
