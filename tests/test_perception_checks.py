@@ -77,7 +77,8 @@ def test_a_track_on_its_landmark_passes_the_check_and_states_the_fit_sigma() -> 
     assert model is not None and obs.corner_sigma_px == model
     track.fit_sigma = 2.0 * model
     (obs,) = p.observations(0)
-    assert obs.corner_sigma_px == 2.0 * model  # the fit's, larger than the size model's
+    scale = p.config.fit_sigma_scale  # the fit's (scaled), larger than the size model's
+    assert obs.corner_sigma_px == scale * 2.0 * model
     track.fit_sigma = 3.0 * model  # beyond max_fit_sigma_ratio: the alignment sits wrong
     (obs,) = p.observations(0)
     assert obs.corners_px is None
