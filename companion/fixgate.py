@@ -34,7 +34,7 @@ class FixGateConfig:
     slack_m: float = field(default=0.3, metadata={"ge": 0})
     max_gap_s: float = field(default=1.0, metadata={"gt": 0})
     confirm: int = field(default=3, metadata={"ge": 1})
-    max_sigma_rel: float = field(default=0.05, metadata={"gt": 0})
+    max_sigma_rel: float = field(default=0.0, metadata={"ge": 0})  # 0: off
 
 
 @dataclass
@@ -55,7 +55,10 @@ class FixGate:
         return math.dist(a.position_ned_m, b.position_ned_m) <= limit
 
     def precise(self, fix: PoseFix, distance_m: float) -> bool:
-        """The fix's position 1-sigma is at most ``max_sigma_rel`` of ``distance_m``."""
+        """The fix's position 1-sigma is at most ``max_sigma_rel`` of ``distance_m``
+        (always, when ``max_sigma_rel`` is 0)."""
+        if self.config.max_sigma_rel <= 0.0:
+            return True
         sigma = math.sqrt(float(np.trace(np.asarray(fix.covariance)[:3, :3])))
         return sigma <= self.config.max_sigma_rel * distance_m
 

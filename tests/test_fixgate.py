@@ -18,3 +18,7 @@ def test_a_fix_whose_sigma_exceeds_its_share_of_the_distance_is_not_precise() ->
     assert gate.precise(fix(0.9), 20.0)  # 4.5 % of 20 m
     assert not gate.precise(fix(1.1), 20.0)  # 5.5 %
     assert not gate.precise(fix(0.1), 0.0)  # no distance: nothing is precise enough
+
+
+def test_the_vagueness_check_is_off_by_default() -> None:
+    assert FixGate().precise(fix(100.0), 1.0)
