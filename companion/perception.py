@@ -237,7 +237,7 @@ class Perception:
                 del self._rectified[old]
         image = self._rectified_image(frame) if rectified is None else rectified
         starts: list[Start] = []
-        if self._should_acquire(frame.index):
+        if self._should_acquire(frame):
             self._acquired_frame = frame.index
             starts += self._acquire(image)
         if fix is not None:
@@ -350,11 +350,16 @@ class Perception:
         return lid in self.tracks or lid in waiting or any(
             s.track.landmark_id == lid for s in starts)
 
-    def _should_acquire(self, frame_index: int) -> bool:
-        if self._busy() >= self.config.max_tracks:
+    def _should_acquire(self, frame: Frame) -> bool:
+        """Feature matching is due: nothing tracked, or ``acquire_every_frames`` since the
+        last (``acquire_every_frames_with_fix`` while fixes come: prediction then finds the
+        plates in view, at a fraction of SIFT's cost)."""
+        cfg = self.config
+        if self._busy() >= cfg.max_tracks:
             return False
-        due = frame_index - self._acquired_frame >= self.config.acquire_every_frames
-        return not self.tracks or due
+        recent_fix = frame.t_us - self._last_fix_us <= cfg.search_after_s * 1e6
+        every = cfg.acquire_every_frames_with_fix if recent_fix else cfg.acquire_every_frames
+        return not self.tracks or frame.index - self._acquired_frame >= every
 
     def _acquire(self, image: npt.NDArray[np.uint8]) -> list[Start]:
         wanted = [lid for lid, ref in self.matcher.references.items()

@@ -28,6 +28,7 @@ class PerceptionConfig:
     """How often to look for untracked landmarks and how far to trust a track."""
 
     acquire_every_frames: int = field(default=15, metadata={"ge": 1})
+    acquire_every_frames_with_fix: int = field(default=60, metadata={"ge": 1})
     max_tracks: int = field(default=8, metadata={"ge": 1})
     min_track_confidence: float = field(default=0.2, metadata={"ge": 0, "le": 1})
     refine_corners: bool = True

@@ -8,6 +8,7 @@ import numpy as np
 
 from companion.perception import Perception
 from companion.perception_types import Track
+from companion.sources.base import Frame
 from tests.acquire.test_verify import scene
 from tracker.acquire import homography_to, project_corners
 from tracker.camera import CameraModel
@@ -85,10 +86,12 @@ def test_a_track_on_its_landmark_passes_the_check_and_states_the_fit_sigma() -> 
 
 
 def test_a_light_step_is_noticed_and_makes_acquisition_due() -> None:
-    frame, plate, _ = scene()
+    frame, plate, corners = scene()
     p = perception(plate)
+    p.tracks["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
+    p._acquired_frame, p._last_fix_us = 100, 3_333_333  # acquired, and a fix, last frame
     assert not p._light_step(frame)
     assert not p._light_step((frame * 0.9).astype(np.uint8))
-    p._acquired_frame = 100
+    assert not p._should_acquire(Frame(101, 3_366_666, frame))
     assert p._light_step(np.clip(frame * 1.6, 0, 255).astype(np.uint8))
-    assert p._should_acquire(101)
+    assert p._should_acquire(Frame(101, 3_366_666, frame))
