@@ -16,7 +16,10 @@ of its stated sigmas (``perception_survey.noisy_attitude``).  Prints, per run:
 * ``first_fix_after_step_s``: time from ``--light-step-s`` to the next fix.
 
     PYTHONPATH=. python benchmarks/perception_stream.py STREAM [--runs 3] [--deployment]
-        [--light-step-s 12] [--frames N] [--json]
+        [--light-step-s 12] [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
+
+Real-imagery worlds are measured with ``--set 'acquire.features="sift"' --set
+acquire.min_inliers=6`` (the sim layer keeps ORB for the renderer's plates).
 """
 
 from __future__ import annotations
@@ -122,7 +125,7 @@ def run_once(folder: Path, args: argparse.Namespace, seed: int) -> dict[str, Any
     truth = read_truth(folder)
     landmarks, refs = load_stream_map(folder)
     by_id = {lm.landmark_id: lm for lm in landmarks}
-    settings = load_settings(shipped=() if args.deployment else SIM_LAYERS)
+    settings = load_settings(sets=args.set, shipped=() if args.deployment else SIM_LAYERS)
 
     def sensors(t_us: int) -> SideSensors:
         ft = truth_by_time.get(t_us)
@@ -191,6 +194,8 @@ def main() -> int:
                         "on a wrong place")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--dump", action="store_true", help="print every fix")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a setting, as companion --set does (repeat)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     results = [run_once(args.stream, args, seed) for seed in range(args.runs)]
