@@ -19,7 +19,8 @@ of its stated sigmas (``perception_survey.noisy_attitude``).  Prints, per run:
         [--light-step-s 12] [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
 
 Real-imagery worlds are measured with ``--set 'acquire.features="sift"' --set
-acquire.min_inliers=6`` (the sim layer keeps ORB for the renderer's plates).
+acquire.min_inliers=6 --set fixgate.max_sigma_rel=0.05`` (the sim layer keeps ORB and the
+vagueness gate off for the renderer's plates).
 """
 
 from __future__ import annotations
