@@ -9,7 +9,10 @@ the last one it let through:
   back and counted;
 * after a gap (start, a loss, a run of rejections) it needs ``confirm`` fixes in a row
   that agree with each other before any is passed on, so a wrong first fix cannot lock
-  the gate onto itself.
+  the gate onto itself;
+* a fix whose own position 1-sigma exceeds ``max_sigma_rel`` of the distance to the
+  landmarks it used is not passed on: too vague to help, and on real imagery such fixes
+  (one plate, seen small) were the ones whose covariance was not honest (issue 25).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ class FixGateConfig:
     slack_m: float = field(default=0.3, metadata={"ge": 0})
     max_gap_s: float = field(default=1.0, metadata={"gt": 0})
     confirm: int = field(default=3, metadata={"ge": 1})
+    max_sigma_rel: float = field(default=0.0, metadata={"ge": 0})  # 0: off
 
 
 @dataclass
@@ -49,6 +53,14 @@ class FixGate:
                           + float(np.trace(np.asarray(b.covariance)[:3, :3])))
         limit = cfg.max_speed_m_s * dt + cfg.n_sigma * sigma + cfg.slack_m
         return math.dist(a.position_ned_m, b.position_ned_m) <= limit
+
+    def precise(self, fix: PoseFix, distance_m: float) -> bool:
+        """The fix's position 1-sigma is at most ``max_sigma_rel`` of ``distance_m``
+        (always, when ``max_sigma_rel`` is 0)."""
+        if self.config.max_sigma_rel <= 0.0:
+            return True
+        sigma = math.sqrt(float(np.trace(np.asarray(fix.covariance)[:3, :3])))
+        return sigma <= self.config.max_sigma_rel * distance_m
 
     def admit(self, fix: PoseFix) -> bool:
         """True when ``fix`` is consistent with the recent ones."""

@@ -6,7 +6,10 @@ every frame and the spread of each corner about its mean is the jitter the pose 
 will see.  The perception gives a plate of width W the corner sigma
 ``pixel_sigma_px * s * (ref * s / W) ** exponent`` (``Perception._corner_sigma``; s is
 the rectification's stretch), so the value written is the jitter divided by that factor:
-on this plate, the perception then states exactly the jitter measured.
+on this plate, the perception then states exactly the jitter measured.  (In flight the
+perception states the larger of that and the alignment's own fit sigma times
+``perception.fit_sigma_scale``, ``tracker.verify.fit_corner_sigma``: the fit follows what a
+still scene cannot show, e.g. a blurred or badly lit plate; it is not calibrated here.)
 
 What a still scene cannot show: errors that do not change from frame to frame (a corner
 drawn in by the alignment, a map's wrong size).  The measured value is a lower bound of

@@ -30,6 +30,7 @@ import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -57,7 +58,6 @@ from tracker.acquire import (
 )
 from tracker.boxes import (
     box_corners,
-    box_iou,
     clip_box,
     in_view_share,
     inside,
@@ -75,6 +75,7 @@ from tracker.pose.types import (
     PoseFix,
 )
 from tracker.types import Box, TrackResult
+from tracker.verify import check_appearance, detail_ncc, quad_iou
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -141,6 +142,7 @@ class Perception:
         self.attitude_bias = AttitudeBias(self.pose_config) \
             if self.pose_config.learn_attitude_bias else None
         self._frames = 0
+        self._light_level: float | None = None
 
     def process(self, frame: Frame) -> FrameResult:
         """Track and solve: one frame in, tracks and maybe a fix out.
@@ -166,8 +168,38 @@ class Perception:
             if not alive:
                 del self.tracks[track.landmark_id]
                 events.append({"event": "lost", "landmark": track.landmark_id})
+        stepped = self._light_step(image)
+        if stepped or self._frames % self.config.verify_every_frames == 0:
+            events += self._verify_tracks(image)
         self._frames += 1
         return self._solve(frame, events)
+
+    def _light_step(self, image: npt.NDArray[np.uint8]) -> bool:
+        """True when the frame's mean grey level jumped by ``light_step_ratio`` or more
+        since the last frame (housekeeping then acquires at once)."""
+        level = max(float(image[::8, ::8].mean()), 1.0)
+        last, self._light_level = self._light_level, level
+        if last is None or max(level / last, last / level) < self.config.light_step_ratio:
+            return False
+        self._acquired_frame = -(2**62)  # acquisition is due now
+        return True
+
+    def _verify_tracks(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
+        """Check every track's landmark is still where its homography says, by its warped
+        appearance; one that failed is left out of fixes, dropped after repeated failures."""
+        events: list[dict[str, Any]] = []
+        cfg = self.config
+        for track in list(self.tracks.values()):
+            ncc, fit = (0.0, None) if track.homography is None else check_appearance(
+                self.matcher.references[track.landmark_id], image, track.homography)
+            track.fit_sigma = fit if cfg.corner_sigma_from_fit else None
+            track.verify_failures = 0 if ncc >= cfg.track_appearance_ncc \
+                else track.verify_failures + 1
+            if track.verify_failures >= cfg.max_verify_failures:
+                del self.tracks[track.landmark_id]
+                events.append({"event": "lost", "landmark": track.landmark_id,
+                               "why": f"appearance no longer there (correlation {ncc:.2f})"})
+        return events
 
     def close(self) -> None:
         """Stop the track-update thread (the pipeline calls this once it has stopped)."""
@@ -213,7 +245,7 @@ class Perception:
         starts: list[Start] = []
         if fix is not None:
             self._last_fix_us = fix.time_us
-        acquire = self._should_acquire(frame.index)
+        acquire = self._should_acquire(frame)
         lost = fix is None and frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6
         # While tracks run, one heavy step per call (they take turns, issue 23): a call that
         # runs several holds a one-core board's next frame up by their sum.  With no track
@@ -285,9 +317,17 @@ class Perception:
         if aligned is None:
             return None
         corners = project_corners(ref, aligned)
-        x0, y0 = corners.min(axis=0)
-        x1, y1 = corners.max(axis=0)
-        if box_iou((x0, y0, x1 - x0, y1 - y0), box) < self.config.min_corner_agreement:
+        x, y, w, h = box
+        if verify:  # from the box itself: its centre must lie on the plate found
+            outline = corners.astype(np.float32).reshape(-1, 1, 2)
+            on = cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) >= 0
+            return aligned if on else None
+        # the outline predicted (the last one, moved with the tracker's box) against the
+        # outline found: a rotated plate's outline fills its axis-aligned box poorly, so
+        # outlines are compared, not boxes
+        predicted = project_corners(ref, hom)
+        predicted = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
+        if quad_iou(corners, predicted) < self.config.min_corner_agreement:
             return None  # the alignment wandered off: keep the box, drop the corners
         return aligned
 
@@ -337,11 +377,16 @@ class Perception:
         return lid in self.tracks or lid in waiting or any(
             s.track.landmark_id == lid for s in starts)
 
-    def _should_acquire(self, frame_index: int) -> bool:
-        if self._busy() >= self.config.max_tracks:
+    def _should_acquire(self, frame: Frame) -> bool:
+        """Feature matching is due: nothing tracked, or ``acquire_every_frames`` since the
+        last (``acquire_every_frames_with_fix`` while fixes come: prediction then finds the
+        plates in view, at a fraction of SIFT's cost)."""
+        cfg = self.config
+        if self._busy() >= cfg.max_tracks:
             return False
-        due = frame_index - self._acquired_frame >= self.config.acquire_every_frames
-        return not self.tracks or due
+        recent_fix = frame.t_us - self._last_fix_us <= cfg.search_after_s * 1e6
+        every = cfg.acquire_every_frames_with_fix if recent_fix else cfg.acquire_every_frames
+        return not self.tracks or frame.index - self._acquired_frame >= every
 
     def _acquire(self, image: npt.NDArray[np.uint8]) -> list[Start]:
         wanted = [lid for lid, ref in self.matcher.references.items()
@@ -352,21 +397,25 @@ class Perception:
             box = clip_box(match.box, width, height)
             if box is None or self._busy(starts) >= self.config.max_tracks:
                 continue
-            starts.append(self._start(match.landmark_id, image, box, match.homography,
-                                      match.corners_px, "features", starts))
+            starts += self._start(match.landmark_id, image, box, match.homography,
+                                  match.corners_px, "features", starts)
         return starts
 
     def _start(self, lid: str, image: npt.NDArray[np.uint8], box: Box, hom: FloatArray,
-               corners: FloatArray, by: str, starts: Sequence[Start]) -> Start:
-        """A tracker for landmark ``lid`` in ``box`` with a verified homography."""
+               corners: FloatArray, by: str, starts: Sequence[Start]) -> list[Start]:
+        """A tracker for landmark ``lid`` in ``box`` with a homography, verified first by
+        the appearance it warps onto the frame (none when that does not match)."""
+        ncc = detail_ncc(self.matcher.references[lid], image, hom)
+        if ncc < self.config.min_appearance_ncc:
+            return []
         busy = self._busy(starts)
         tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + busy)
         tracker.init(image, box, rank_phase=RANK_PHASE_STEP * busy)
         track = Track(lid, tracker, box, hom, corners=corners,
                       align_weights=feature_weights_bgr(tracker.features))
-        return Start(track,
-                     {"event": "acquired", "landmark": lid, "by": by,
-                      "box": [round(v, 1) for v in box]})
+        return [Start(track, {"event": "acquired", "landmark": lid, "by": by,
+                              "box": [round(v, 1) for v in box],
+                              "appearance_correlation": round(ncc, 3)})]
 
     def _detect_acquire(self, image: npt.NDArray[np.uint8]) -> list[Start]:
         """Restart tracks from detector hits: each hit is tried against the untracked map
@@ -385,9 +434,10 @@ class Perception:
                 quad = project_corners(ref, aligned)
                 box = clip_box(det.box, image.shape[1], image.shape[0])
                 if box is not None and inside(quad, image.shape[1], image.shape[0], 2.0):
-                    starts.append(self._start(lid, image, box, aligned, quad, "detector",
-                                              starts))
-                    break
+                    started = self._start(lid, image, box, aligned, quad, "detector", starts)
+                    starts += started
+                    if started:
+                        break
         return starts
 
     def _search(self, image: npt.NDArray[np.uint8]) -> list[Start]:
@@ -412,7 +462,7 @@ class Perception:
         box = clip_box((x0, y0, x1 - x0, y1 - y0), image.shape[1], image.shape[0])
         if box is None or not inside(quad, image.shape[1], image.shape[0], margin=2.0):
             return []
-        return [self._start(lid, image, box, aligned, quad, "search", [])]
+        return self._start(lid, image, box, aligned, quad, "search", [])
 
     def _predict_acquire(self, image: npt.NDArray[np.uint8], fix: PoseFix,
                          earlier: Sequence[Start]) -> list[Start]:
@@ -445,8 +495,15 @@ class Perception:
             box = clip_box((x0, y0, x1 - x0, y1 - y0), width, height)
             if box is None:
                 continue
-            starts.append(self._start(lid, image, box, aligned, quad, "prediction", starts))
+            starts += self._start(lid, image, box, aligned, quad, "prediction", starts)
         return starts[len(earlier):]
+
+    def _distance(self, fix: PoseFix) -> float:
+        """Mean distance (m) from the fix to the landmarks it used."""
+        pos = np.asarray(fix.position_ned_m)
+        used = [lm for lm in self.landmarks if lm.landmark_id in fix.landmark_ids]
+        return float(np.mean([np.linalg.norm(pos - np.asarray(lm.position_ned_m))
+                              for lm in used])) if used else 0.0
 
     def _project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
         """The landmark's corners in the image for the vehicle pose of ``fix``."""
@@ -470,11 +527,11 @@ class Perception:
         out = []
         size = (self.camera.width, self.camera.height)
         cfg = self.config
+        tracks = [t for t in self.tracks.values() if t.verify_failures == 0]
         usable = {t.landmark_id: t.corners is not None
                   and in_view_share(t.corners, *size) >= cfg.min_corner_in_view
-                  and t.saturated <= cfg.max_corner_saturated
-                  for t in self.tracks.values()}
-        tracks = list(self.tracks.values())
+                  and t.saturated <= cfg.max_corner_saturated and self._fits(t)
+                  for t in tracks}
         if any(usable.values()):
             tracks = [t for t in tracks if usable[t.landmark_id]]
         else:  # boxes only: a box reaching out of the image is not centred on its plate
@@ -491,9 +548,18 @@ class Perception:
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
                                    frame_index=frame_index,
-                                   corner_sigma_px=self._corner_sigma(corners, stretch),
+                                   corner_sigma_px=self._corner_sigma(corners, stretch,
+                                                                      t.fit_sigma),
                                    corner_scale_sigma_px=scale))
         return out
+
+    def _fits(self, track: Track) -> bool:
+        """The alignment's fit sigma is within ``max_fit_sigma_ratio`` of the size model's."""
+        if track.fit_sigma is None or track.corners is None:
+            return True
+        corners = [(float(u), float(v)) for u, v in track.corners]
+        model = self._corner_sigma(corners) or 0.0
+        return track.fit_sigma <= self.config.max_fit_sigma_ratio * model
 
     def _stretch(self, corners: Sequence[tuple[float, float]]) -> float:
         """Rectified px per raw px at the plate's centre (1 without rectification)."""
@@ -503,21 +569,24 @@ class Perception:
         return self._rectify.scale_at((float(centre[0]), float(centre[1])))
 
     def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None,
-                      s: float | None = None) -> float | None:
+                      s: float | None = None, fit: float | None = None) -> float | None:
         """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``).
 
         In a rectified frame, the plate was imaged ``s`` times smaller than it is drawn
         (``s``: rectified px per raw px at its centre, :meth:`_stretch`, above 1 towards the
         edges of a barrel-distorted frame), so its corners have the raw sigma of a plate
-        ``width / s`` wide, stretched by ``s`` (computed when not given)."""
+        ``width / s`` wide, stretched by ``s`` (computed when not given).  ``fit``: the
+        alignment's own estimate (:func:`tracker.verify.fit_corner_sigma`); the larger of
+        the two is stated."""
         if corners is None:
             return None
         s = self._stretch(corners) if s is None else s
         cfg = self.config
         quad = np.asarray(corners, np.float64)
         width = max(float(np.ptp(quad[:, 0])), 1.0)
-        return float(s * self.pose_config.pixel_sigma_px
-                     * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
+        model = float(s * self.pose_config.pixel_sigma_px
+                      * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
+        return model if fit is None else max(model, cfg.fit_sigma_scale * fit)
 
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
         tracks = tuple(
@@ -546,6 +615,10 @@ class Perception:
             why = next(n for n in fix.notes if n.startswith("attitude prior rejected"))
             events.append({"event": "attitude prior rejected", "detail": why,
                            "count": self.attitude_rejections})
+        if not self.gate.precise(fix, self._distance(fix)):
+            return FrameResult(frame.index, frame.t_us, tracks, None,
+                               "held back: too vague for its distance", tuple(events),
+                               particles=particles)
         if not self.gate.admit(fix):
             return FrameResult(frame.index, frame.t_us, tracks, None,
                                "held back: inconsistent with recent fixes", tuple(events),

@@ -28,6 +28,7 @@ class PerceptionConfig:
     """How often to look for untracked landmarks and how far to trust a track."""
 
     acquire_every_frames: int = field(default=15, metadata={"ge": 1})
+    acquire_every_frames_with_fix: int = field(default=60, metadata={"ge": 1})
     max_tracks: int = field(default=8, metadata={"ge": 1})
     min_track_confidence: float = field(default=0.2, metadata={"ge": 0, "le": 1})
     refine_corners: bool = True
@@ -54,6 +55,29 @@ class PerceptionConfig:
     #: corner sigma no setting tried kept every scenario's fixes consistent (docs/pose.md,
     #: "Corner errors are not independent"), so it is off: corners independent.
     corner_scale_sigma_px: float = field(default=0.0, metadata={"ge": 0})
+    #: The corners' 1-sigma is the larger of the size model above and the alignment's own
+    #: fit (tracker.verify.fit_corner_sigma: residual and gradient of the warped appearance).
+    corner_sigma_from_fit: bool = True
+    #: ... and a track's corners are not used when the fit's sigma exceeds the size model's
+    #: by this factor: the alignment sits wrong on the plate (a real crop's corners 2-8 px
+    #: off with a fit sigma 3-9x the model's, where the plates aligned right had <= 1.2x).
+    max_fit_sigma_ratio: float = field(default=2.5, metadata={"gt": 1})
+    #: The fit sigma times this is stated: the fit knows the noise, not the bias JPEG and
+    #: resampling leave (real crops' corner errors were ~1.5x the fit sigma, RMS).
+    fit_sigma_scale: float = field(default=2.0, metadata={"ge": 1})
+    #: Every new track is verified by its appearance warped by the homography found: the
+    #: normalised correlation of its detail with the frame's (light-normalised,
+    #: tracker.verify.detail_ncc) must reach this.
+    min_appearance_ncc: float = field(default=0.65, metadata={"gt": 0, "le": 1})
+    #: Every this many frames each track is checked the same way; under
+    #: ``track_appearance_ncc`` (or without corners) it is unverified: left out of the fix,
+    #: and dropped after ``max_verify_failures`` checks in a row.
+    verify_every_frames: int = field(default=5, metadata={"ge": 1})
+    track_appearance_ncc: float = field(default=0.5, metadata={"gt": 0, "le": 1})
+    max_verify_failures: int = field(default=2, metadata={"ge": 1})
+    #: The frame's mean grey level changing by more than this factor from one frame to the
+    #: next is a light step: every track is checked at once and acquisition runs at once.
+    light_step_ratio: float = field(default=1.25, metadata={"gt": 1})
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
@@ -110,6 +134,10 @@ class Track:
     #: the colour feature the corners are aligned on: the tracker's best at acquisition,
     #: when the box was verified (None: grey levels)
     align_weights: Weights | None = None
+    #: corner 1-sigma (px) from the alignment's fit at the last check (None: not known)
+    fit_sigma: float | None = None
+    #: appearance checks failed in a row (0: the last check found the landmark)
+    verify_failures: int = 0
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Literal
 
 import cv2
@@ -33,6 +34,7 @@ EffectKind = Literal[
     "noise",
     "motion_blur",
     "distractor",
+    "vignette",
 ]
 FOREVER_S = 1e9
 
@@ -55,6 +57,8 @@ class EffectSpec:
     * ``motion_blur``: a line blur ``length_px`` long at ``angle_deg``.
     * ``distractor``: a plate of the landmark's mean colour, same size and facing,
       ``offset_m`` (NED) away from it; drawn in the world, never in the truth.
+    * ``vignette``: the lens darkens towards the corners: gain ``1 - strength r^2``, r the
+      distance from the image centre over the half-diagonal (before the sensor noise).
     """
 
     kind: EffectKind = "noise"
@@ -147,6 +151,19 @@ def motion_blur(image: ImageU8, length_px: int, angle_deg: float) -> ImageU8:
     return np.asarray(cv2.filter2D(image, -1, k, borderType=cv2.BORDER_REPLICATE), np.uint8)
 
 
+@lru_cache(maxsize=8)
+def vignette_gain(shape: tuple[int, ...], strength: float) -> np.ndarray:
+    """Per-pixel gain ``1 - strength r^2`` (float32, the image's shape), r = distance from
+    the centre over the half-diagonal."""
+    h, w = shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    r2 = ((xs - (w - 1) / 2) ** 2 + (ys - (h - 1) / 2) ** 2) / (((w - 1) ** 2 + (h - 1) ** 2) / 4)
+    gain = (1.0 - strength * r2).astype(np.float32)
+    out = np.repeat(gain[..., None], shape[2], axis=2) if len(shape) == 3 else gain
+    out.setflags(write=False)
+    return out
+
+
 NOISE_PAD = 64
 
 
@@ -237,6 +254,9 @@ class EffectStack:
             scale = np.asarray([*gain.tolist(), 0.0], dtype=np.float64)
             image = np.asarray(cv2.multiply(image, scale), dtype=np.uint8)
         for spec in self.specs:
+            if spec.kind == "vignette" and spec.active(t_s) and spec.strength > 0:
+                image = np.asarray(cv2.multiply(image, vignette_gain(image.shape, spec.strength),
+                                                dtype=cv2.CV_8U), np.uint8)
             if spec.kind == "motion_blur" and spec.active(t_s):
                 image = motion_blur(image, spec.length_px, spec.angle_deg)
         for n, spec in enumerate(self.specs):

@@ -21,6 +21,7 @@ def synth_stream(
     out: Path,
     *,
     image_format: str = "png",
+    jpeg_quality: int = 95,
     overwrite: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> int:
@@ -33,7 +34,8 @@ def synth_stream(
     """
     s = simulator.scenario
     total = max(1, round(s.seconds * s.fps))
-    with StreamWriter(out, simulator.stream_meta(), image_format, overwrite=overwrite) as writer:
+    with StreamWriter(out, simulator.stream_meta(), image_format, jpeg_quality,
+                      overwrite=overwrite) as writer:
         for index in range(total):
             image, truth = simulator.render(index)
             frame = Frame(index, round(index * 1e6 / s.fps), image, s.camera_id)

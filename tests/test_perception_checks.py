@@ -1,0 +1,97 @@
+"""Issue 25's perception checks: an acquisition is verified by the appearance it warps onto
+the frame, a rotated plate keeps its corners, a track that lost its landmark leaves the
+fix and is dropped, a light step is noticed, the corner sigma follows the fit."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from companion.perception import Perception
+from companion.perception_types import Track
+from companion.sources.base import Frame
+from tests.acquire.test_verify import scene
+from tracker.acquire import homography_to, project_corners
+from tracker.camera import CameraModel
+from tracker.pose.types import MapLandmark
+
+
+def perception(plate: np.ndarray) -> Perception:
+    lm = MapLandmark("p", (10.0, 0.0, 0.0), 1.2, 0.8, None, "other")
+    return Perception(CameraModel(320, 240, 300.0, 300.0, 159.5, 119.5), [lm], {"p": plate})
+
+
+def track_at(p: Perception, corners: np.ndarray, box: tuple[float, float, float, float]
+             ) -> Track:
+    ref = p.matcher.references["p"]
+    return Track("p", None, box, homography_to(ref, corners),  # type: ignore[arg-type]
+                 corners=corners)
+
+
+def test_an_acquisition_whose_appearance_is_not_there_is_refused() -> None:
+    frame, plate, corners = scene()
+    p = perception(plate)
+    ref = p.matcher.references["p"]
+    wrong = corners + np.array([-110.0, 60.0])
+    assert p._start("p", frame, (20.0, 120.0, 90.0, 90.0), homography_to(ref, wrong), wrong,
+                    "search", []) == []
+    right = p._start("p", frame, (115.0, 75.0, 90.0, 90.0), homography_to(ref, corners),
+                     corners, "features", [])
+    assert len(right) == 1 and right[0].event["appearance_correlation"] > 0.8
+
+
+def test_a_rotated_plate_keeps_its_corners() -> None:
+    """The tracker's box of a plate turned 35 deg is axis-aligned and about the plate's own
+    size: it overlaps the aligned outline's box less than 0.5 (the old rule dropped the
+    corners); the outline moved with the box matches the outline found."""
+    frame, plate, corners = scene(angle_deg=35.0, noise=2.0)
+    p = perception(plate)
+    box = (160.0 - 45.0, 120.0 - 30.0, 90.0, 60.0)  # centred, unrotated size
+    track = track_at(p, corners + np.array([1.5, -1.0]), box)  # last frame's outline, a bit off
+    aligned = p._align(track, frame, track.homography)  # type: ignore[arg-type]
+    assert aligned is not None
+    found = project_corners(p.matcher.references["p"], aligned)
+    assert np.abs(found - corners).max() < 0.5
+
+
+def test_a_track_that_lost_its_landmark_leaves_the_fix_and_is_dropped() -> None:
+    frame, plate, corners = scene()
+    p = perception(plate)
+    wrong = corners + np.array([-110.0, 60.0])
+    p.tracks["p"] = track_at(p, wrong, (20.0, 120.0, 90.0, 90.0))
+    assert p._verify_tracks(frame) == []
+    assert p.tracks["p"].verify_failures == 1
+    assert p.observations(0) == []  # unverified: not in the fix
+    events = p._verify_tracks(frame)
+    assert "p" not in p.tracks
+    assert events[0]["event"] == "lost" and "appearance" in events[0]["why"]
+
+
+def test_a_track_on_its_landmark_passes_the_check_and_states_the_fit_sigma() -> None:
+    frame, plate, corners = scene(noise=6.0)
+    p = perception(plate)
+    track = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
+    p.tracks["p"] = track
+    assert p._verify_tracks(frame) == [] and track.verify_failures == 0
+    track.fit_sigma = 1e-4
+    (obs,) = p.observations(0)
+    model = p._corner_sigma(obs.corners_px)
+    assert model is not None and obs.corner_sigma_px == model
+    track.fit_sigma = 2.0 * model
+    (obs,) = p.observations(0)
+    scale = p.config.fit_sigma_scale  # the fit's (scaled), larger than the size model's
+    assert obs.corner_sigma_px == scale * 2.0 * model
+    track.fit_sigma = 3.0 * model  # beyond max_fit_sigma_ratio: the alignment sits wrong
+    (obs,) = p.observations(0)
+    assert obs.corners_px is None
+
+
+def test_a_light_step_is_noticed_and_makes_acquisition_due() -> None:
+    frame, plate, corners = scene()
+    p = perception(plate)
+    p.tracks["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
+    p._acquired_frame, p._last_fix_us = 100, 3_333_333  # acquired, and a fix, last frame
+    assert not p._light_step(frame)
+    assert not p._light_step((frame * 0.9).astype(np.uint8))
+    assert not p._should_acquire(Frame(101, 3_366_666, frame))
+    assert p._light_step(np.clip(frame * 1.6, 0, 255).astype(np.uint8))
+    assert p._should_acquire(Frame(101, 3_366_666, frame))
