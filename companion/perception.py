@@ -47,6 +47,7 @@ from companion.perception_types import (
 from tracker import TrackerConfig
 from tracker.acquire import (
     AcquireConfig,
+    Reference,
     ReferenceMatcher,
     homography_to,
     project_corners,
@@ -67,7 +68,7 @@ from tracker.pose.types import (
     Observation,
     PoseFix,
 )
-from tracker.types import TrackResult
+from tracker.types import Box, TrackResult
 from tracker.verify import check_appearance, quad_iou
 
 FloatArray = npt.NDArray[np.float64]
@@ -75,6 +76,14 @@ FloatArray = npt.NDArray[np.float64]
 
 #: How many frames' fixes are kept for housekeeping to look up.
 RECENT_FIXES = 8
+
+
+def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
+    """``hom`` moved so that the outline it projects is centred on the tracker's ``box``
+    (a track without corners this frame: its last homography, where the tracker is)."""
+    x, y, w, h = box
+    dx, dy = np.array([x + w / 2, y + h / 2]) - project_corners(ref, hom).mean(axis=0)
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ hom
 
 
 class Perception(Acquisition):
@@ -180,8 +189,11 @@ class Perception(Acquisition):
         events: list[dict[str, Any]] = []
         cfg = self.config
         for track in list(self.tracks.values()):
-            ncc, fit = (0.0, None) if track.homography is None else check_appearance(
-                self.matcher.references[track.landmark_id], image, track.homography)
+            ref = self.matcher.references[track.landmark_id]
+            hom = track.homography
+            if hom is not None and track.corners is None:
+                hom = moved_to_box(ref, hom, track.box)  # no corners this frame: at the box
+            ncc, fit = (0.0, None) if hom is None else check_appearance(ref, image, hom)
             track.fit_sigma = fit if cfg.corner_sigma_from_fit else None
             track.verify_failures = 0 if ncc >= cfg.track_appearance_ncc \
                 else track.verify_failures + 1

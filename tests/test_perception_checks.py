@@ -95,3 +95,24 @@ def test_a_light_step_is_noticed_and_makes_acquisition_due() -> None:
     assert not p._should_acquire(Frame(101, 3_366_666, frame))
     assert p._light_step(np.clip(frame * 1.6, 0, 255).astype(np.uint8))
     assert p._should_acquire(Frame(101, 3_366_666, frame))
+
+
+def test_a_track_without_corners_is_checked_where_its_box_is() -> None:
+    """A box-only track (no corners this frame: a plate too small, or corners off) keeps the
+    homography of its last corners: the check moves it to the tracker's box.  Checked at the
+    stale homography, a plate that moved 40 px failed twice and its track was dropped."""
+    frame, plate, corners = scene()
+    p = perception(plate)
+    before = corners + np.array([40.0, -25.0])  # where the corners were last found
+    on_plate = track_at(p, before, (115.0, 75.0, 90.0, 90.0))  # the box is on the plate now
+    on_plate.corners = None
+    p.tracks["p"] = on_plate
+    for _ in range(3):
+        assert p._verify_tracks(frame) == []
+    assert on_plate.verify_failures == 0
+    off_plate = track_at(p, before, (20.0, 120.0, 90.0, 90.0))  # the box left the plate
+    off_plate.corners = None
+    p.tracks["p"] = off_plate
+    assert p._verify_tracks(frame) == []
+    events = p._verify_tracks(frame)
+    assert "p" not in p.tracks and events[0]["event"] == "lost"
