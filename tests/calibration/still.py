@@ -33,12 +33,19 @@ class StillScene:
     jitter_px: float
 
 
+#: Gaussian sigma (px) of a signpost's appearance photo too blurred for the matcher.
+PLAIN_BLUR_PX = 12.0
+
+
 def map_with_appearances(folder: Path, sim: Simulator, plain_signs: bool = False) -> Path:
     """config/landmarks.geojson with each landmark's rendered texture as its appearance.
 
-    The simulated signposts are plain plates with 2-6 ORB features, fewer than the matcher
-    needs (found by prediction from a fix, never by matching): left out unless
-    ``plain_signs`` (then ``companion check`` must fail on them)."""
+    The simulated signposts are plain plates with 2-6 ORB features, fewer than the
+    simulator layer's ORB matcher needs (found by prediction from a fix, never by
+    matching): left out unless ``plain_signs``.  The deployment layer's SIFT finds 80-89 on
+    them, so with ``plain_signs`` their appearance is written as a photo too blurred to
+    match (Gaussian sigma 12 px: 1-5 SIFT features, 8 needed), on which ``companion
+    check`` must fail."""
     doc = json.loads((config_dir() / "landmarks.geojson").read_text(encoding="utf-8"))
     if not plain_signs:
         doc["features"] = [f for f in doc["features"]
@@ -46,6 +53,8 @@ def map_with_appearances(folder: Path, sim: Simulator, plain_signs: bool = False
     folder.mkdir(parents=True, exist_ok=True)
     for feature in doc["features"]:
         texture = sim.world.landmark(feature["id"]).quad.texture
+        if plain_signs and feature["properties"]["category"] == "signpost":
+            texture = cv2.GaussianBlur(texture, (0, 0), PLAIN_BLUR_PX)
         cv2.imwrite(str(folder / f"{feature['id']}.png"), texture)
         feature["properties"]["appearance"] = f"{feature['id']}.png"
         feature["properties"]["appearance_box"] = [0, 0, texture.shape[1], texture.shape[0]]
