@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from benchmarks.perception_survey import NEES_HIGH, NEES_LOW, noisy_attitude
-from companion.flightmap import reference_image
+from companion.flightmap import placed
 from companion.landmarks.geodesy import LocalFrame
 from companion.landmarks.geojson_io import read_map
 from companion.perception import Perception, SideSensors
@@ -86,14 +86,7 @@ def load_stream_map(folder: Path) -> tuple[list[MapLandmark], dict[str, np.ndarr
     """The stream's landmark map in NED about its origin, and the appearance references."""
     origin = read_meta(folder).origin
     frame = LocalFrame(origin.lat, origin.lon, origin.alt_m)
-    landmarks, refs = [], {}
-    for lm in read_map(folder / "landmarks.geojson"):
-        n, e, d = (float(v) for v in frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m))
-        landmarks.append(MapLandmark(lm.id, (n, e, d), lm.width_m, lm.height_m,
-                                     lm.facing_deg, lm.category))
-        image, _ = reference_image(lm)
-        if image is not None:
-            refs[lm.id] = image
+    landmarks, refs, _ = placed(frame, read_map(folder / "landmarks.geojson"))
     return landmarks, refs
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -163,15 +163,10 @@ def _nearest(settings: Settings, records: list[Landmark]) -> tuple[float | None,
     return float(d[k]), ids[k]
 
 
-def load_practical_map(settings: Settings) -> PracticalMap:
-    """The flight's map (module docstring) placed about the configured EKF origin."""
-    frame = _origin(settings)
-    path = settings.landmarks.map_path
-    left: tuple[tuple[str, str], ...] = ()
-    if path:
-        records, described = _from_file(path), f"the map file {path}"
-    else:
-        records, left, described = _from_database(settings, flight_area(settings))
+def placed(frame: LocalFrame, records: Iterable[Landmark]
+           ) -> tuple[list[MapLandmark], dict[str, ImageU8], dict[str, str]]:
+    """Landmark records in NED about ``frame``, their appearance references, and why each
+    landmark without a usable reference has none."""
     landmarks, references, unusable = [], {}, {}
     for lm in records:
         n, e, d = (float(v) for v in frame.to_ned(lm.lat_deg, lm.lon_deg, lm.alt_m))
@@ -182,6 +177,19 @@ def load_practical_map(settings: Settings) -> PracticalMap:
             references[lm.id] = image
         else:
             unusable[lm.id] = str(why)
+    return landmarks, references, unusable
+
+
+def load_practical_map(settings: Settings) -> PracticalMap:
+    """The flight's map (module docstring) placed about the configured EKF origin."""
+    frame = _origin(settings)
+    path = settings.landmarks.map_path
+    left: tuple[tuple[str, str], ...] = ()
+    if path:
+        records, described = _from_file(path), f"the map file {path}"
+    else:
+        records, left, described = _from_database(settings, flight_area(settings))
+    landmarks, references, unusable = placed(frame, records)
     nearest_m, nearest_id = _nearest(settings, records)
     return PracticalMap(tuple(landmarks), references, frame, unusable, left, described,
                         nearest_m, nearest_id)

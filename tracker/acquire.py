@@ -284,6 +284,27 @@ def homography_to(ref: Reference, corners_px: FloatArray) -> FloatArray:
                       np.float64)
 
 
+
+def outline_window(corners: FloatArray, width: int, height: int, margin: float, least: int
+                   ) -> tuple[int, int, int, int] | None:
+    """``(x0, y0, x1, y1)``: the frame region around an outline, ``margin`` px wider on
+    every side and clipped to the frame; None when narrower or lower than ``least`` px."""
+    x0, y0 = (int(v) for v in np.floor(np.maximum(corners.min(axis=0) - margin, 0.0)))
+    x1 = int(min(np.ceil(corners[:, 0].max() + margin), width))
+    y1 = int(min(np.ceil(corners[:, 1].max() + margin), height))
+    if x1 - x0 < least or y1 - y0 < least:
+        return None
+    return x0, y0, x1, y1
+
+
+def size_in_frame(ref: Reference, corners: FloatArray, least: int) -> tuple[int, int]:
+    """The reference's size (w, h) scaled to about the area of its outline in the frame
+    (never up, never below ``least`` px)."""
+    w, h = ref.size_px
+    area = float(cv2.contourArea(corners.astype(np.float32)))
+    scale = float(np.clip(np.sqrt(max(area, 1.0) / (w * h)), 0.05, 1.0))
+    return max(least, round(w * scale)), max(least, round(h * scale))
+
 def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
                iterations: int = 40, min_correlation: float = 0.6,
                fine_iterations: int = 10, weights_bgr: Weights | None = None
@@ -313,15 +334,12 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
         return None
     height, width = frame.shape[:2]
     margin = 0.15 * float(np.ptp(corners, axis=0).max()) + 6.0
-    x0, y0 = np.floor(np.maximum(corners.min(axis=0) - margin, 0)).astype(int)
-    x1 = int(min(np.ceil(corners[:, 0].max() + margin), width))
-    y1 = int(min(np.ceil(corners[:, 1].max() + margin), height))
-    if x1 - x0 < 8 or y1 - y0 < 8:
+    window = outline_window(corners, width, height, margin, 8)
+    if window is None:
         return None
+    x0, y0, x1, y1 = window
     w, h = ref.size_px
-    quad_area = float(cv2.contourArea(corners.astype(np.float32)))
-    scale = float(np.clip(np.sqrt(max(quad_area, 1.0) / (w * h)), 0.05, 1.0))
-    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    size = size_in_frame(ref, corners, 8)
     template = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
                                      interpolation=cv2.INTER_AREA), np.float32)
     s_ref = resize_map((w, h), template.shape[1::-1])  # ref -> template

@@ -26,7 +26,14 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.acquire import Reference, homography_to, project_corners, resize_map
+from tracker.acquire import (
+    Reference,
+    homography_to,
+    outline_window,
+    project_corners,
+    resize_map,
+    size_in_frame,
+)
 
 FloatArray = npt.NDArray[np.float64]
 #: Fewer pixels than this inside the outline: too small to judge.
@@ -59,15 +66,12 @@ def overlay(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
     if not np.all(np.isfinite(corners)):
         return None
     height, width = frame_bgr.shape[:2]
-    x0, y0 = (int(v) for v in np.floor(np.maximum(corners.min(axis=0) - 2.0, 0.0)))
-    x1 = int(min(np.ceil(corners[:, 0].max() + 2.0), width))
-    y1 = int(min(np.ceil(corners[:, 1].max() + 2.0), height))
-    if x1 - x0 < 6 or y1 - y0 < 6:
+    window = outline_window(corners, width, height, 2.0, 6)
+    if window is None:
         return None
+    x0, y0, x1, y1 = window
     w, h = ref.size_px
-    area = float(cv2.contourArea(corners.astype(np.float32)))
-    scale = float(np.clip(np.sqrt(max(area, 1.0) / (w * h)), 0.05, 1.0))
-    size = (max(6, round(w * scale)), max(6, round(h * scale)))
+    size = size_in_frame(ref, corners, 6)
     small = np.asarray(cv2.resize(ref.gray, size, interpolation=cv2.INTER_AREA), np.float32)
     to_roi = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]])
     warp = to_roi @ hom @ np.linalg.inv(resize_map((w, h), size))
