@@ -350,8 +350,8 @@ def parse() -> argparse.Namespace:
     ap.add_argument("--scenario", default="survey")
     ap.add_argument("--seconds", type=float, default=31.0, help="recording length (>= 30)")
     ap.add_argument("--core", type=int, default=max(os.sched_getaffinity(0)))
-    ap.add_argument("--cases", default="quiet,busy", help="quiet, busy (a busy-loop process "
-                    "on the same core) or both")
+    ap.add_argument("--cases", default="quiet,busy", help="comma-separated: quiet, busy (a "
+                    "busy-loop process on the same core); default both")
     ap.add_argument("--stream", help="reuse a recording made by an earlier run (folder)")
     ap.add_argument("--demo", action="store_true",
                     help="run `companion demo --json` of each checkout instead (not pinned)")
@@ -371,6 +371,8 @@ def main() -> int:
         return 0
     checkouts = [c.resolve() for c in (args.checkout or [ROOT])]
     cases = [c for c in args.cases.split(",") if c]
+    if not cases or set(cases) - {"quiet", "busy"}:
+        raise SystemExit(f"--cases: quiet, busy or quiet,busy, not {args.cases!r}")
     with tempfile.TemporaryDirectory(prefix="latency-stream-") as tmp:
         stream = Path(args.stream) if args.stream else Path(tmp)
         stream.mkdir(parents=True, exist_ok=True)
