@@ -65,6 +65,7 @@ class Score:
     wrong_run: dict[str, int] = dataclasses.field(default_factory=dict)
     longest_wrong: int = 0
     first_fix_after_step_s: float | None = None
+    no_fix_2plus: dict[str, int] = dataclasses.field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         err, dist, nees = np.array(self.err), np.array(self.dist), np.array(self.nees)
@@ -79,6 +80,8 @@ class Score:
             "nees_inside_95_share": round(inside, 3),
             "longest_wrong_track_frames": self.longest_wrong,
             "first_fix_after_step_s": self.first_fix_after_step_s,
+            "no_fix_2plus_visible": dict(sorted(self.no_fix_2plus.items(),
+                                                key=lambda kv: -kv[1])),
         }
 
 
@@ -149,6 +152,9 @@ def run_once(folder: Path, args: argparse.Namespace, seed: int) -> dict[str, Any
         if len(full) >= 2:
             score.frames_2plus += 1
             score.fixes_2plus += fix is not None
+            if fix is None:
+                why = (result.no_fix_reason or "?").split(":")[0][:60]
+                score.no_fix_2plus[why] = score.no_fix_2plus.get(why, 0) + 1
         for lid in by_id:
             t = perception.tracks.get(lid)
             score_track(score, lid, None if t is None else t.box, ft, args.wrong_iou)

@@ -10,7 +10,13 @@ latency ...) plus what a recording needs:
   bridge; a frame dropped in real time counts as without);
 * ``nees_inside_95_share``: fixes whose 3-DOF NEES lies inside the two-sided 95 % bound;
 * ``fixes_solved``, ``fixes_refused`` by reason (the bridge's), ``attitude_error_deg``: the
-  attitude the solver was given against the true one (RMS per axis, and the mean yaw).
+  attitude the solver was given against the true one (RMS per axis, and the mean yaw);
+* ``longest_wrong_track_frames``: the longest run of frames one track sat on a wrong place
+  (its box overlaps its landmark's true box, the projected corners' bounding box cut to the
+  image, at IoU < ``WRONG_IOU``, or its landmark is not in view);
+* ``light_steps``: each frame whose mean grey level jumped by ``LIGHT_STEP`` or more from
+  the frame before (recorded time ``at_s``) and ``fix_after_s``, the recorded time from it
+  to the next fix (0: that frame had one; None: none came).
 """
 
 from __future__ import annotations
@@ -28,11 +34,18 @@ from companion.demo import DemoResult, TruthRecorder, print_summary, summary
 from companion.perception import Perception
 from companion.recorded import RecordedTruth
 from companion.sensors import SensorHistory
+from companion.sources.stream_format import TruthPose
 from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot
+from tracker.boxes import box_iou
 from tracker.camera import CameraModel
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import MapLandmark
+
+#: A track overlapping its landmark's true box less than this is on a wrong place.
+WRONG_IOU = 0.2
+#: A frame this much brighter or darker (mean grey) than the one before is a light step.
+LIGHT_STEP = 1.25
 
 
 class ReplayScorer(TruthRecorder):
@@ -49,6 +62,10 @@ class ReplayScorer(TruthRecorder):
         self.done = done
         self.fixed: set[int] = set()
         self.attitude_errors: list[tuple[float, float, float]] = []
+        self.wrong_run: dict[str, int] = {}
+        self.longest_wrong = 0
+        self._level: float | None = None
+        self.light_steps: list[dict[str, float | None]] = []
 
     def process(self, frame: Frame) -> FrameResult:
         try:
@@ -58,6 +75,9 @@ class ReplayScorer(TruthRecorder):
         if result.fix is not None:
             self.fixed.add(frame.index)
         found = self.truth.pose_at(frame.t_us)
+        if found is not None:
+            self._score_tracks(found[1])
+            self._score_light(frame, found[0] / 1e6, result.fix is not None)
         given = self.sensors.attitude_at(frame.t_us)
         if found is not None and given is not None:
             p = found[1]
@@ -66,6 +86,47 @@ class ReplayScorer(TruthRecorder):
                 ((given.roll_rad, p.roll_rad), (given.pitch_rad, p.pitch_rad),
                  (given.yaw_rad, p.yaw_rad))))
         return result
+
+    def _score_tracks(self, pose: TruthPose) -> None:
+        """Advance each track's run of frames on a wrong place (module notes)."""
+        tracks = self.perception.tracks
+        camera = self.perception.camera
+        position = self.truth.to_flight((pose.north_m, pose.east_m, pose.down_m))
+        rpy = (pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
+        for lid in [i for i in self.wrong_run if i not in tracks]:
+            del self.wrong_run[lid]
+        for lid, track in tracks.items():
+            lm = self.landmarks.get(lid)
+            true = None if lm is None else true_box(camera, position, rpy, lm)
+            on = true is not None and box_iou(track.box, true) >= WRONG_IOU
+            self.wrong_run[lid] = 0 if on else self.wrong_run.get(lid, 0) + 1
+            self.longest_wrong = max(self.longest_wrong, self.wrong_run[lid])
+
+    def _score_light(self, frame: Frame, r_s: float, fixed: bool) -> None:
+        """Note a light step, and the time from each step to its next fix."""
+        level = max(float(frame.image[::8, ::8].mean()), 1.0)
+        last, self._level = self._level, level
+        if last is not None and max(level / last, last / level) >= LIGHT_STEP:
+            self.light_steps.append({"at_s": round(r_s, 3), "fix_after_s": None})
+        for step in self.light_steps:
+            if fixed and step["fix_after_s"] is None:
+                step["fix_after_s"] = round(r_s - float(step["at_s"] or 0.0), 3)
+
+
+def true_box(camera: CameraModel, position_ned: Sequence[float],
+             rpy_rad: tuple[float, float, float], landmark: MapLandmark
+             ) -> tuple[float, float, float, float] | None:
+    """The bounding box of ``landmark``'s projected corners cut to the image (x, y, w, h);
+    None when a corner is behind the camera or nothing of the box is in the image."""
+    pts = camera.world_to_camera(landmark_corners_ned(landmark), np.asarray(position_ned),
+                                 rpy_rad)
+    if not np.all(pts[:, 2] > 0):
+        return None
+    uv = camera.project_camera_points(pts)
+    x0, y0 = max(float(uv[:, 0].min()), 0.0), max(float(uv[:, 1].min()), 0.0)
+    x1 = min(float(uv[:, 0].max()), camera.width - 1.0)
+    y1 = min(float(uv[:, 1].max()), camera.height - 1.0)
+    return None if x1 <= x0 or y1 <= y0 else (x0, y0, x1 - x0, y1 - y0)
 
 
 def fully_visible(camera: CameraModel, position_ned: Sequence[float],
@@ -120,6 +181,8 @@ def replay_summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge,
         "fixes_refused": refused,
         "attitude_error_deg": _attitude_error(scorer.attitude_errors),
         "telemetry_replayed": dict(fake.replay.sent) if fake.replay is not None else {},
+        "longest_wrong_track_frames": scorer.longest_wrong,
+        "light_steps": scorer.light_steps,
     }
 
 
