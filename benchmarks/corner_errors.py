@@ -67,7 +67,8 @@ def sightings(folder: Path, args: argparse.Namespace) -> list[tuple[float, ...]]
             continue
         p = ft.pose
         pos = np.array([p.north_m, p.east_m, p.down_m])
-        used = {o.landmark_id: o for o in perception.observations(frame.index)}
+        used = {o.landmark_id: perception._residual_floor(o)
+                for o in perception.observations(frame.index)}
         for lid, track in perception.tracks.items():
             obs = used.get(lid)
             if track.corners is None or obs is None or obs.corners_px is None:

@@ -26,6 +26,7 @@ Algorithms live in ``tracker/``; this module only keeps state and glues them tog
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -61,6 +62,7 @@ from tracker.boxes import (
 from tracker.camera import CameraModel, Rectifier
 from tracker.pose.attitude_bias import AttitudeBias
 from tracker.pose.config import PoseConfig
+from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.solve import solve_pose
 from tracker.pose.types import (
     MapLandmark,
@@ -76,6 +78,8 @@ FloatArray = npt.NDArray[np.float64]
 
 #: How many frames' fixes are kept for housekeeping to look up.
 RECENT_FIXES = 8
+#: Parameters a fix fits to its corners (position and attitude).
+POSE_PARAMETERS = 6
 
 
 def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
@@ -426,6 +430,43 @@ class Perception(Acquisition):
                       * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
         return model if fit is None else max(model, cfg.fit_sigma_scale * fit)
 
+    def _residual_floor(self, obs: Observation) -> Observation:
+        """``obs`` with its corner sigma raised to what its track's corners have really
+        missed by in recent fixes (``residual_sigma_fixes``; unchanged without corners or
+        before such a fix)."""
+        track = None if obs.landmark_id is None else self.tracks.get(obs.landmark_id)
+        if (obs.corner_sigma_px is None or track is None or track.residual_var is None
+                or self.config.residual_sigma_fixes <= 0):
+            return obs
+        floor = float(np.sqrt(track.residual_var))
+        return obs if floor <= obs.corner_sigma_px else \
+            dataclasses.replace(obs, corner_sigma_px=floor)
+
+    def _learn_residuals(self, observations: Sequence[Observation], fix: PoseFix) -> None:
+        """Average each track's corner residuals against a fix from two or more plates'
+        corners: mean square per coordinate times n / (n - 6), n the fix's corner
+        coordinates, 6 the pose parameters fitted to them."""
+        used = [(o.landmark_id, o) for o in observations if o.corners_px is not None
+                and o.landmark_id in fix.landmark_ids and o.landmark_id in self.tracks]
+        fixes = self.config.residual_sigma_fixes
+        if len(used) < 2 or fixes <= 0:
+            return
+        n = 8 * len(used)
+        by_id = {lm.landmark_id: lm for lm in self.landmarks}
+        pos = np.asarray(fix.position_ned_m, np.float64)
+        for lid, o in used:
+            if lid is None:
+                continue
+            pts = self.camera.world_to_camera(landmark_corners_ned(by_id[lid]),
+                                              pos, fix.attitude_rpy_rad)
+            if not np.all(pts[:, 2] > 0):
+                continue
+            resid = np.asarray(o.corners_px) - self.camera.project_camera_points(pts)
+            var = float(np.mean(resid**2)) * n / (n - POSE_PARAMETERS)
+            track = self.tracks[lid]
+            last = track.residual_var
+            track.residual_var = var if last is None else last + (var - last) / fixes
+
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
         tracks = tuple(
             {"landmark_id": t.landmark_id, "box": [round(v, 1) for v in t.box],
@@ -440,11 +481,14 @@ class Perception(Acquisition):
         side = self.sensors(frame.t_us)
         bias = self.attitude_bias
         attitude = side.attitude if bias is None else bias.correct(side.attitude)
-        fix = solve_pose(self.observations(frame.index), self.landmarks, self.camera,
+        observations = [self._residual_floor(o) for o in self.observations(frame.index)]
+        fix = solve_pose(observations, self.landmarks, self.camera,
                          frame.t_us, attitude=attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
         if bias is not None:
             bias.learn(side.attitude, fix)
+        if isinstance(fix, PoseFix):
+            self._learn_residuals(observations, fix)
         if isinstance(fix, NoFix):
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
                                particles=particles)

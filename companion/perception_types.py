@@ -65,6 +65,13 @@ class PerceptionConfig:
     #: The fit sigma times this is stated: the fit knows the noise, not the bias JPEG and
     #: resampling leave (real crops' corner errors were ~1.5x the fit sigma, RMS).
     fit_sigma_scale: float = field(default=2.0, metadata={"ge": 1})
+    #: ... and no less than what the track's corners have really missed by: the RMS of
+    #: their reprojection residuals in fixes from two or more plates (corrected for the
+    #: six pose parameters fitted to them), averaged over about ``residual_sigma_fixes``
+    #: fixes (0: off).  JPEG moves edges (0.39 px against 0.11 px on PNG, survey world)
+    #: and a real crop can sit biased (0.6-0.8 px) where neither the size model nor the fit
+    #: sees it; the other plates do (docs/decisions.md, issue 25).
+    residual_sigma_fixes: float = field(default=10.0, metadata={"ge": 0})
     #: Every new track is verified by its appearance warped by the homography found: the
     #: normalised correlation of its detail with the frame's (light-normalised,
     #: tracker.verify.detail_ncc) must reach this.
@@ -136,6 +143,9 @@ class Track:
     align_weights: Weights | None = None
     #: corner 1-sigma (px) from the alignment's fit at the last check (None: not known)
     fit_sigma: float | None = None
+    #: mean squared corner reprojection residual (px^2, per coordinate, corrected for the
+    #: pose's parameters) over recent fixes from two or more plates (None: none yet)
+    residual_var: float | None = None
     #: appearance checks failed in a row (0: the last check found the landmark)
     verify_failures: int = 0
 

@@ -40,11 +40,14 @@ def brightness(frames: list[FrameRecord], start_s: float, end_s: float) -> float
 
 def assert_kept_through_light_change(flight: Flight, start_s: float, end_s: float,
                                      dimmest: float, brightest: float) -> None:
+    """``dimmest``: the light must fall to this share of the light before ``start_s``
+    (0: no dimming is expected); ``brightest``: rise to this share (0: no rise expected)."""
     frames = flight.frames
     before = brightness(frames, 0.5, start_s)
     lo = min(brightness(frames, t, t + 0.5) for t in np.arange(start_s, end_s - 0.5, 0.25))
     hi = max(brightness(frames, t, t + 0.5) for t in np.arange(start_s, end_s - 0.5, 0.25))
-    assert lo <= dimmest * before, f"the light never dimmed: {lo:.0f} vs {before:.0f}"
+    assert dimmest == 0.0 or lo <= dimmest * before, \
+        f"the light never dimmed: {lo:.0f} vs {before:.0f}"
     assert brightest == 0.0 or hi >= brightest * before, \
         f"the light never brightened: {hi:.0f} vs {before:.0f}"
     gap = max_fix_gap_s(frames, start_s, end_s)
@@ -81,12 +84,12 @@ def test_sudden_light_drop(sudden_light: Flight) -> None:
     assert_kept_through_light_change(sudden_light, 3.0, 6.0, dimmest=0.5, brightest=0.0)
 
 
-@pytest.mark.xfail(reason="finding: after the jump to 160 % with a colour cast the tracks are "
-                   "lost and not re-acquired until the light is normal (~3 s without a fix); "
-                   "perception's job, see docs/reliability.md", strict=False)
 def test_sudden_light_jump_to_bright(sudden_light: Flight) -> None:
-    """The light jumps to 160 % with a colour cast: the landmarks are kept."""
-    assert_kept_through_light_change(sudden_light, 6.0, 9.0, dimmest=2.0, brightest=1.3)
+    """The light jumps to 160 % with a colour cast: the landmarks are kept.  (Measured
+    against the mean light of 0.5-6 s, which holds the dim phase: the frames' grey level
+    goes 51 -> 187 at the jump, 1.5x the normal 127; the old "lo <= 2x that mean" check
+    failed on the stimulus itself, 187 against 2 x 90.)"""
+    assert_kept_through_light_change(sudden_light, 6.0, 9.0, dimmest=0.0, brightest=1.3)
 
 
 def hide_everything(sc: ScenarioConfig, ids: list[str], start_s: float,

@@ -5,6 +5,7 @@ fix and is dropped, a light step is noticed, the corner sigma follows the fit.""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from companion.perception import Perception
 from companion.perception_types import Track
@@ -116,3 +117,41 @@ def test_a_track_without_corners_is_checked_where_its_box_is() -> None:
     assert p._verify_tracks(frame) == []
     events = p._verify_tracks(frame)
     assert "p" not in p.tracks and events[0]["event"] == "lost"
+
+
+def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
+    """Issue 25: JPEG and biased real crops put corners off by more than the size model
+    and the fit say.  A track's corners that missed the fix's reprojection in fixes from
+    two plates state at least that RMS (times n / (n - 6)); a track whose corners matched
+    keeps its sigma; one-plate fixes teach nothing."""
+    from companion.perception import POSE_PARAMETERS
+    from tracker.pose.landmarks import landmark_corners_ned
+    from tracker.pose.types import Observation, PoseFix
+
+    lms = [MapLandmark("a", (10.0, -1.5, 0.0), 1.2, 0.8, None, "other"),
+           MapLandmark("b", (10.0, 1.5, 0.0), 1.2, 0.8, None, "other")]
+    cam = CameraModel(320, 240, 300.0, 300.0, 159.5, 119.5)
+    plate = np.full((80, 120, 3), 128, np.uint8)
+    plate[20:60, 30:90] = 20
+    p = Perception(cam, lms, {"a": plate, "b": plate})
+    pos, rpy = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    off = {"a": 0.0, "b": 1.0}  # b's corners 1 px off in x and y, every fix
+    obs = []
+    for lm in lms:
+        true = cam.project_camera_points(cam.world_to_camera(
+            landmark_corners_ned(lm), np.asarray(pos), rpy)) + off[lm.landmark_id]
+        p.tracks[lm.landmark_id] = Track(lm.landmark_id, None,  # type: ignore[arg-type]
+                                         (0.0, 0.0, 10.0, 10.0), None, corners=true)
+        obs.append(Observation(centre_px=(0.0, 0.0), box_wh_px=(10.0, 10.0),
+                               landmark_id=lm.landmark_id, corner_sigma_px=0.2,
+                               corners_px=tuple((float(u), float(v)) for u, v in true)))
+    fix = PoseFix(0, pos, rpy, np.eye(6), 90, ("a", "b"), "bearing_ls")
+    one = PoseFix(0, pos, rpy, np.eye(6), 90, ("b",), "ippe")
+    p._learn_residuals(obs[1:], one)
+    assert p.tracks["b"].residual_var is None  # one plate: nothing learnt
+    for _ in range(30):
+        p._learn_residuals(obs, fix)
+    expected = 1.0 * 16 / (16 - POSE_PARAMETERS)
+    assert abs(p.tracks["b"].residual_var - expected) < 1e-6  # type: ignore[operator]
+    assert p._residual_floor(obs[1]).corner_sigma_px == pytest.approx(np.sqrt(expected))
+    assert p._residual_floor(obs[0]).corner_sigma_px == 0.2  # matched: unchanged
