@@ -431,16 +431,17 @@ class Perception(Acquisition):
         return model if fit is None else max(model, cfg.fit_sigma_scale * fit)
 
     def _residual_floor(self, obs: Observation) -> Observation:
-        """``obs`` with its corner sigma raised to what its track's corners have really
-        missed by in recent fixes (``residual_sigma_fixes``; unchanged without corners or
-        before such a fix)."""
+        """``obs`` with its corner sigma raised for saturation (``saturated_sigma_gain``)
+        and to what its track's corners have really missed by in recent fixes
+        (``residual_sigma_fixes``); unchanged without corners."""
         track = None if obs.landmark_id is None else self.tracks.get(obs.landmark_id)
-        if (obs.corner_sigma_px is None or track is None or track.residual_var is None
-                or self.config.residual_sigma_fixes <= 0):
+        if obs.corner_sigma_px is None or track is None:
             return obs
-        floor = float(np.sqrt(track.residual_var))
-        return obs if floor <= obs.corner_sigma_px else \
-            dataclasses.replace(obs, corner_sigma_px=floor)
+        sigma = obs.corner_sigma_px * (1.0 + self.config.saturated_sigma_gain * track.saturated)
+        if track.residual_var is not None and self.config.residual_sigma_fixes > 0:
+            sigma = max(sigma, float(np.sqrt(track.residual_var)))
+        return obs if sigma == obs.corner_sigma_px else \
+            dataclasses.replace(obs, corner_sigma_px=sigma)
 
     def _learn_residuals(self, observations: Sequence[Observation], fix: PoseFix) -> None:
         """Average each track's corner residuals against a fix from two or more plates'

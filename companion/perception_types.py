@@ -72,6 +72,10 @@ class PerceptionConfig:
     #: and a real crop can sit biased (0.6-0.8 px) where neither the size model nor the fit
     #: sees it; the other plates do (docs/decisions.md, issue 25).
     residual_sigma_fixes: float = field(default=10.0, metadata={"ge": 0})
+    #: A plate's corners with a share ``s`` of its pixels saturated state their sigma times
+    #: ``1 + saturated_sigma_gain * s``: sudden_light's plates 50-60 % saturated (160 %
+    #: light) had corners 0.41 px off against 0.10 px unsaturated, 4x (docs/pose.md).
+    saturated_sigma_gain: float = field(default=5.5, metadata={"ge": 0})
     #: Every new track is verified by its appearance warped by the homography found: the
     #: normalised correlation of its detail with the frame's (light-normalised,
     #: tracker.verify.detail_ncc) must reach this.

@@ -123,7 +123,8 @@ def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
     """Issue 25: JPEG and biased real crops put corners off by more than the size model
     and the fit say.  A track's corners that missed the fix's reprojection in fixes from
     two plates state at least that RMS (times n / (n - 6)); a track whose corners matched
-    keeps its sigma; one-plate fixes teach nothing."""
+    keeps its sigma; one-plate fixes teach nothing.  A saturated plate's sigma grows with
+    its saturated share."""
     from companion.perception import POSE_PARAMETERS
     from tracker.pose.landmarks import landmark_corners_ned
     from tracker.pose.types import Observation, PoseFix
@@ -155,3 +156,5 @@ def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
     assert abs(p.tracks["b"].residual_var - expected) < 1e-6  # type: ignore[operator]
     assert p._residual_floor(obs[1]).corner_sigma_px == pytest.approx(np.sqrt(expected))
     assert p._residual_floor(obs[0]).corner_sigma_px == 0.2  # matched: unchanged
+    p.tracks["a"].saturated = 0.5  # half its pixels saturated: 1 + 5.5 x 0.5
+    assert p._residual_floor(obs[0]).corner_sigma_px == pytest.approx(0.2 * 3.75)
