@@ -468,6 +468,24 @@ class Perception(Acquisition):
             last = track.residual_var
             track.residual_var = var if last is None else last + (var - last) / fixes
 
+    def _drop_rejected(self, observations: Sequence[Observation], fix: PoseFix
+                       ) -> list[dict[str, Any]]:
+        """Count, per track, the fixes in a row that left its corners out; drop a track at
+        ``max_pose_rejections`` (housekeeping then acquires it afresh)."""
+        limit = self.config.max_pose_rejections
+        events: list[dict[str, Any]] = []
+        for o in observations:
+            track = None if o.landmark_id is None else self.tracks.get(o.landmark_id)
+            if track is None or o.corners_px is None:
+                continue
+            used = o.landmark_id in fix.landmark_ids
+            track.pose_rejections = 0 if used else track.pose_rejections + 1
+            if limit and track.pose_rejections >= limit:
+                del self.tracks[track.landmark_id]
+                events.append({"event": "lost", "landmark": track.landmark_id,
+                               "why": f"its corners left out of {limit} fixes in a row"})
+        return events
+
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
         tracks = tuple(
             {"landmark_id": t.landmark_id, "box": [round(v, 1) for v in t.box],
@@ -490,6 +508,7 @@ class Perception(Acquisition):
             bias.learn(side.attitude, fix)
         if isinstance(fix, PoseFix):
             self._learn_residuals(observations, fix)
+            events += self._drop_rejected(observations, fix)
         if isinstance(fix, NoFix):
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
                                particles=particles)

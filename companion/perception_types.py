@@ -76,6 +76,10 @@ class PerceptionConfig:
     #: ``1 + saturated_sigma_gain * s``: sudden_light's plates 50-60 % saturated (160 %
     #: light) had corners 0.41 px off against 0.10 px unsaturated, 4x (docs/pose.md).
     saturated_sigma_gain: float = field(default=5.5, metadata={"ge": 0})
+    #: A track whose corners the pose solver left out of this many fixes in a row (they
+    #: disagreed with the other landmarks') is dropped, to be acquired afresh (0: never;
+    #: docs/reliability.md finding 4: a re-acquired track kept corners 12.7 sigma off).
+    max_pose_rejections: int = field(default=15, metadata={"ge": 0})
     #: Every new track is verified by its appearance warped by the homography found: the
     #: normalised correlation of its detail with the frame's (light-normalised,
     #: tracker.verify.detail_ncc) must reach this.
@@ -150,6 +154,8 @@ class Track:
     #: mean squared corner reprojection residual (px^2, per coordinate, corrected for the
     #: pose's parameters) over recent fixes from two or more plates (None: none yet)
     residual_var: float | None = None
+    #: fixes in a row that left this track's corners out
+    pose_rejections: int = 0
     #: appearance checks failed in a row (0: the last check found the landmark)
     verify_failures: int = 0
 

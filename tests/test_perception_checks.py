@@ -4,6 +4,8 @@ fix and is dropped, a light step is noticed, the corner sigma follows the fit.""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -158,3 +160,24 @@ def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
     assert p._residual_floor(obs[0]).corner_sigma_px == 0.2  # matched: unchanged
     p.tracks["a"].saturated = 0.5  # half its pixels saturated: 1 + 5.5 x 0.5
     assert p._residual_floor(obs[0]).corner_sigma_px == pytest.approx(0.2 * 3.75)
+
+
+def test_a_track_whose_corners_the_pose_keeps_leaving_out_is_dropped() -> None:
+    """docs/reliability.md finding 4: a re-acquired track kept corners 12.7 sigma off and
+    the pose left them out of every fix; after ``max_pose_rejections`` fixes in a row it
+    is dropped (to be acquired afresh); a track used in between starts counting again."""
+    from tracker.pose.types import Observation, PoseFix
+
+    _frame, plate, corners = scene()
+    p = perception(plate)
+    p.config = dataclasses.replace(p.config, max_pose_rejections=3)
+    p.tracks["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
+    obs = [Observation(centre_px=(0.0, 0.0), box_wh_px=(1.0, 1.0), landmark_id="p",
+                       corners_px=tuple((float(u), float(v)) for u, v in corners))]
+    without = PoseFix(0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), np.eye(6), 90, ("q",), "ippe")
+    with_p = dataclasses.replace(without, landmark_ids=("p",))
+    assert p._drop_rejected(obs, without) == [] and p._drop_rejected(obs, without) == []
+    assert p._drop_rejected(obs, with_p) == [] and p.tracks["p"].pose_rejections == 0
+    assert p._drop_rejected(obs, without) == [] and p._drop_rejected(obs, without) == []
+    (event,) = p._drop_rejected(obs, without)
+    assert "p" not in p.tracks and event["event"] == "lost" and "3 fixes" in event["why"]

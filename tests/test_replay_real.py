@@ -1,0 +1,62 @@
+"""The real-imagery world as a regression check with ``companion replay`` (issue 25).
+
+A real-imagery world is built from the shared photographs (``../shared/data``; skipped,
+with the reason printed, when they are absent), written as a recorded stream with truth,
+and replayed through the whole companion (``companion replay --fast --json``).  The
+issue's targets are asserted on the replay's own scores: a fix on >= 90 % of the frames
+with two or more landmarks fully visible, position RMSE <= 0.5 % of the distance to the
+landmarks, >= 90 % of fixes inside the 95 % NEES bounds, no track on a wrong place for
+more than 10 frames, and a fix within 1 s of each light step.
+
+The configuration is the simulator's layer with the real-imagery settings the worlds are
+scored with (docs/benchmarks.md): SIFT acquisition (as in deployment), 6 inliers, and the
+vagueness gate at 5 % of the distance.  Slow: a 30 s world, about a minute of replay.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from companion.sim.realworld import RealWorldSpec, shared_data, synth_real
+from tests.test_replay import replay
+
+#: Scored as docs/benchmarks.md scores the real-imagery worlds.
+REAL_SETTINGS = ("--set", 'acquire.features="sift"', "--set", "acquire.min_inliers=6",
+                 "--set", "fixgate.max_sigma_rel=0.05")
+
+
+def real_world(folder: Path, seed: int) -> Path:
+    data = shared_data()
+    if not (data / "aerial").is_dir() or not (data / "otb").is_dir():
+        print(f"SKIP: the real photographs are not at {data} (set LMC_SHARED_DATA)")
+        pytest.skip(f"real photographs not available at {data} (set LMC_SHARED_DATA)")
+    out = folder / f"real{seed}"
+    synth_real(RealWorldSpec(seed=seed), out)
+    return out
+
+
+def assert_issue_25_targets(s: dict[str, Any]) -> None:
+    assert s["frames_2plus_visible"] >= 300, s  # the world shows what is scored
+    assert s["fix_share_2plus_visible"] >= 0.9, s
+    assert s["position_rmse_pct_of_distance"] <= 0.5, s
+    assert s["nees_inside_95_share"] >= 0.9, s
+    assert s["longest_wrong_track_frames"] <= 10, s
+    steps = s["light_steps"]
+    assert steps, "the world's light step at 12 s was not seen"
+    assert all(st["fix_after_s"] is not None and st["fix_after_s"] <= 1.0 for st in steps), steps
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1])
+def test_replay_of_a_real_imagery_world_meets_the_issue_targets(
+        tmp_path: Path, seed: int) -> None:
+    stream = real_world(tmp_path, seed)
+    status, s = replay(tmp_path, stream, *REAL_SETTINGS)
+    assert status == 0
+    print({k: s[k] for k in ("fix_share_2plus_visible", "position_rmse_pct_of_distance",
+                             "nees_inside_95_share", "longest_wrong_track_frames",
+                             "light_steps")})
+    assert_issue_25_targets(s)
