@@ -13,7 +13,9 @@ of its stated sigmas (``perception_survey.noisy_attitude``).  Prints, per run:
   NEES inside the 95 % chi-square bounds (``perception_survey.Fixes``);
 * ``longest_wrong_track_frames``: the longest run of frames a track sat on a wrong place
   (box IoU with its landmark's truth box < ``--wrong-iou``, or its landmark not in view);
-* ``first_fix_after_step_s``: time from ``--light-step-s`` to the next fix.
+* ``first_fix_after_step_s``: time from ``--light-step-s`` to the next fix;
+* ``no_fix_2plus_visible``: why the frames with >= 2 landmarks fully in view got no fix
+  (the perception's no-fix reason up to its first colon, counted).
 
     PYTHONPATH=. python benchmarks/perception_stream.py STREAM [--runs 3] [--deployment]
         [--light-step-s 12] [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
