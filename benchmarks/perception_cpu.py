@@ -66,6 +66,32 @@ def pct(values: list[float], q: float) -> float:
     return round(float(np.percentile(values, q)), 2) if values else 0.0
 
 
+def configs(args: argparse.Namespace) -> dict[str, Any]:
+    """Perception's keyword arguments for ``--layer``, ``--max-tracks``, ``--particles``."""
+    from companion.perception import PerceptionConfig
+    from tracker import TrackerConfig
+
+    if args.layer == "flight":
+        from tracker.detector import Detector
+
+        kw: dict[str, Any] = {"config": PerceptionConfig(), "tracker_config": TrackerConfig(),
+                              "detect": Detector().detect}
+    else:
+        from companion.runtime import detector_for
+        from companion.settings import load_settings
+
+        st = load_settings(shipped=("sim",))
+        kw = {"config": st.perception, "tracker_config": st.tracker, "pose_config": st.pose,
+              "acquire_config": st.acquire, "gate_config": st.fixgate,
+              "detect": detector_for(st)}
+    if args.max_tracks is not None:
+        kw["config"] = dataclasses.replace(kw["config"], max_tracks=args.max_tracks)
+    if args.particles is not None:
+        kw["tracker_config"] = dataclasses.replace(kw["tracker_config"],
+                                                   particles=args.particles)
+    return kw
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="survey")
@@ -74,6 +100,9 @@ def main() -> int:
     ap.add_argument("--particles", type=int, help="tracker particles (default: its own)")
     ap.add_argument("--scale", type=float, default=1.0,
                     help="camera resolution scale (0.5: 320x240 for 640x480)")
+    ap.add_argument("--layer", choices=("flight", "sim"), default="sim",
+                    help="sim: the settings `companion demo` runs with (config/sim.toml, its "
+                    "detector); flight: tests/test_perception.py's flight() defaults")
     ap.add_argument("--profile", type=int, default=0, metavar="N")
     ap.add_argument("--json", action="store_true", help="one JSON line instead of text")
     args = ap.parse_args()
@@ -81,12 +110,10 @@ def main() -> int:
     import cv2
 
     from companion.demo import map_landmarks
-    from companion.perception import Perception, PerceptionConfig, SideSensors
+    from companion.perception import Perception, SideSensors
     from companion.sim.scenario import load_scenario
     from companion.sim.simulator import Simulator
     from companion.sources.base import Frame
-    from tracker import TrackerConfig
-    from tracker.detector import Detector
     from tracker.pose.types import AttitudeSample, PoseFix
 
     cv2.setNumThreads(1)  # as the companion runs it (companion.runtime.fly)
@@ -104,13 +131,8 @@ def main() -> int:
         s = sim.state_at(t_us / 1e6)
         return SideSensors(attitude=AttitudeSample(t_us, *map(float, s.attitude_rpy_rad)))
 
-    config = PerceptionConfig() if args.max_tracks is None else PerceptionConfig(
-        max_tracks=args.max_tracks)
-    tracker_config = None if args.particles is None else dataclasses.replace(
-        TrackerConfig(), particles=args.particles)
     perception = Perception(sim.scenario.camera, landmarks, references, sensors=sensors,
-                            config=config, tracker_config=tracker_config,
-                            detect=Detector().detect)
+                            **configs(args))
     meter = Meter()
     meter.wrap(Perception, "process", "process", time.process_time)
     meter.wrap(Perception, "housekeeping", "housekeeping", time.process_time)
@@ -141,7 +163,9 @@ def main() -> int:
                                     sim.state_at(i / sim.fps).position_ned_m))
     perception.close()
     rmse = float(np.sqrt(np.mean(np.square(errors)))) if errors else None
-    out = {"scenario": args.scenario, "frames": args.frames, "fixes": len(errors),
+    out = {"scenario": args.scenario, "layer": args.layer, "frames": args.frames,
+           "scale": args.scale, "max_tracks": args.max_tracks, "particles": args.particles,
+           "fixes": len(errors),
            "rmse_m": None if rmse is None else round(rmse, 4),
            "tracks_mean": round(float(np.mean(tracks_per_frame)), 2),
            "cpu_ms_per_frame": {k: {"mean": round(float(np.mean(v)), 2), "p50": pct(v, 50),
@@ -151,7 +175,8 @@ def main() -> int:
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"{args.scenario} frames {args.frames}: {out['fixes']} fixes, RMSE "
+        print(f"{args.scenario} ({args.layer} settings) frames {args.frames}: "
+              f"{out['fixes']} fixes, RMSE "
               f"{out['rmse_m']} m, {out['tracks_mean']} tracks on average")
         print("CPU ms per frame (mean / p50 / p99 / max):")
         for k, v in out["cpu_ms_per_frame"].items():
