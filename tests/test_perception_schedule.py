@@ -1,55 +1,14 @@
-"""Where the perception's periodic work runs (issue 23): no housekeeping call runs more
-than one heavy step, and a track's appearance check runs on the thread that updated it."""
+"""Where the perception's periodic work runs (issue 23): a track's appearance check runs
+on the thread that updated it (housekeeping's one heavy step per call:
+tests/test_perception.py)."""
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 from typing import Any
 
-from companion.demo import map_landmarks
 from companion.perception import Perception, PerceptionConfig
-from companion.sim.scenario import load_scenario
-from companion.sim.simulator import Simulator
-from companion.sources.base import Frame
 from tests.test_perception import flight
-
-
-def test_housekeeping_with_no_track_runs_one_heavy_step_per_call() -> None:
-    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=60))
-    landmarks, references = map_landmarks(sim)
-    detected: list[int] = []
-
-    def detect(_image: Any) -> list[Any]:
-        detected.append(1)
-        return []
-
-    perception = Perception(sim.scenario.camera, landmarks, references, detect=detect)
-    steps: list[list[str]] = []
-
-    def counted(name: str) -> None:
-        inner = getattr(perception, name)
-
-        def run(*args: Any) -> Any:
-            steps[-1].append(name)
-            return inner(*args)
-
-        setattr(perception, name, run)
-
-    counted("_acquire")
-    counted("_search")
-    image, _ = sim.render(0)  # the sky above the survey: nothing there to find
-    blank = image * 0
-    for i in range(6):
-        steps.append([])
-        before = len(detected)
-        perception.housekeeping(Frame(i, 10_000_000 + i * 33_333, blank))
-        steps[-1] += ["detect"] * (len(detected) - before)
-    perception.close()
-    assert not perception.tracks
-    assert all(len(s) <= 1 for s in steps), steps  # before: features + detector + search
-    ran = {name for s in steps for name in s}
-    assert ran == {"_acquire", "detect", "_search"}, steps  # each still gets its turn
 
 
 def test_appearance_checks_run_on_the_thread_that_updated_the_track() -> None:
