@@ -85,6 +85,7 @@ def child(args: argparse.Namespace) -> None:
     """One pinned run of the demo's pipeline on the recording; prints one JSON line."""
     os.sched_setaffinity(0, {args.core})  # before any thread starts: they all inherit it
     import asyncio
+    import dataclasses
 
     import numpy as np
 
@@ -123,6 +124,10 @@ def child(args: argparse.Namespace) -> None:
         demo.AUTOPILOT_CORES = others
     probe = Probe(demo) if args.profile else None
     settings = load_settings(shipped=("sim",))  # as `companion demo` reads them
+    # Zenoh on a port of its own: the demo's usual 7447 may still be held by the run before
+    # (or another engineer's demo), and Zenoh's listener then fails to bind
+    settings = dataclasses.replace(settings, monitor=dataclasses.replace(
+        settings.monitor, listen=(f"tcp/127.0.0.1:{free_port()}",), connect=()))
     s = asyncio.run(demo.run_demo(settings, meta["scenario"], meta["seconds"]))
     st = captured["app"].stats
     stages = {"capture_to_worker": st.queue_ms, "process": st.process_ms,
@@ -268,6 +273,16 @@ def run_child(checkout: Path, stream: Path, core: int, busy: bool,
     raise SystemExit(f"run in {checkout} failed:\n{done.stderr[-3000:]}")
 
 
+def free_port() -> int:
+    """A TCP port on loopback nobody listens on now."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
 def cpu_per_frame(s: dict[str, Any]) -> dict[str, Any]:
     """The companion's CPU per processed frame (ms; robust to the machine's load) and the
     fake autopilot's cores when it ran in its own process (not in ``cores``)."""
@@ -279,7 +294,9 @@ def cpu_per_frame(s: dict[str, Any]) -> dict[str, Any]:
 def run_demo_child(checkout: Path, seconds: float) -> dict[str, Any]:
     """``companion demo --seconds S --json`` of one checkout, as a user runs it."""
     exe = checkout / ".venv" / "bin" / "companion"
-    done = subprocess.run([str(exe), "demo", "--seconds", str(seconds), "--json"],
+    listen = json.dumps([f"tcp/127.0.0.1:{free_port()}"])  # see child()
+    done = subprocess.run([str(exe), "--set", f"monitor.listen={listen}", "demo",
+                           "--seconds", str(seconds), "--json"],
                           cwd=checkout, capture_output=True, text=True, check=False)
     try:
         s = json.loads(done.stdout)
