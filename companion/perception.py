@@ -200,9 +200,13 @@ class Perception(Acquisition):
             else track.verify_failures + 1
         self._checked[track.landmark_id] = ncc  # one key per track: no two threads share one
 
-    def _verify_tracks(self) -> list[dict[str, Any]]:
-        """After the checks of this frame (:meth:`_check_track`): a track that failed is
-        left out of fixes, dropped after repeated failures."""
+    def _verify_tracks(self, image: npt.NDArray[np.uint8] | None = None
+                       ) -> list[dict[str, Any]]:
+        """Check every track on ``image`` (None: :meth:`process` has, in the track updates);
+        a track that failed is left out of fixes, dropped after repeated failures."""
+        if image is not None:
+            for track in list(self.tracks.values()):
+                self._check_track(track, image)
         events: list[dict[str, Any]] = []
         checked, self._checked = self._checked, {}
         for track in list(self.tracks.values()):
