@@ -163,14 +163,16 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     # rendered in a process of its own, started before the clock: a camera exposes without
     # the companion's interpreter (docs/benchmarks.md, "Latency tail")
     source = SimCameraSource(sim, realtime=True, seconds=seconds, own_process=True)
+    # the fake autopilot flies what the camera sees, on one clock: its creation is t = 0;
+    # in a process of its own, as a real autopilot is on a board of its own (launched now:
+    # its start-up overlaps the renderer's)
+    fake = AutopilotProcess(FakeAutopilotConfig(profile=settings.vehicle.profile,
+                                                endpoint="udpin:127.0.0.1:0",
+                                                attitude_error=drift),
+                            sim.scenario, AUTOPILOT_CORES)
     try:  # fly() closes the source; until then, whatever fails here closes it
+        fake.launch()
         await source.start()
-        # the fake autopilot flies what the camera sees, on one clock: its creation is t = 0;
-        # in a process of its own, as a real autopilot is on a board of its own
-        fake = AutopilotProcess(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                                    endpoint="udpin:127.0.0.1:0",
-                                                    attitude_error=drift),
-                                sim.scenario, AUTOPILOT_CORES)
         await fake.start()
         source.anchor(fake.start_ns // 1000)
         bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
@@ -178,6 +180,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
                             set_origin=True)
     except BaseException:
         source.close()
+        fake.close()
         raise
     recorders: list[TruthRecorder] = []
 

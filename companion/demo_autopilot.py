@@ -51,10 +51,17 @@ class AutopilotProcess:
         self._start_ns = 0
         self._result: dict[str, Any] | None = None
 
+    def launch(self) -> None:
+        """Start the process: it imports and builds its world, then waits for
+        :meth:`start` (so its start-up overlaps the camera's; t = 0 is not yet)."""
+        if self._process.pid is None:
+            self._process.start()
+            self._child.close()  # ours: a dead child then ends recv() with EOFError
+
     async def start(self) -> None:
-        """Start the process; returns once the fake listens (its creation is t = 0)."""
-        self._process.start()
-        self._child.close()  # ours: a dead child then ends recv() with EOFError
+        """Create the fake over there (its creation is t = 0); returns once it listens."""
+        self.launch()
+        self._conn.send("go")
         try:
             self._port, self._start_ns = await asyncio.to_thread(self._conn.recv)
         except EOFError:
@@ -90,6 +97,13 @@ class AutopilotProcess:
             await asyncio.to_thread(self._process.join, 5.0)
             self._conn.close()
 
+    def close(self) -> None:
+        """End the process at once, results or not (start-up failed)."""
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join(5.0)
+        self._conn.close()
+
     def accepted(self) -> list[VisionRecord]:
         return list(self._done()["accepted"])
 
@@ -119,7 +133,9 @@ async def _fly(conn: multiprocessing.connection.Connection, config: FakeAutopilo
                scenario: ScenarioConfig, count: Any) -> None:
     from companion.sim.simulator import Simulator  # the child's own (not the parent's)
 
-    fake = FakeAutopilot(config, truth=Simulator(scenario).truth_fn)
+    truth = Simulator(scenario).truth_fn
+    await asyncio.to_thread(conn.recv)  # "go": the flight's clock starts now
+    fake = FakeAutopilot(config, truth=truth)
     await fake.start()
     cpu0 = time.process_time()
     conn.send((fake.local_port, fake.start_ns))
