@@ -29,7 +29,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
+from companion.launch import limit_library_threads
+
+# one thread per native pool, as `companion` runs, before numpy loads: OpenBLAS's idle
+# threads spin, and their CPU time counted in every stage (3.3 ms a frame without this)
+limit_library_threads()
+
+import numpy as np  # noqa: E402
 
 STAGES = ("process", "housekeeping", "tracker.update", "_align", "_recover_corners",
           "_check_track", "_verify_tracks", "_solve")
@@ -85,6 +91,8 @@ def configs(args: argparse.Namespace) -> dict[str, Any]:
         kw = {"config": st.perception, "tracker_config": st.tracker, "pose_config": st.pose,
               "acquire_config": st.acquire, "gate_config": st.fixgate,
               "detect": detector_for(st)}
+    if args.serial:
+        kw["config"] = dataclasses.replace(kw["config"], parallel_tracks=False)
     if args.max_tracks is not None:
         kw["config"] = dataclasses.replace(kw["config"], max_tracks=args.max_tracks)
     if args.particles is not None:
@@ -104,6 +112,8 @@ def main() -> int:
     ap.add_argument("--layer", choices=("flight", "sim"), default="sim",
                     help="sim: the settings `companion demo` runs with (config/sim.toml, its "
                     "detector); flight: tests/test_perception.py's flight() defaults")
+    ap.add_argument("--serial", action="store_true",
+                    help="perception.parallel_tracks = false (every track on one thread)")
     ap.add_argument("--profile", type=int, default=0, metavar="N")
     ap.add_argument("--json", action="store_true", help="one JSON line instead of text")
     args = ap.parse_args()
