@@ -32,7 +32,7 @@ from typing import Any
 from companion.launch import limit_library_threads
 
 # one thread per native pool, as `companion` runs, before numpy loads: OpenBLAS's idle
-# threads spin, and their CPU time counted in every stage (3.3 ms a frame without this)
+# threads spin, and their CPU time counted in every stage (3.9 ms a frame without this)
 limit_library_threads()
 
 import numpy as np  # noqa: E402
