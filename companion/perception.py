@@ -163,16 +163,19 @@ class Perception(Acquisition):
                 self._rectified[frame.index] = image
                 for old in [i for i in self._rectified if i <= frame.index - RECENT_FIXES]:
                     del self._rectified[old]
-        # the appearance check is due on a light step and every ``verify_every_frames``:
-        # each track is checked right after its update, on the thread that updated it
-        check = self._light_step(image) or self._frames % self.config.verify_every_frames == 0
+        # each track's appearance check is due every ``verify_every_frames``, the tracks'
+        # checks on different frames (issue 23: not every track's on one frame), and all
+        # at once on a light step; a track is checked right after its update, on its thread
+        stepped = self._light_step(image)
         tracks = list(self.tracks.values())
-        for track, alive in zip(tracks, self._update_tracks(tracks, image, check),
+        every = self.config.verify_every_frames
+        checks = [stepped or (self._frames + i) % every == 0 for i in range(len(tracks))]
+        for track, alive in zip(tracks, self._update_tracks(tracks, image, checks),
                                 strict=True):
             if not alive:
                 del self.tracks[track.landmark_id]
                 events.append({"event": "lost", "landmark": track.landmark_id})
-        if check:
+        if any(checks):
             events += self._verify_tracks()
         self._frames += 1
         return self._solve(frame, events)
@@ -223,14 +226,17 @@ class Perception(Acquisition):
             self._pool.shutdown(wait=True)
 
     def _update_tracks(self, tracks: list[Track], image: npt.NDArray[np.uint8],
-                       check: bool = False) -> list[bool]:
-        """Update every track (and ``check`` its appearance: :meth:`_check_track`); with
-        two or more, every other one on the second thread.  Each track touches only its
-        own state."""
+                       checks: Sequence[bool] = ()) -> list[bool]:
+        """Update every track (and check the appearance of those whose ``checks`` entry is
+        true: :meth:`_check_track`); with two or more, every other one on the second
+        thread.  Each track touches only its own state."""
+        due = [bool(c) for c in checks] or [False] * len(tracks)
         if self._pool is None or len(tracks) < 2:
-            return [self._update_track(t, image, check) for t in tracks]
-        there = [self._pool.submit(self._update_track, t, image, check) for t in tracks[::2]]
-        here = [self._update_track(t, image, check) for t in tracks[1::2]]
+            return [self._update_track(t, image, c) for t, c in zip(tracks, due, strict=True)]
+        there = [self._pool.submit(self._update_track, t, image, c)
+                 for t, c in zip(tracks[::2], due[::2], strict=True)]
+        here = [self._update_track(t, image, c)
+                for t, c in zip(tracks[1::2], due[1::2], strict=True)]
         there_ok = [f.result() for f in there]
         return [there_ok[i // 2] if i % 2 == 0 else here[i // 2] for i in range(len(tracks))]
 
