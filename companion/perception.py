@@ -274,8 +274,7 @@ class Perception(Acquisition):
         # One heavy step per call (they take turns, issue 23): a call that runs several
         # holds a one-core board's next frame up by their sum (50-70 ms of CPU with no
         # track: features, then the detector, then the template search).
-        spread = True
-        if acquire and lost and spread:
+        if acquire and lost:
             self._lost_turn = not self._lost_turn
             acquire, lost = self._lost_turn, not self._lost_turn
         if acquire:
@@ -284,7 +283,7 @@ class Perception(Acquisition):
         if fix is not None:
             starts += self._predict_acquire(image, fix, starts)
         elif lost:
-            starts += self._find_while_lost(image, spread)
+            starts += self._find_while_lost(image, spread=True)
         if starts:
             with self._lock:
                 self._pending += starts
