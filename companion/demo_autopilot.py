@@ -84,9 +84,11 @@ class AutopilotProcess:
 
     async def stop(self) -> None:
         """Stop the fake and take its results; idempotent."""
-        if self._result is not None or not self._process.is_alive():
-            self._result = self._result or {"accepted": [], "summary": {}, "cpu_s": 0.0}
+        if self._result is not None:
             return
+        if not self._process.is_alive():
+            raise CompanionError("the fake autopilot's process ended early (exit code "
+                                 f"{self._process.exitcode})")
         self._conn.send("stop")
         try:
             self._result = await asyncio.to_thread(self._conn.recv)
