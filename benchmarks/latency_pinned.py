@@ -85,6 +85,7 @@ def child(args: argparse.Namespace) -> None:
     """One pinned run of the demo's pipeline on the recording; prints one JSON line."""
     os.sched_setaffinity(0, {args.core})  # before any thread starts: they all inherit it
     import asyncio
+    import dataclasses
 
     import numpy as np
 
@@ -116,8 +117,17 @@ def child(args: argparse.Namespace) -> None:
 
     demo.SimCameraSource = Recorded  # type: ignore[misc]
     demo.summary = summary  # type: ignore[assignment]
+    others = set(range(os.cpu_count() or 1)) - {args.core}
+    if hasattr(demo, "AUTOPILOT_CORES") and others:
+        # the fake autopilot in its own process (code since issue 23's second round) runs
+        # on the other cores: a real autopilot is a board of its own
+        demo.AUTOPILOT_CORES = others
     probe = Probe(demo) if args.profile else None
     settings = load_settings(shipped=("sim",))  # as `companion demo` reads them
+    # Zenoh on a port of its own: the demo's usual 7447 may still be held by the run before
+    # (or another engineer's demo), and Zenoh's listener then fails to bind
+    settings = dataclasses.replace(settings, monitor=dataclasses.replace(
+        settings.monitor, listen=(f"tcp/127.0.0.1:{free_port()}",), connect=()))
     s = asyncio.run(demo.run_demo(settings, meta["scenario"], meta["seconds"]))
     st = captured["app"].stats
     stages = {"capture_to_worker": st.queue_ms, "process": st.process_ms,
@@ -125,7 +135,7 @@ def child(args: argparse.Namespace) -> None:
     out = {"frames": s["frames"], "dropped": s["dropped_frames"],
            "cores": s["cpu_cores_busy"], "fixes_sent": s["fixes_sent"],
            "fixes_accepted": s["fixes_accepted"], "rmse_m": s["position_rmse_m"],
-           "nees_inside_95": s["nees_inside_95"],
+           "nees_inside_95": s["nees_inside_95"], **cpu_per_frame(s),
            "stages": {k: {"p50": r.percentile(50), "p99": r.percentile(99),
                           "max": r.percentile(100), "n": r.count} for k, r in stages.items()}}
     if probe is not None:
@@ -263,10 +273,30 @@ def run_child(checkout: Path, stream: Path, core: int, busy: bool,
     raise SystemExit(f"run in {checkout} failed:\n{done.stderr[-3000:]}")
 
 
+def free_port() -> int:
+    """A TCP port on loopback nobody listens on now."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+def cpu_per_frame(s: dict[str, Any]) -> dict[str, Any]:
+    """The companion's CPU per processed frame (ms; robust to the machine's load) and the
+    fake autopilot's cores when it ran in its own process (not in ``cores``)."""
+    per = s["cpu_cores_busy"] * s.get("flown_s", 0.0) / max(s["frames"], 1) * 1e3
+    return {"cpu_ms_per_frame": round(per, 2) if s.get("flown_s") else None,
+            "cores_autopilot": s.get("cpu_cores_autopilot")}
+
+
 def run_demo_child(checkout: Path, seconds: float) -> dict[str, Any]:
     """``companion demo --seconds S --json`` of one checkout, as a user runs it."""
     exe = checkout / ".venv" / "bin" / "companion"
-    done = subprocess.run([str(exe), "demo", "--seconds", str(seconds), "--json"],
+    listen = json.dumps([f"tcp/127.0.0.1:{free_port()}"])  # see child()
+    done = subprocess.run([str(exe), "--set", f"monitor.listen={listen}", "demo",
+                           "--seconds", str(seconds), "--json"],
                           cwd=checkout, capture_output=True, text=True, check=False)
     try:
         s = json.loads(done.stdout)
@@ -275,7 +305,7 @@ def run_demo_child(checkout: Path, seconds: float) -> dict[str, Any]:
     return {"frames": s["frames"], "dropped": s["dropped_frames"],
             "cores": s["cpu_cores_busy"], "fixes_sent": s["fixes_sent"],
             "fixes_accepted": s["fixes_accepted"], "rmse_m": s["position_rmse_m"],
-            "nees_inside_95": s["nees_inside_95"],
+            "nees_inside_95": s["nees_inside_95"], **cpu_per_frame(s),
             "stages": {"capture_to_worker": s["stage_ms"]["capture_to_worker"],
                        "process": s["stage_ms"]["process"],
                        "capture_to_wire": {"p50": s["latency_p50_ms"],
@@ -291,7 +321,10 @@ def line(label: str, r: dict[str, Any]) -> str:
         st = r["stages"][k]
         parts.append(f"{k} {ms(st.get('p50'))}/{ms(st.get('p99'))}/{ms(st.get('max'))}")
     parts.append(f"dropped {r['dropped']:3d}/{r['frames'] + r['dropped']}  cores "
-                 f"{r['cores']:.2f}  rmse {r['rmse_m']} m  nees95 {r['nees_inside_95']}  "
+                 f"{r['cores']:.2f} (companion only; fake autopilot "
+                 f"{r.get('cores_autopilot') or 'in it'})  cpu/frame "
+                 f"{r.get('cpu_ms_per_frame')} ms  rmse {r['rmse_m']} m  "
+                 f"nees95 {r['nees_inside_95']}  "
                  f"load {r['load']}")
     extra = "".join(f"\n    {k}: {r[k]}" for k in PROBED if k in r)
     return "  ".join(parts) + extra
@@ -307,6 +340,7 @@ def medians(results: list[dict[str, Any]]) -> dict[str, Any]:
                            for q in ("p50", "p99", "max")} for k in STAGES},
             "dropped": med([r["dropped"] for r in results]),
             "cores": med([r["cores"] for r in results]),
+            "cpu_ms_per_frame": med([r.get("cpu_ms_per_frame") for r in results]),
             "rmse_m": med([r["rmse_m"] for r in results])}
 
 
@@ -395,7 +429,8 @@ def main() -> int:
     for label, m in summary.items():
         print(f"  {label:<22} " + "  ".join(
             f"{k} {m['stages'][k]['p50']}/{m['stages'][k]['p99']}/{m['stages'][k]['max']}"
-            for k in STAGES) + f"  dropped {m['dropped']}  cores {m['cores']}")
+            for k in STAGES) + f"  dropped {m['dropped']}  cores {m['cores']}  cpu/frame "
+            f"{m['cpu_ms_per_frame']} ms")
     if args.json is not None:
         args.json.write_text(json.dumps({"runs": results, "medians": summary}, indent=1))
     by_case = {label.split(":", 1)[1]: m for label, m in summary.items()}

@@ -24,6 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from companion.app import CompanionApp
+from companion.demo_autopilot import AutopilotProcess
 from companion.landmarks.geodesy import LocalFrame
 from companion.monitoring.config import local_meeting
 from companion.perception import Perception, PerceptionWrapper
@@ -34,12 +35,17 @@ from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
 from mavlink_bridge.bridge import VisionBridge
-from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
 from mavlink_bridge.fake_drift import AttitudeErrorConfig
+from mavlink_bridge.fake_rules import VisionRecord
 from tracker.pose.scenarios import NEES_HIGH_3DOF, NEES_LOW_3DOF
 from tracker.pose.types import MapLandmark, PoseFix
 
 log = logging.getLogger(__name__)
+
+#: The CPUs the fake autopilot's process may use (None: any this process may); a real
+#: autopilot runs on a board of its own (``benchmarks/latency_pinned.py`` sets it).
+AUTOPILOT_CORES: set[int] | None = None
 
 
 @dataclass
@@ -76,6 +82,13 @@ class TruthRecorder(PerceptionWrapper):
             if result.pose_json is not None:
                 result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
         return result
+
+
+class AutopilotResults(Protocol):
+    """What the summary reads of the fake autopilot (in this process or its own)."""
+
+    def accepted(self) -> list[VisionRecord]: ...
+    def summary(self) -> dict[str, Any]: ...
 
 
 class TimedSource(Protocol):
@@ -150,13 +163,16 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     # rendered in a process of its own, started before the clock: a camera exposes without
     # the companion's interpreter (docs/benchmarks.md, "Latency tail")
     source = SimCameraSource(sim, realtime=True, seconds=seconds, own_process=True)
+    # the fake autopilot flies what the camera sees, on one clock: its creation is t = 0;
+    # in a process of its own, as a real autopilot is on a board of its own (launched now:
+    # its start-up overlaps the renderer's)
+    fake = AutopilotProcess(FakeAutopilotConfig(profile=settings.vehicle.profile,
+                                                endpoint="udpin:127.0.0.1:0",
+                                                attitude_error=drift),
+                            sim.scenario, AUTOPILOT_CORES)
     try:  # fly() closes the source; until then, whatever fails here closes it
+        fake.launch()
         await source.start()
-        # the fake autopilot flies what the camera sees, on one clock: its creation is t = 0
-        fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                                 endpoint="udpin:127.0.0.1:0",
-                                                 attitude_error=drift),
-                             truth=sim.truth_fn)
         await fake.start()
         source.anchor(fake.start_ns // 1000)
         bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
@@ -164,6 +180,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
                             set_origin=True)
     except BaseException:
         source.close()
+        fake.close()
         raise
     recorders: list[TruthRecorder] = []
 
@@ -188,12 +205,15 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
         await fake.stop()
     wall = max(wall1 - wall0, 1e-9)
     ours = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / wall
-    return summary(app, fake, bridge, recorders[0].result, source,
-                   ours - source.render_cpu_s / wall,
-                   ours + source.render_cpu_elsewhere_s / wall)
+    autopilot = fake.cpu_s / wall
+    s = summary(app, fake, bridge, recorders[0].result, source,
+                ours - source.render_cpu_s / wall,
+                ours + source.render_cpu_elsewhere_s / wall + autopilot)
+    s["cpu_cores_autopilot"] = round(autopilot, 3)
+    return s
 
 
-async def _progress(app: CompanionApp, fake: FakeAutopilot, seconds: float,
+async def _progress(app: CompanionApp, fake: AutopilotProcess, seconds: float,
                     progress: Callable[[str], None] | None) -> None:
     if progress is None:
         return
@@ -205,17 +225,19 @@ async def _progress(app: CompanionApp, fake: FakeAutopilot, seconds: float,
         progress(f"{time.monotonic() - start:5.1f}/{seconds:.0f} s  {s['state']:<9} "
                  f"frames {s['counters']['frames']:5d}  fps {s['fps']:5.1f}  "
                  f"fixes {s['counters']['fixes_sent']:5d} (accepted "
-                 f"{len(fake.accepted()):5d})  latency p50 "
+                 f"{fake.accepted_count:5d})  latency p50 "
                  f"{'-' if lat is None else f'{lat:.1f}'} ms  dropped {s['dropped_frames']}")
 
 
-def summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge, result: DemoResult,
+def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, result: DemoResult,
             source: TimedSource, cpu_cores_busy: float,
             cpu_cores_busy_total: float) -> dict[str, Any]:
     """``cpu_cores_busy`` is the companion's share: the process's CPU time less what the
-    simulated camera spent rendering (the fake autopilot's small share stays in);
-    ``cpu_cores_busy_total`` adds the simulated camera's (in its own process or not).  The
-    keys the README and the issue name, and a few more."""
+    simulated camera spent rendering (the demo's fake autopilot runs in a process of its
+    own and is not in it; a replay's, on a driven clock, is); ``cpu_cores_busy_total`` adds
+    the simulated camera's (in its own process or not) and the demo's fake autopilot's
+    (:func:`run_demo` adds ``cpu_cores_autopilot``).  The keys the README and the issue
+    name, and a few more."""
     errors = [math.dist(fix.position_ned_m, truth) for fix, truth, _ in result.fixes]
     nees = [nees_3d(fix, truth) for fix, truth, _ in result.fixes]
     dists = [d for _, _, d in result.fixes if math.isfinite(d)]
@@ -284,6 +306,8 @@ def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
         f"latency           p50 {f(s['latency_p50_ms'], ' ms')}  p99 "
         f"{f(s['latency_p99_ms'], ' ms')} (capture -> on the wire)",
         f"cpu               {s['cpu_cores_busy']} cores busy on average by the companion "
-        f"({s['cpu_cores_busy_total']} with the simulated camera's rendering)",
+        f"alone ({s['cpu_cores_busy_total']} with the simulated camera's rendering"
+        + (f" and the fake autopilot's {s['cpu_cores_autopilot']}, each in its own process)"
+           if "cpu_cores_autopilot" in s else ")"),
     ]
     print("\n".join(lines), file=out)

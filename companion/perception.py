@@ -130,6 +130,7 @@ class Perception(Acquisition):
         self._events_next: list[dict[str, Any]] = []
         self._pending: list[Start] = []
         self._fixes: dict[int, PoseFix] = {}  # frame index -> its fix (the last few)
+        self._checked: dict[str, float] = {}  # this frame's appearance checks (correlation)
         self._rectified: dict[int, npt.NDArray[np.uint8]] = {}  # the same, rectified frames
         # housekeeping's own
         self._last_fix_us = -(2**62)
@@ -166,14 +167,20 @@ class Perception(Acquisition):
                 self._rectified[frame.index] = image
                 for old in [i for i in self._rectified if i <= frame.index - RECENT_FIXES]:
                     del self._rectified[old]
+        # each track's appearance check is due every ``verify_every_frames``, the tracks'
+        # checks on different frames (issue 23: not every track's on one frame), and all
+        # at once on a light step; a track is checked right after its update, on its thread
+        stepped = self._light_step(image)
         tracks = list(self.tracks.values())
-        for track, alive in zip(tracks, self._update_tracks(tracks, image), strict=True):
+        every = self.config.verify_every_frames
+        checks = [stepped or (self._frames + i) % every == 0 for i in range(len(tracks))]
+        for track, alive in zip(tracks, self._update_tracks(tracks, image, checks),
+                                strict=True):
             if not alive:
                 del self.tracks[track.landmark_id]
                 events.append({"event": "lost", "landmark": track.landmark_id})
-        stepped = self._light_step(image)
-        if stepped or self._frames % self.config.verify_every_frames == 0:
-            events += self._verify_tracks(image)
+        if any(checks):
+            events += self._verify_tracks()
         self._frames += 1
         return self._solve(frame, events)
 
@@ -187,22 +194,32 @@ class Perception(Acquisition):
         self._acquired_frame = -(2**62)  # acquisition is due now
         return True
 
-    def _verify_tracks(self, image: npt.NDArray[np.uint8]) -> list[dict[str, Any]]:
-        """Check every track's landmark is still where its homography says, by its warped
-        appearance; one that failed is left out of fixes, dropped after repeated failures."""
+    def _check_track(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
+        """Check the track's landmark is still where its homography says, by its warped
+        appearance (its correlation goes to ``_checked``; the track's own state only)."""
+        ref = self.matcher.references[track.landmark_id]
+        hom = track.homography
+        if hom is not None and track.corners is None:
+            hom = moved_to_box(ref, hom, track.box)  # no corners this frame: at the box
+        ncc, fit = (0.0, None) if hom is None else check_appearance(ref, image, hom)
+        track.fit_sigma = fit if self.config.corner_sigma_from_fit else None
+        track.verify_failures = 0 if ncc >= self.config.track_appearance_ncc \
+            else track.verify_failures + 1
+        self._checked[track.landmark_id] = ncc  # one key per track: no two threads share one
+
+    def _verify_tracks(self, image: npt.NDArray[np.uint8] | None = None
+                       ) -> list[dict[str, Any]]:
+        """Check every track on ``image`` (None: :meth:`process` has, in the track updates);
+        a track that failed is left out of fixes, dropped after repeated failures."""
+        if image is not None:
+            for track in list(self.tracks.values()):
+                self._check_track(track, image)
         events: list[dict[str, Any]] = []
-        cfg = self.config
+        checked, self._checked = self._checked, {}
         for track in list(self.tracks.values()):
-            ref = self.matcher.references[track.landmark_id]
-            hom = track.homography
-            if hom is not None and track.corners is None:
-                hom = moved_to_box(ref, hom, track.box)  # no corners this frame: at the box
-            ncc, fit = (0.0, None) if hom is None else check_appearance(ref, image, hom)
-            track.fit_sigma = fit if cfg.corner_sigma_from_fit else None
-            track.verify_failures = 0 if ncc >= cfg.track_appearance_ncc \
-                else track.verify_failures + 1
-            if track.verify_failures >= cfg.max_verify_failures:
+            if track.verify_failures >= self.config.max_verify_failures:
                 del self.tracks[track.landmark_id]
+                ncc = checked.get(track.landmark_id, 0.0)
                 events.append({"event": "lost", "landmark": track.landmark_id,
                                "why": f"appearance no longer there (correlation {ncc:.2f})"})
         return events
@@ -212,13 +229,18 @@ class Perception(Acquisition):
         if self._pool is not None:
             self._pool.shutdown(wait=True)
 
-    def _update_tracks(self, tracks: list[Track], image: npt.NDArray[np.uint8]) -> list[bool]:
-        """Update every track; with two or more, every other one on the second thread.
-        Each track touches only its own state."""
+    def _update_tracks(self, tracks: list[Track], image: npt.NDArray[np.uint8],
+                       checks: Sequence[bool] = ()) -> list[bool]:
+        """Update every track (and check the appearance of those whose ``checks`` entry is
+        true: :meth:`_check_track`); with two or more, every other one on the second
+        thread.  Each track touches only its own state."""
+        due = [bool(c) for c in checks] or [False] * len(tracks)
         if self._pool is None or len(tracks) < 2:
-            return [self._update_track(t, image) for t in tracks]
-        there = [self._pool.submit(self._update_track, t, image) for t in tracks[::2]]
-        here = [self._update_track(t, image) for t in tracks[1::2]]
+            return [self._update_track(t, image, c) for t, c in zip(tracks, due, strict=True)]
+        there = [self._pool.submit(self._update_track, t, image, c)
+                 for t, c in zip(tracks[::2], due[::2], strict=True)]
+        here = [self._update_track(t, image, c)
+                for t, c in zip(tracks[1::2], due[1::2], strict=True)]
         there_ok = [f.result() for f in there]
         return [there_ok[i // 2] if i % 2 == 0 else here[i // 2] for i in range(len(tracks))]
 
@@ -253,11 +275,10 @@ class Perception(Acquisition):
             self._last_fix_us = fix.time_us
         acquire = self._should_acquire(frame)
         lost = fix is None and frame.t_us - self._last_fix_us > self.config.search_after_s * 1e6
-        # While tracks run, one heavy step per call (they take turns, issue 23): a call that
-        # runs several holds a one-core board's next frame up by their sum.  With no track
-        # the frames carry no fix to delay: then all at once, for the quickest start.
-        spread = bool(self.tracks)
-        if acquire and lost and spread:
+        # One heavy step per call (they take turns, issue 23): a call that runs several
+        # holds a one-core board's next frame up by their sum (50-70 ms of CPU with no
+        # track: features, then the detector, then the template search).
+        if acquire and lost:
             self._lost_turn = not self._lost_turn
             acquire, lost = self._lost_turn, not self._lost_turn
         if acquire:
@@ -266,7 +287,7 @@ class Perception(Acquisition):
         if fix is not None:
             starts += self._predict_acquire(image, fix, starts)
         elif lost:
-            starts += self._find_while_lost(image, spread)
+            starts += self._find_while_lost(image, spread=True)
         if starts:
             with self._lock:
                 self._pending += starts
@@ -279,7 +300,15 @@ class Perception(Acquisition):
 
     # -- tracking ---------------------------------------------------------------------
 
-    def _update_track(self, track: Track, image: npt.NDArray[np.uint8]) -> bool:
+    def _update_track(self, track: Track, image: npt.NDArray[np.uint8],
+                      check: bool = False) -> bool:
+        alive = self._follow(track, image)
+        if alive and check:
+            self._check_track(track, image)
+        return alive
+
+    def _follow(self, track: Track, image: npt.NDArray[np.uint8]) -> bool:
+        """The tracker's update and the corners' alignment; False when the track is lost."""
         result: TrackResult = track.tracker.update(image)
         if result.box is None or result.confidence < self.config.min_track_confidence:
             return False

@@ -127,11 +127,11 @@ def _fake_config_of(argv: list[str], monkeypatch: pytest.MonkeyPatch) -> Any:
     """The FakeAutopilotConfig `companion demo ARGV` gives its fake autopilot."""
     seen: list[Any] = []
 
-    def capture(config: Any, **_kw: Any) -> None:
+    def capture(config: Any, *_args: Any, **_kw: Any) -> None:
         seen.append(config)
         raise _CapturedError
 
-    monkeypatch.setattr(demo, "FakeAutopilot", capture)
+    monkeypatch.setattr(demo, "AutopilotProcess", capture)  # the fake's own process
     with pytest.raises(_CapturedError):
         cli_main(["--log-level", "warning", "demo", "--seconds", "1", *argv])
     return seen[0]
