@@ -251,8 +251,13 @@ class AdaptiveTracker:
         centre = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0]
         patch_box = (centre[0] - half[0], centre[1] - half[1], 2 * half[0], 2 * half[1])
-        planes = feature_bins(window.patch, self._candidates, cfg.bins, cfg.stretch_features)
         inner, ring = ring_masks(window.patch.shape[:2], patch_box, cfg.ring_area_ratio)
+        if self._cue == "colour" and not cfg.stretch_features:  # per pixel: box and ring only
+            used = inner | ring
+            inner, ring = inner[used][None], ring[used][None]
+            planes = feature_bins(window.patch[used][None], self._candidates, cfg.bins)
+        else:  # the grey features are neighbourhood operators: the whole window
+            planes = feature_bins(window.patch, self._candidates, cfg.bins, cfg.stretch_features)
         p_now = masked_histograms(planes, inner, cfg.bins)
         q = masked_histograms(planes, ring, cfg.bins)
         if self._p_first is None:
@@ -273,7 +278,7 @@ class AdaptiveTracker:
         llr = log_likelihood_ratio(p[rows], q[rows], cfg.loglik_floor)
         first_window, first_state = self._first
         first = self._hist(first_window, first_state[None], top)[0]
-        sel = planes[rows]
+        sel = feature_bins(window.patch, top, cfg.bins, cfg.stretch_features)
         recent = self._kernel(sel, centre[None], half[None])[0] if trusted else first
         model = cfg.anchor_weight * first + (1.0 - cfg.anchor_weight) * recent
         around = centre[None] + _NEIGHBOURS * 2.0 * half[None]
@@ -595,9 +600,3 @@ def _frame_mean(image: npt.NDArray[np.uint8]) -> FloatArray:
 
 def _clamp(value: float, low: int, high: int) -> int:
     return int(min(max(value, low), high))
-
-
-def feature_weights(feature_id: int) -> tuple[int, int, int]:
-    """The (wR, wG, wB) weights of a colour feature id (0..48)."""
-    r, g, b = (int(v) for v in colour_weights()[feature_id])
-    return (r, g, b)
