@@ -41,7 +41,7 @@ from tracker.refine import Refiner
 from tracker.template import as_float
 from tracker.types import Box, Cue, TrackResult
 from tracker.validation import check_box, check_image, check_same_frame
-from tracker.window import Window, cut_window, work_factor
+from tracker.window import Window, clamp_index, cut_window, frame_mean, work_factor
 
 FloatArray = npt.NDArray[np.float64]
 _NEIGHBOURS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy], float)
@@ -99,7 +99,7 @@ class AdaptiveTracker:
         )
         self._aspect_step = 1.0
         self._ref_mean = self._box_mean(window, self._state)
-        self._ref_frame_mean = _frame_mean(image)
+        self._ref_frame_mean = frame_mean(image)
         self._gain = np.ones(3)
         self._p_first: FloatArray | None = None
         self._model = self._rank(window, self._state)
@@ -170,8 +170,8 @@ class AdaptiveTracker:
         c = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0] * self.config.gain_core_frac
         h, w = window.patch.shape[:2]
-        x0, x1 = _clamp(c[0] - half[0], 0, w - 1), _clamp(c[0] + half[0], 1, w)
-        y0, y1 = _clamp(c[1] - half[1], 0, h - 1), _clamp(c[1] + half[1], 1, h)
+        x0, x1 = clamp_index(c[0] - half[0], 0, w - 1), clamp_index(c[0] + half[0], 1, w)
+        y0, y1 = clamp_index(c[1] - half[1], 0, h - 1), clamp_index(c[1] + half[1], 1, h)
         region = window.patch[y0 : max(y1, y0 + 1), x0 : max(x1, x0 + 1)]
         return np.maximum(np.asarray(cv2.mean(region)[:3], dtype=np.float64), 1.0)
 
@@ -194,9 +194,9 @@ class AdaptiveTracker:
 
     def _frame_gain(self, image: npt.NDArray[np.uint8]) -> None:
         """gain <- (1-r) gain + r * (first frame's mean / this frame's mean), on a 1/8 grid."""
-        ratio = self._ref_frame_mean / _frame_mean(image)
+        ratio = self._ref_frame_mean / frame_mean(image)
         if self.config.gain_mode == "grey":
-            ratio = np.full(3, float(self._ref_frame_mean.sum() / _frame_mean(image).sum()))
+            ratio = np.full(3, float(self._ref_frame_mean.sum() / frame_mean(image).sum()))
         rate = self.config.gain_rate
         self._gain = (1.0 - rate) * self._gain + rate * np.clip(ratio, 0.25, 4.0)
 
@@ -591,12 +591,3 @@ class AdaptiveTracker:
             cue=self._cue,
             particles=self.config.particles,
         )
-
-
-def _frame_mean(image: npt.NDArray[np.uint8]) -> FloatArray:
-    """Mean BGR of the frame sampled on every 8th row and column (cheap, robust to motion)."""
-    return np.maximum(image[::8, ::8].reshape(-1, 3).mean(axis=0), 1.0)
-
-
-def _clamp(value: float, low: int, high: int) -> int:
-    return int(min(max(value, low), high))
