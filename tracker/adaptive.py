@@ -200,11 +200,11 @@ class AdaptiveTracker:
         rate = self.config.gain_rate
         self._gain = (1.0 - rate) * self._gain + rate * np.clip(ratio, 0.25, 4.0)
 
-    def _update_gain(self, raw: Window, state: FloatArray) -> None:
+    def _update_gain(self, raw: Window, state: FloatArray, known: FloatArray | None) -> None:
         """gain <- (1-r) gain + r * (first-frame target mean / current target mean).
 
         With ``gain_check`` the new gain is kept only if the target box, compensated with it,
-        looks at least as much like the model as with the old gain.
+        looks at least as much like the model as with the old gain (``known``: its histogram).
         """
         current = self._box_mean(raw, state)
         ratio = np.clip(self._ref_mean / current, 0.25, 4.0)
@@ -213,8 +213,11 @@ class AdaptiveTracker:
         rate = self.config.gain_rate
         proposed = (1.0 - rate) * self._gain + rate * ratio
         if self.config.gain_check and self._gain_applies():
-            rhos = self._rho_under_gains(raw, state, np.stack([self._gain, proposed]))
-            if rhos[1] < rhos[0]:
+            if known is None:
+                now = self._rho_under_gains(raw, state, self._gain[None])
+            else:
+                now = bhattacharyya(known[None], self._model_hist())
+            if self._rho_under_gains(raw, state, proposed[None])[0] < now[0]:
                 return
         self._gain = proposed
 
@@ -374,9 +377,12 @@ class AdaptiveTracker:
             state, hist, rho, score = self._refined(image, image_f32, pair, planes, state)
         else:
             score = -1.0
+        features = self._model.features
         result = self._accept(window, state, hist, rho, score)
         if result.box is not None and result.confidence >= cfg.lost_below_confidence:
-            self._learn((image, image_f32), raw, state, score)
+            # the box's histogram under the current gain (window compensated, same features)
+            known = hist if window is not raw and features == self._model.features else None
+            self._learn((image, image_f32), raw, state, score, known)
         return result
 
     def _learn(
@@ -385,12 +391,12 @@ class AdaptiveTracker:
         raw: Window,
         state: FloatArray,
         score: float,
+        known: FloatArray | None,
     ) -> None:
-        """After a trusted frame: the gain; the template and size filters where the template
-        located the target; :meth:`Refiner.learn` decides which of its templates and whether
-        the size filters learn.  ``images``: the frame, the window."""
+        """After a trusted frame: the gain; where the template located the target,
+        :meth:`Refiner.learn` (which templates and whether the size filters learn)."""
         if self.config.gain_source == "target":
-            self._update_gain(raw, state)
+            self._update_gain(raw, state, known)
         if score >= self.config.template_accept_score:
             frame, image_f32 = images
             box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
