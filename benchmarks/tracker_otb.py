@@ -12,7 +12,9 @@ the same run.  ``--ablation`` adds the adaptive tracker with all particles mean-
 (Shan et al.) and with none.  ``--trackers`` runs only the named rows (exploring: our tracker
 alone, CSRT once for the table); ``--set NAME=VALUE`` overrides a ``TrackerConfig`` field of
 every adaptive row (a candidate measured on all sequences before it becomes a default);
-``--per-seed`` adds each seed's AUC and mean centre error.
+``--per-seed`` adds each seed's AUC and mean centre error; ``--dump DIR`` writes, per
+sequence, tracker and seed, a CSV of every frame's box, truth, confidence and centre error
+(``DIR/<sequence>-<tracker>-s<seed>.csv``) to find the frames that carry a mean.
 """
 
 from __future__ import annotations
@@ -31,7 +33,8 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from companion.evaluation.runner import make_tracker, run_frames  # noqa: E402
+from companion.evaluation.metrics import centre_errors  # noqa: E402
+from companion.evaluation.runner import RunResult, make_tracker, run_frames  # noqa: E402
 from companion.evaluation.sequences import load_sequence  # noqa: E402
 from companion.evaluation.synthetic import SynthSpec, write_otb  # noqa: E402
 from tracker import AdaptiveTracker, TrackerConfig  # noqa: E402
@@ -79,6 +82,18 @@ def _mean(runs: list, key: str) -> float:
     return float(np.mean([getattr(r.scores, key) for r in runs]))
 
 
+def _dump(path: Path, run: RunResult, truth: np.ndarray) -> None:
+    """One CSV row per frame: box (empty while lost), truth, confidence, centre error px."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pred = np.array([b if b is not None else (np.nan,) * 4 for b in run.boxes], float)
+    err = centre_errors(pred, truth)
+    with path.open("w") as out:
+        out.write("frame,x,y,w,h,tx,ty,tw,th,confidence,centre_err_px\n")
+        for i, (box, gt, conf, e) in enumerate(zip(pred, truth, run.confidences, err, strict=True)):
+            cells = [*box, *gt, conf, e]
+            out.write(f"{i}," + ",".join(f"{c:.2f}" for c in cells) + "\n")
+
+
 def main() -> int:
     root = Path(__file__).resolve().parents[1]
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -93,6 +108,7 @@ def main() -> int:
     parser.add_argument("--trackers", default="", help="comma-separated rows (default: all)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--per-seed", action="store_true")
+    parser.add_argument("--dump", type=Path, default=None, metavar="DIR")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -123,6 +139,8 @@ def main() -> int:
                     else make_tracker(name, seed)
                 )
                 runs.append(run_frames(tracker, name, seq, images))
+                if args.dump is not None:
+                    _dump(args.dump / f"{seq.name}-{name}-s{seed}.csv", runs[-1], seq.truth)
             auc = [r.scores.success_auc for r in runs]
             ms = float(np.median([r.median_ms_per_update for r in runs]))
             print(

@@ -41,7 +41,7 @@ from tracker.refine import Refiner
 from tracker.template import as_float
 from tracker.types import Box, Cue, TrackResult
 from tracker.validation import check_box, check_image, check_same_frame
-from tracker.window import Window, cut_window, work_factor
+from tracker.window import Window, clamp_index, cut_window, frame_mean, work_factor
 
 FloatArray = npt.NDArray[np.float64]
 _NEIGHBOURS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy], float)
@@ -99,7 +99,7 @@ class AdaptiveTracker:
         )
         self._aspect_step = 1.0
         self._ref_mean = self._box_mean(window, self._state)
-        self._ref_frame_mean = _frame_mean(image)
+        self._ref_frame_mean = frame_mean(image)
         self._gain = np.ones(3)
         self._p_first: FloatArray | None = None
         self._model = self._rank(window, self._state)
@@ -170,8 +170,8 @@ class AdaptiveTracker:
         c = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0] * self.config.gain_core_frac
         h, w = window.patch.shape[:2]
-        x0, x1 = _clamp(c[0] - half[0], 0, w - 1), _clamp(c[0] + half[0], 1, w)
-        y0, y1 = _clamp(c[1] - half[1], 0, h - 1), _clamp(c[1] + half[1], 1, h)
+        x0, x1 = clamp_index(c[0] - half[0], 0, w - 1), clamp_index(c[0] + half[0], 1, w)
+        y0, y1 = clamp_index(c[1] - half[1], 0, h - 1), clamp_index(c[1] + half[1], 1, h)
         region = window.patch[y0 : max(y1, y0 + 1), x0 : max(x1, x0 + 1)]
         return np.maximum(np.asarray(cv2.mean(region)[:3], dtype=np.float64), 1.0)
 
@@ -194,17 +194,17 @@ class AdaptiveTracker:
 
     def _frame_gain(self, image: npt.NDArray[np.uint8]) -> None:
         """gain <- (1-r) gain + r * (first frame's mean / this frame's mean), on a 1/8 grid."""
-        ratio = self._ref_frame_mean / _frame_mean(image)
+        ratio = self._ref_frame_mean / frame_mean(image)
         if self.config.gain_mode == "grey":
-            ratio = np.full(3, float(self._ref_frame_mean.sum() / _frame_mean(image).sum()))
+            ratio = np.full(3, float(self._ref_frame_mean.sum() / frame_mean(image).sum()))
         rate = self.config.gain_rate
         self._gain = (1.0 - rate) * self._gain + rate * np.clip(ratio, 0.25, 4.0)
 
-    def _update_gain(self, raw: Window, state: FloatArray) -> None:
+    def _update_gain(self, raw: Window, state: FloatArray, known: FloatArray | None) -> None:
         """gain <- (1-r) gain + r * (first-frame target mean / current target mean).
 
         With ``gain_check`` the new gain is kept only if the target box, compensated with it,
-        looks at least as much like the model as with the old gain.
+        looks at least as much like the model as with the old gain (``known``: its histogram).
         """
         current = self._box_mean(raw, state)
         ratio = np.clip(self._ref_mean / current, 0.25, 4.0)
@@ -213,8 +213,11 @@ class AdaptiveTracker:
         rate = self.config.gain_rate
         proposed = (1.0 - rate) * self._gain + rate * ratio
         if self.config.gain_check and self._gain_applies():
-            rhos = self._rho_under_gains(raw, state, np.stack([self._gain, proposed]))
-            if rhos[1] < rhos[0]:
+            if known is None:
+                now = self._rho_under_gains(raw, state, self._gain[None])
+            else:
+                now = bhattacharyya(known[None], self._model_hist())
+            if self._rho_under_gains(raw, state, proposed[None])[0] < now[0]:
                 return
         self._gain = proposed
 
@@ -251,8 +254,13 @@ class AdaptiveTracker:
         centre = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0]
         patch_box = (centre[0] - half[0], centre[1] - half[1], 2 * half[0], 2 * half[1])
-        planes = feature_bins(window.patch, self._candidates, cfg.bins, cfg.stretch_features)
         inner, ring = ring_masks(window.patch.shape[:2], patch_box, cfg.ring_area_ratio)
+        if self._cue == "colour" and not cfg.stretch_features:  # per pixel: box and ring only
+            used = inner | ring
+            inner, ring = inner[used][None], ring[used][None]
+            planes = feature_bins(window.patch[used][None], self._candidates, cfg.bins)
+        else:  # the grey features are neighbourhood operators: the whole window
+            planes = feature_bins(window.patch, self._candidates, cfg.bins, cfg.stretch_features)
         p_now = masked_histograms(planes, inner, cfg.bins)
         q = masked_histograms(planes, ring, cfg.bins)
         if self._p_first is None:
@@ -273,7 +281,7 @@ class AdaptiveTracker:
         llr = log_likelihood_ratio(p[rows], q[rows], cfg.loglik_floor)
         first_window, first_state = self._first
         first = self._hist(first_window, first_state[None], top)[0]
-        sel = planes[rows]
+        sel = feature_bins(window.patch, top, cfg.bins, cfg.stretch_features)
         recent = self._kernel(sel, centre[None], half[None])[0] if trusted else first
         model = cfg.anchor_weight * first + (1.0 - cfg.anchor_weight) * recent
         around = centre[None] + _NEIGHBOURS * 2.0 * half[None]
@@ -369,9 +377,12 @@ class AdaptiveTracker:
             state, hist, rho, score = self._refined(image, image_f32, pair, planes, state)
         else:
             score = -1.0
+        features = self._model.features
         result = self._accept(window, state, hist, rho, score)
         if result.box is not None and result.confidence >= cfg.lost_below_confidence:
-            self._learn((image, image_f32), raw, state, score)
+            # the box's histogram under the current gain (window compensated, same features)
+            known = hist if window is not raw and features == self._model.features else None
+            self._learn((image, image_f32), raw, state, score, known)
         return result
 
     def _learn(
@@ -380,12 +391,12 @@ class AdaptiveTracker:
         raw: Window,
         state: FloatArray,
         score: float,
+        known: FloatArray | None,
     ) -> None:
-        """After a trusted frame: the gain; the template and size filters where the template
-        located the target; :meth:`Refiner.learn` decides which of its templates and whether
-        the size filters learn.  ``images``: the frame, the window."""
+        """After a trusted frame: the gain; where the template located the target,
+        :meth:`Refiner.learn` (which templates and whether the size filters learn)."""
         if self.config.gain_source == "target":
-            self._update_gain(raw, state)
+            self._update_gain(raw, state, known)
         if score >= self.config.template_accept_score:
             frame, image_f32 = images
             box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
@@ -586,18 +597,3 @@ class AdaptiveTracker:
             cue=self._cue,
             particles=self.config.particles,
         )
-
-
-def _frame_mean(image: npt.NDArray[np.uint8]) -> FloatArray:
-    """Mean BGR of the frame sampled on every 8th row and column (cheap, robust to motion)."""
-    return np.maximum(image[::8, ::8].reshape(-1, 3).mean(axis=0), 1.0)
-
-
-def _clamp(value: float, low: int, high: int) -> int:
-    return int(min(max(value, low), high))
-
-
-def feature_weights(feature_id: int) -> tuple[int, int, int]:
-    """The (wR, wG, wB) weights of a colour feature id (0..48)."""
-    r, g, b = (int(v) for v in colour_weights()[feature_id])
-    return (r, g, b)

@@ -205,3 +205,9 @@ def is_grayscale(patch_bgr: npt.NDArray[np.uint8], tolerance: float) -> bool:
     p = patch_bgr.astype(np.int16)
     diff = np.abs(p[:, :, 0] - p[:, :, 1]) + np.abs(p[:, :, 1] - p[:, :, 2])
     return float(diff.mean()) <= tolerance
+
+
+def feature_weights(feature_id: int) -> tuple[int, int, int]:
+    """The (wR, wG, wB) weights of a colour feature id (0..48)."""
+    r, g, b = (int(v) for v in colour_weights()[feature_id])
+    return (r, g, b)

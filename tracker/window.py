@@ -63,3 +63,13 @@ def cut_window(
         cv2.resize(crop, (out_w, out_h), interpolation=cv2.INTER_AREA), dtype=np.uint8
     )
     return Window(x0, y0, out_w / (x1 - x0), out_h / (y1 - y0), patch)
+
+
+def frame_mean(image: npt.NDArray[np.uint8]) -> FloatArray:
+    """Mean BGR of the frame sampled on every 8th row and column (cheap, robust to motion)."""
+    return np.asarray(np.maximum(image[::8, ::8].reshape(-1, 3).mean(axis=0), 1.0))
+
+
+def clamp_index(value: float, low: int, high: int) -> int:
+    """``value`` truncated to an int within [low, high] (a pixel index)."""
+    return int(min(max(value, low), high))
