@@ -24,7 +24,7 @@ import argparse
 import numpy as np
 
 from companion.calibration import BoardDetector, Limits, ViewPicker, calibrate
-from companion.sim.boards import BoardCamera, spread_views
+from companion.calibration_boards import BoardCamera, spread_views
 from tests.calibration.boards import CHARUCO, CHESSBOARD, PX_PER_SQUARE, TRUTH
 
 

@@ -30,10 +30,10 @@ from typing import Any
 import numpy as np
 import pymap3d
 
+from companion.core.landmark import BBox, Category, Landmark, Scores
+from companion.core.map_file import landmark_to_feature
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.geojson_io import import_map, landmark_to_feature
-from companion.landmarks.record import BBox, Category, Landmark, Scores
-from companion.landmarks.repository import LandmarkRepository
+from companion.landmarks.repository import LandmarkRepository, import_map
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 from companion.landmarks.sync import select_area
 

@@ -82,7 +82,7 @@ def empty(tmp_path: Path) -> Path:
 
 def test_the_installed_package_is_the_wheels_and_reads_its_own_config(
         installed: Path, empty: Path) -> None:
-    probe = ("import companion, companion.resources as r; "
+    probe = ("import companion, companion.core.resources as r; "
              "print(companion.__file__); print(r.config_dir())")
     out = run(installed / "python", "-c", probe, cwd=empty)
     assert out.returncode == 0, out.stderr

@@ -15,18 +15,16 @@ from typing import Any
 
 import psycopg
 
-from companion.errors import InputError
-from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
-from companion.landmarks.repository import (
+from companion.core.landmark import Area, Candidates, Landmark, filter_area, spatial_order
+from companion.core.landmark_rows import (
     APPEARANCE_COLUMNS,
     COLUMNS,
     LandmarkRows,
-    Progress,
-    ScoreUpdate,
-    check_new_ids,
     paused_gc,
     row_to_landmark,
 )
+from companion.errors import InputError
+from companion.landmarks.repository import Progress, ScoreUpdate, check_new_ids
 
 _GEOM_INDEX = "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)"
 _NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"

@@ -29,18 +29,16 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from companion.errors import CompanionError, InputError
-from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
-from companion.landmarks.repository import (
+from companion.core.landmark import Area, Candidates, Landmark, filter_area, spatial_order
+from companion.core.landmark_rows import (
     APPEARANCE_COLUMNS,
     COLUMNS,
     LandmarkRows,
-    Progress,
-    ScoreUpdate,
-    check_new_ids,
     paused_gc,
     row_to_landmark,
 )
+from companion.errors import CompanionError, InputError
+from companion.landmarks.repository import Progress, ScoreUpdate, check_new_ids
 
 _ID_INDEX = "CREATE UNIQUE INDEX landmarks_id ON landmarks (id)"
 _NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from companion.calibration import BoardDetector
+from companion.calibration_boards import BoardCamera, spread_views
 from companion.cli import main
 from companion.settings import load_settings
-from companion.sim.boards import BoardCamera, spread_views
 from tests.calibration.boards import (
     CHARUCO,
     CHESSBOARD,

@@ -19,8 +19,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import SourceError
-from companion.landmarks.geodesy import LocalFrame
-from companion.sim.follow import (
+from companion.follow import (
     FollowCameraSource,
     TruthSample,
     add_sample,
@@ -29,6 +28,7 @@ from companion.sim.follow import (
     state_at,
     truth_sample,
 )
+from companion.landmarks.geodesy import LocalFrame
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.config import FollowConfig
@@ -157,7 +157,7 @@ def test_slerp_matches_rotation_of_intermediate_angle() -> None:
 
 
 def test_quaternion_from_rpy_agrees_with_tracker_geometry() -> None:
-    from companion.sim.follow import rotation_from_quaternion
+    from companion.follow import rotation_from_quaternion
 
     rpy = (0.2, -0.4, 2.5)
     r = rotation_from_quaternion(np.asarray(quaternion_from_rpy(*rpy)))

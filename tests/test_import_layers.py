@@ -1,0 +1,71 @@
+"""The direction of imports between the parts (docs/architecture.md, "Packages and the
+direction of imports"), read from the source's syntax tree, so a function-level import
+counts as much as one at the top of a module."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# What the simulator may import of the application: the shared records and utilities, the
+# root exception, and the package's root (its version string).
+SIM_ALLOWED = ("companion.core", "companion.errors")
+
+
+def imported_modules(path: Path) -> list[tuple[int, str]]:
+    """Every module ``path`` imports (absolute names), with the line it is imported on."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    package = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+    out: list[tuple[int, str]] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.extend((node.lineno, alias.name) for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{parent}.{base}" if base else parent
+            if base == "companion":  # "from companion import x" names a module or the version
+                out.extend((node.lineno, f"companion.{alias.name}") for alias in node.names)
+            else:
+                out.append((node.lineno, base))
+    return out
+
+
+def _inside(name: str, prefixes: tuple[str, ...]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+def forbidden(folder: str, banned: tuple[str, ...], allowed: tuple[str, ...] = ()
+              ) -> list[str]:
+    """``file:line imports module`` for each import under ``folder`` of a ``banned``
+    module that is not ``allowed``."""
+    bad = []
+    for path in sorted((ROOT / folder).rglob("*.py")):
+        for line, name in imported_modules(path):
+            if _inside(name, banned) and not _inside(name, allowed):
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {name}")
+    return bad
+
+
+def test_simulator_is_a_leaf() -> None:
+    """companion/sim imports of the application only the shared records (companion.core)
+    and the root exception; the application imports the simulator, never the reverse."""
+    allowed = (*SIM_ALLOWED, "companion.sim", "companion.__version__")
+    assert forbidden("companion/sim", ("companion",), allowed) == []
+
+
+@pytest.mark.parametrize("folder", ["companion/sources", "companion/landmarks", "companion/core"])
+def test_the_simulator_is_not_imported_by_the_production_parts(folder: str) -> None:
+    """Frame sources, the landmark database and the shared records never import the
+    simulator (a source that knows its truth says so through a protocol)."""
+    assert forbidden(folder, ("companion.sim",)) == []
+
+
+def test_core_imports_only_errors() -> None:
+    """The shared records import nothing else of the application."""
+    assert forbidden("companion/core", ("companion",), SIM_ALLOWED) == []
