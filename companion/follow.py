@@ -34,7 +34,8 @@ from companion.sim.simulator import Simulator
 from companion.sim.trajectory import KinematicState
 from companion.sources.base import Frame, ImageU8, SourceStatus
 from companion.sources.config import FollowConfig
-from mavlink_bridge.telemetry import TRUTH_NAMES, SimTruth, Telemetry, quaternion_from_rpy
+from mavlink_bridge.messages import euler_to_quaternion
+from mavlink_bridge.telemetry import TRUTH_NAMES, SimTruth, Telemetry
 from tracker.geometry import FloatArray, rpy_from_rotation
 
 log = logging.getLogger(__name__)
@@ -103,7 +104,7 @@ def truth_sample(item: Telemetry, frame: LocalFrame) -> TruthSample | None:
         return None
     ned = frame.to_ned(v.lat_deg, v.lon_deg, v.alt_m)
     q = np.asarray(v.quaternion_wxyz if v.quaternion_wxyz is not None
-                   else quaternion_from_rpy(*v.attitude_rpy_rad), dtype=np.float64)
+                   else euler_to_quaternion(*v.attitude_rpy_rad), dtype=np.float64)
     vel = np.zeros(3) if v.velocity_ned_m_s is None else np.asarray(v.velocity_ned_m_s)
     return TruthSample(item.received_ns, np.asarray(ned, dtype=np.float64),
                        q / np.linalg.norm(q), vel.astype(np.float64))
