@@ -69,3 +69,38 @@ def test_the_simulator_is_not_imported_by_the_production_parts(folder: str) -> N
 def test_core_imports_only_errors() -> None:
     """The shared records import nothing else of the application."""
     assert forbidden("companion/core", ("companion",), SIM_ALLOWED) == []
+@pytest.mark.parametrize(("folder", "banned"), [
+    ("tracker", ("companion", "mavlink_bridge", "sitl_tests", "tests", "benchmarks")),
+    ("mavlink_bridge", ("companion", "tracker", "sitl_tests", "tests", "benchmarks")),
+    ("companion", ("sitl_tests", "tests", "benchmarks")),
+    ("benchmarks", ("sitl_tests", "tests")),
+    ("sitl_tests", ("benchmarks",)),
+    ("testsupport", ("tests", "sitl_tests", "benchmarks")),
+    ("companion", ("testsupport",)),
+])
+def test_package_layers(folder: str, banned: tuple[str, ...]) -> None:
+    """tracker and mavlink_bridge stay below companion; no package, benchmark or scenario
+    test imports the tests or another's scripts: shared code lives in the package or in
+    testsupport, which imports none of them. On the parent commit benchmarks imported
+    tests.calibration.boards, tests.landmarks.pgcluster and sitl_tests.harness."""
+    assert forbidden(folder, banned) == []
+
+
+def loads_by_path(folder: str) -> list[str]:
+    """``file:line`` of each call that runs a Python file by its path (which hides an
+    import from the checks above)."""
+    bad = []
+    for path in sorted((ROOT / folder).rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute | ast.Name):
+                name = node.func.attr if isinstance(node.func, ast.Attribute) else node.func.id
+                if name in ("spec_from_file_location", "run_path"):
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno} calls {name}")
+    return bad
+
+
+@pytest.mark.parametrize("folder", ["tests", "sitl_tests", "benchmarks", "companion"])
+def test_no_module_is_loaded_by_its_path(folder: str) -> None:
+    """sitl_tests/test_soak.py loaded benchmarks/soak.py by path; shared code is imported
+    from the package or from testsupport instead."""
+    assert loads_by_path(folder) == []

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.calibration.boards import TRUTH, session
 from tests.calibration.still import camera_toml, still_scene, vehicle_toml
+from testsupport.boards import TRUTH, session
 from tracker.camera import CameraModel
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,7 +17,7 @@ import numpy as np
 
 from companion.calibration import ImageU8
 from companion.calibration_boards import BoardCamera, spread_views
-from tests.calibration.boards import CHESSBOARD, PX_PER_SQUARE, TRUTH
+from testsupport.boards import CHESSBOARD, PX_PER_SQUARE, TRUTH
 
 
 @dataclass

@@ -14,7 +14,7 @@ from companion.calibration import BoardDetector
 from companion.calibration_boards import BoardCamera, spread_views
 from companion.cli import main
 from companion.settings import load_settings
-from tests.calibration.boards import (
+from testsupport.boards import (
     CHARUCO,
     CHESSBOARD,
     PX_PER_SQUARE,
