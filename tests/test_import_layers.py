@@ -5,6 +5,7 @@ counts as much as one at the top of a module."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -16,9 +17,15 @@ ROOT = Path(__file__).resolve().parents[1]
 SIM_ALLOWED = ("companion.core", "companion.errors")
 
 
+@functools.cache
+def syntax_tree(path: Path) -> ast.Module:
+    """The parsed module (each file is parsed once for all the checks)."""
+    return ast.parse(path.read_text(encoding="utf-8"), str(path))
+
+
 def imported_modules(path: Path) -> list[tuple[int, str]]:
     """Every module ``path`` imports (absolute names), with the line it is imported on."""
-    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    tree = syntax_tree(path)
     package = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
     out: list[tuple[int, str]] = []
     for node in ast.walk(tree):
@@ -91,7 +98,7 @@ def loads_by_path(folder: str) -> list[str]:
     import from the checks above)."""
     bad = []
     for path in sorted((ROOT / folder).rglob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        for node in ast.walk(syntax_tree(path)):
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute | ast.Name):
                 name = node.func.attr if isinstance(node.func, ast.Attribute) else node.func.id
                 if name in ("spec_from_file_location", "run_path"):
@@ -104,3 +111,12 @@ def test_no_module_is_loaded_by_its_path(folder: str) -> None:
     """sitl_tests/test_soak.py loaded benchmarks/soak.py by path; shared code is imported
     from the package or from testsupport instead."""
     assert loads_by_path(folder) == []
+
+
+@pytest.mark.parametrize("package", ["companion", "tracker", "mavlink_bridge", "fieldbounds"])
+def test_every_folder_of_a_shipped_package_is_a_package(package: str) -> None:
+    """setup.py's find_packages ships only folders with an ``__init__.py``: a folder without
+    one imports in the checkout (a namespace package) and is missing from the wheel."""
+    folders = {p.parent for p in (ROOT / package).rglob("*.py")}
+    assert sorted(str(f.relative_to(ROOT)) for f in folders
+                  if not (f / "__init__.py").is_file()) == []

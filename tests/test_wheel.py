@@ -31,7 +31,7 @@ from tracker.camera import CameraModel
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("pyproject.toml", "setup.py", "README.md", "companion", "tracker", "mavlink_bridge",
-           "config")
+           "fieldbounds", "config")
 
 
 def run(*cmd: str | Path, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
