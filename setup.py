@@ -4,5 +4,6 @@ repository's root plus ``companion_config``, the shipped configuration that stay
 
 from setuptools import find_packages, setup
 
-setup(packages=[*find_packages(include=["companion*", "tracker*", "mavlink_bridge*"]),
+setup(packages=[*find_packages(include=["companion*", "tracker*", "mavlink_bridge*",
+                                                 "fieldbounds*"]),
                 "companion_config"])

@@ -3,7 +3,7 @@
 Run: ``PYTHONPATH=. python benchmarks/calibration_accuracy.py [--boards chessboard,charuco]
 [--seeds 1,2,3] [--count 25] [--supersample 4] [--distance-m 0.45,0.75]``
 
-For each board and seed: ``count`` views spread over the image (tests/calibration/boards.py's
+For each board and seed: ``count`` views spread over the image (testsupport/boards.py's
 camera, board sizes and texture sizes), the views ``calibrate`` keeps, the RMS reprojection
 error, the worst of fx, fy, cx, cy's relative errors (issue 20: under 0.3 %, RMS under
 0.1 px), and each detected corner's distance from where the board really is (RMS and
@@ -24,8 +24,8 @@ import argparse
 import numpy as np
 
 from companion.calibration import BoardDetector, Limits, ViewPicker, calibrate
-from companion.sim.boards import BoardCamera, spread_views
-from tests.calibration.boards import CHARUCO, CHESSBOARD, PX_PER_SQUARE, TRUTH
+from companion.calibration_boards import BoardCamera, spread_views
+from testsupport.boards import CHARUCO, CHESSBOARD, PX_PER_SQUARE, TRUTH
 
 
 def measure(kind: str, seed: int, count: int, supersample: int,

@@ -24,12 +24,12 @@ import numpy as np
 
 from companion.app import Frame, FrameResult
 from companion.demo import map_landmarks, run_demo
+from companion.follow import FollowCameraSource, command_sender
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import PerceptionWrapper
 from companion.runtime import PracticalMap, bridge_for, fly, perception_for
 from companion.sensors import SensorHistory
 from companion.settings import SIM_LAYERS, Settings, load_settings
-from companion.sim.follow import FollowCameraSource, command_sender
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig

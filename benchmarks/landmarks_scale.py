@@ -9,7 +9,7 @@
 
 Landmarks are spread uniformly over a ``--region-km`` square (default 40 km: 1,000,000
 landmarks give ~625 per km^2, ~2,500 per 2 km x 2 km area).  PostGIS runs in a throwaway
-cluster (tests/landmarks/pgcluster.py); it is skipped with the reason if not installed.
+cluster (testsupport/pgcluster.py); it is skipped with the reason if not installed.
 
     PYTHONPATH=. python benchmarks/landmarks_scale.py [--count 1000000] [--backend sqlite]
 """
@@ -30,10 +30,10 @@ from typing import Any
 import numpy as np
 import pymap3d
 
+from companion.core.landmark import BBox, Category, Landmark, Scores
+from companion.core.map_file import landmark_to_feature
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.geojson_io import import_map, landmark_to_feature
-from companion.landmarks.record import BBox, Category, Landmark, Scores
-from companion.landmarks.repository import LandmarkRepository
+from companion.landmarks.repository import LandmarkRepository, import_map
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 from companion.landmarks.sync import select_area
 
@@ -150,7 +150,7 @@ def run_postgis(args: argparse.Namespace, records: list[Landmark], tmp: Path) ->
     import pytest
 
     from companion.landmarks.postgis_repo import PostgisLandmarkRepository
-    from tests.landmarks.pgcluster import throwaway_cluster
+    from testsupport.pgcluster import throwaway_cluster
 
     try:
         with throwaway_cluster() as url:

@@ -39,15 +39,15 @@ import cv2
 import numpy as np
 
 from benchmarks.perception_survey import NEES_HIGH, NEES_LOW, noisy_attitude
+from companion.core.images import read_image
+from companion.core.map_file import read_map
+from companion.core.stream_format import FrameTruth, read_meta
+from companion.core.stream_io import read_truth
 from companion.flightmap import placed
 from companion.landmarks.geodesy import LocalFrame
-from companion.landmarks.geojson_io import read_map
 from companion.perception import Perception, SideSensors
 from companion.settings import SIM_LAYERS, load_settings
 from companion.sources.base import Frame
-from companion.sources.images import read_image
-from companion.sources.stream_format import FrameTruth, read_meta
-from companion.sources.stream_io import read_truth
 from tracker.boxes import box_iou
 from tracker.pose.types import AttitudeSample, MapLandmark, PoseFix
 

@@ -33,12 +33,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.core.stream_format import TruthBox
 from companion.demo import map_landmarks
 from companion.perception import Perception, SideSensors
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
-from companion.sources.stream_format import TruthBox
 from tracker.camera import CameraModel
 from tracker.geometry import FloatArray
 from tracker.pose.config import PoseConfig

@@ -33,10 +33,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.core.landmark import BBox, Circle, Landmark, parse_area
+from companion.core.map_file import read_map
 from companion.errors import ConfigError, InputError
 from companion.landmarks.geodesy import LocalFrame
-from companion.landmarks.geojson_io import read_map
-from companion.landmarks.record import BBox, Circle, Landmark, parse_area
 from companion.landmarks.selection import busy_zones
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 from companion.landmarks.sync import select_area

@@ -20,6 +20,7 @@ from companion.errors import CompanionError
 from companion.flightmap import load_practical_map
 from companion.runtime import bridge_for
 from companion.settings import BUILT_IN, Settings
+from companion.simulated import open_sim
 from companion.sources.base import EndOfStream
 from companion.sources.factory import open_source, resolve
 from mavlink_bridge.bridge import VisionBridge
@@ -103,7 +104,7 @@ async def sample_frames(settings: Settings, count: int = 30, timeout_s: float = 
                         ) -> FrameSample:
     """Open the configured source and read ``count`` frames (recordings unpaced)."""
     config = dataclasses.replace(resolve(settings.source), realtime=False)
-    source = await open_source(config)
+    source = await open_source(config, open_sim)
     times: list[int] = []
     size = None
     deadline = time.monotonic() + timeout_s

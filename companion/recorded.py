@@ -18,12 +18,12 @@ import math
 from collections import OrderedDict
 from pathlib import Path
 
+from companion.core.stream_format import TruthPose
+from companion.core.stream_io import read_truth_pose
 from companion.errors import InputError
 from companion.landmarks.geodesy import LocalFrame
 from companion.sources.base import Frame, FrameSource, monotonic_us
 from companion.sources.files import RecordedStreamSource
-from companion.sources.stream_format import TruthPose
-from companion.sources.stream_io import read_truth_pose
 from mavlink_bridge.fake_drift import AttitudeDrift, AttitudeErrorConfig
 from tracker.camera import CameraModel
 from tracker.pose.types import AttitudeSample

@@ -34,6 +34,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from companion.core.stream_format import TruthPose
+from companion.core.stream_io import read_telemetry
 from companion.errors import InputError
 from companion.flightmap import load_practical_map
 from companion.recorded import OnCompanionClock, RecordedTruth, TruthAttitude
@@ -43,8 +45,6 @@ from companion.sensors import SensorHistory
 from companion.settings import Settings
 from companion.sources.base import Frame, monotonic_us
 from companion.sources.files import RecordedStreamSource
-from companion.sources.stream_format import TruthPose
-from companion.sources.stream_io import read_telemetry
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.fake_replay import RecordedMessage, TelemetryReplay
 from mavlink_bridge.vehicle import TruthFn, VehicleState

@@ -21,6 +21,7 @@ import cv2
 
 from companion.app import CompanionApp, Frame, FrameResult, FrameSource
 from companion.autopilot import BridgeSink
+from companion.core.validate import to_plain
 from companion.errors import ConfigError, InputError, note_stop_signal
 from companion.flightlog import FlightLogWriter
 from companion.flightmap import PracticalMap, acquisition_report, log_report, static_blocker
@@ -32,7 +33,6 @@ from companion.preview import render_preview
 from companion.reporting import Reporter
 from companion.sensors import SensorHistory
 from companion.settings import Settings
-from companion.validate import to_plain
 from mavlink_bridge.bridge import VisionBridge, create_bridge
 from mavlink_bridge.errors import BackendError
 from mavlink_bridge.streams import needed_streams

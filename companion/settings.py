@@ -25,14 +25,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from companion.core.resources import config_dir
+from companion.core.validate import FieldError, build
 from companion.errors import ConfigError
 from companion.fixgate import FixGateConfig
 from companion.landmarks.config import LandmarksConfig
 from companion.monitoring.config import MonitorConfig
 from companion.perception import PerceptionConfig
-from companion.resources import config_dir
 from companion.sources.config import SourceConfig
-from companion.validate import FieldError, build
 from mavlink_bridge.config import MavlinkConfig
 from tracker.acquire import AcquireConfig
 from tracker.camera import CameraModel

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from fieldbounds import check_bounds
+
 Profile = Literal["ardupilot", "px4"]
 Backend = Literal["pymavlink", "mavsdk"]
 VisionOutput = Literal["vpe", "odometry"]
@@ -62,7 +64,9 @@ class MavlinkConfig:
     stream_check_s: float = field(default=0.25, metadata={"gt": 0.0})
 
     def check(self) -> None:
-        """Raise ``ValueError`` naming the field when a cross-field rule is broken."""
+        """Raise ``ValueError`` naming the field when a bound in its metadata or a
+        cross-field rule is broken (a config built in code skips the TOML loader's checks)."""
+        check_bounds(self, "mavlink")
         if self.set_origin and self.origin_lat_deg == 0.0 and self.origin_lon_deg == 0.0:
             raise ValueError(
                 "mavlink.origin_lat_deg/origin_lon_deg: expected the EKF origin when "

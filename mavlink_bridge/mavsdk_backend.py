@@ -23,7 +23,6 @@ What MAVSDK does and what we add:
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
 import math
@@ -47,20 +46,17 @@ from mavsdk.plugins.mocap import (
     VisionPositionEstimate,
 )
 
-from mavlink_bridge.bridge import MAV_CMD_DO_SET_GLOBAL_ORIGIN, origin_seen
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.endpoint import Endpoint, parse_endpoint
 from mavlink_bridge.errors import BackendError
 from mavlink_bridge.link import REBOOT_BACKSTEP_MS, HealthState
 from mavlink_bridge.messages import (
-    LandingTargetFix,
     VisionFix,
-    landing_target_fields,
     odometry_fields,
     vpe_fields,
 )
-from mavlink_bridge.output import OutputGate, SendResult
-from mavlink_bridge.streams import StreamWatch, interval_command, keep_streams, parse_streams
+from mavlink_bridge.policy import BridgePolicy, Message
+from mavlink_bridge.streams import keep_streams
 from mavlink_bridge.telemetry import Telemetry, TelemetryHub, convert
 
 log = logging.getLogger(__name__)
@@ -74,32 +70,24 @@ def mavsdk_url(ep: Endpoint) -> str:
     return f"{_URL[ep.kind]}://{ep.host}:{ep.port}"
 
 
-class MavsdkBridge:
-    """:class:`mavlink_bridge.bridge.VisionBridge` on MAVSDK (see module doc)."""
+class MavsdkBridge(BridgePolicy):
+    """:class:`mavlink_bridge.bridge.VisionBridge` on MAVSDK (see module doc): the transport
+    under :class:`~mavlink_bridge.policy.BridgePolicy`."""
 
     def __init__(self, config: MavlinkConfig, clock_ns: Callable[[], int] = time.monotonic_ns):
-        config.check()
-        self.config = config
-        self.clock_ns = clock_ns
-        self.url = mavsdk_url(parse_endpoint(config.endpoint))
-        max_age_us = int(config.max_fix_age_ms * 1000)
-        self.vision_gate = OutputGate(config.rate_hz, max_age_us)
-        self.target_gate = OutputGate(config.landing_target_rate_hz, max_age_us)
-        self.counters: dict[str, int] = {"timesync_answered": 0, "backend_errors": 0,
-                                         "queue_drops": 0, "origin_attempts": 0}
         self.system_id = config.system_id or 1
+        super().__init__(config, clock_ns)
+        self.url = mavsdk_url(parse_endpoint(config.endpoint))
+        self.counters: dict[str, int] = {"timesync_answered": 0, "backend_errors": 0,
+                                         "queue_drops": 0}
         self._mavsdk: Mavsdk | None = None
         self._direct: MavlinkDirectAsync | None = None
         self._mocap: MocapAsync | None = None
         self._connected = False
-        self._origin_ok = False
         self._health: HealthState = "starting"
         self._last_boot_ms = -1
         self.reboots = 0
         self._hub = TelemetryHub(self.config.rx_queue_len, self.counters)
-        self._tasks: list[asyncio.Task[Any]] = []
-        self.streams = StreamWatch(parse_streams(config.streams), self._request_interval,
-                                   self.statustext)
 
     # ------------------------------------------------------------ lifecycle
     async def start(self, timeout_s: float = 10.0) -> None:
@@ -113,14 +101,13 @@ class MavsdkBridge:
         self._direct = MavlinkDirectAsync(system)
         self._mocap = MocapAsync(system)
         self._connected = True
-        self._tasks = [asyncio.create_task(self._receive(), name="mavsdk-receive"),
-                       asyncio.create_task(self._watch_connection(system), name="mavsdk-conn"),
-                       asyncio.create_task(keep_streams(
-                           self.streams, lambda: self._connected, self.clock_ns,
-                           self.config.stream_check_s), name="mavsdk-streams")]
+        self._spawn(self._receive(), "mavsdk-receive")
+        self._spawn(self._watch_connection(system), "mavsdk-conn")
+        self._spawn(keep_streams(self.streams, lambda: self._connected, self.clock_ns,
+                                 self.config.stream_check_s), "mavsdk-streams")
         self.streams.ask_all(self.clock_ns())
         if self.config.set_origin:
-            self._tasks.append(asyncio.create_task(self._origin_loop(), name="mavsdk-origin"))
+            self._spawn(self._origin_loop(), "mavsdk-origin")
 
     async def _connect(self, sysid: int, timeout_s: float) -> Any:
         cfg = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
@@ -147,12 +134,7 @@ class MavsdkBridge:
             self._mavsdk = None
 
     async def stop(self) -> None:
-        for t in self._tasks:
-            t.cancel()
-        for t in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await t
-        self._tasks = []
+        await self._cancel_tasks()
         self._connected = False
         self._destroy()
 
@@ -171,12 +153,19 @@ class MavsdkBridge:
                     self.statustext("link up")
                     self.streams.ask_all(self.clock_ns())
 
-    # ------------------------------------------------------------ sending
-    async def _send(self, name: str, fields: dict[str, Any],
-                    target: tuple[int, int] = (0, 0)) -> bool:
+    # ------------------------------------------------------------ the transport
+    @property
+    def link_up(self) -> bool:
+        return self._connected
+
+    def target_system(self) -> int:
+        return self.system_id
+
+    async def _write(self, message: Message) -> bool:
         """Send one message through MavlinkDirect; NaN is not valid JSON, so never send it."""
         if self._direct is None:
             return False
+        name, fields, target = message
         msg = MavlinkMessage(name, self.system_id, self.config.component_id, target[0],
                              target[1], json.dumps(fields, allow_nan=False))
         try:
@@ -187,40 +176,12 @@ class MavsdkBridge:
             return False
         return True
 
-    def _request_interval(self, name: str, interval_us: int) -> None:
-        fields: dict[str, Any] = {"target_system": self.system_id, "target_component": 1,
-                                  "confirmation": 0, **interval_command(name, interval_us)}
-        task = asyncio.get_running_loop().create_task(
-            self._send("COMMAND_LONG", fields, (self.system_id, 1)))
-        self._tasks.append(task)
-        task.add_done_callback(self._forget)
+    def _post(self, message: Message) -> None:
+        self._spawn(self._write(message), forget=True)
 
-    def statustext(self, text: str, severity: int = 6) -> None:
-        full = (self.config.statustext_prefix + text)[:50]
-        task = asyncio.get_running_loop().create_task(
-            self._send("STATUSTEXT", {"severity": severity, "text": full}))
-        self._tasks.append(task)
-        task.add_done_callback(self._forget)
-
-    def _forget(self, task: asyncio.Task[Any]) -> None:
-        with contextlib.suppress(ValueError):
-            self._tasks.remove(task)
-
-    def report_health(self, state: HealthState) -> None:
-        """MAVSDK owns the heartbeat; health changes are announced by STATUSTEXT."""
-        if state != self._health:
-            if state in ("degraded", "failed") or self._health in ("degraded", "failed"):
-                self.statustext(f"health {state}", severity=6 if state == "ok" else 4)
-            self._health = state
-
-    async def send_fix(self, fix: VisionFix) -> SendResult:
-        gate = self.vision_gate
-        if not self._connected or self._mocap is None:
-            return gate.count("no_link")
-        now = self.clock_ns()
-        problem = gate.check_fix(fix, now)
-        if problem is not None:
-            return gate.count(problem)
+    async def _write_vision(self, fix: VisionFix) -> bool:
+        if self._mocap is None:
+            return False
         try:
             if self.config.profile == "ardupilot" and self.config.output == "odometry":
                 await self._mocap.set_odometry(_odometry(fix))
@@ -228,46 +189,19 @@ class MavsdkBridge:
                 await self._mocap.set_vision_position_estimate(_vpe(fix))
         except MavsdkError as err:
             log.debug("mavsdk mocap failed: %s", err)
-            return gate.count("backend_error")
-        gate.commit(fix.time_us, now)
-        return gate.count("sent")
+            return False
+        return True
 
-    async def send_landing_target(self, target: LandingTargetFix) -> SendResult:
-        gate = self.target_gate
-        if not self._connected:
-            return gate.count("no_link")
-        now = self.clock_ns()
-        problem = gate.check_target(target, now)
-        if problem is not None:
-            return gate.count(problem)
-        fields = landing_target_fields(target, self.config.profile)
-        if fields is None:
-            return gate.count("bad_geometry")
-        if not await self._send("LANDING_TARGET", fields):
-            return gate.count("backend_error")
-        gate.commit(target.time_us, now)
-        return gate.count("sent")
+    def statustext(self, text: str, severity: int = 6) -> None:
+        full = (self.config.statustext_prefix + text)[:50]
+        self._post(("STATUSTEXT", {"severity": severity, "text": full}, (0, 0)))
 
-    # ------------------------------------------------------------ origin
-    async def _origin_loop(self) -> None:
-        c = self.config
-        lat, lon = round(c.origin_lat_deg * 1e7), round(c.origin_lon_deg * 1e7)
-        while True:
-            if self._connected and not self._origin_ok:
-                self.counters["origin_attempts"] += 1
-                if c.profile == "ardupilot":
-                    await self._send("COMMAND_INT", {
-                        "target_system": self.system_id, "target_component": 1, "frame": 0,
-                        "command": MAV_CMD_DO_SET_GLOBAL_ORIGIN, "current": 0,
-                        "autocontinue": 0, "param1": 0.0, "param2": 0.0, "param3": 0.0,
-                        "param4": 0.0, "x": lat, "y": lon, "z": float(c.origin_alt_m)},
-                        (self.system_id, 1))
-                else:
-                    await self._send("SET_GPS_GLOBAL_ORIGIN", {
-                        "target_system": self.system_id, "latitude": lat, "longitude": lon,
-                        "altitude": round(c.origin_alt_m * 1000),
-                        "time_usec": self.clock_ns() // 1000}, (self.system_id, 0))
-            await asyncio.sleep(c.origin_retry_s)
+    def report_health(self, state: HealthState) -> None:
+        """MAVSDK owns the heartbeat; health changes are announced by STATUSTEXT."""
+        if state != self._health:
+            if state in ("degraded", "failed") or self._health in ("degraded", "failed"):
+                self.statustext(f"health {state}", severity=6 if state == "ok" else 4)
+            self._health = state
 
     # ------------------------------------------------------------ receiving
     async def _receive(self) -> None:
@@ -283,9 +217,10 @@ class MavsdkBridge:
                 continue
             if name == "TIMESYNC" and int(fields.get("tc1", 1)) == 0:
                 # PX4 applies the offset only with round trips < 10 ms: answer at once
-                await self._send("TIMESYNC", {"tc1": now, "ts1": int(fields["ts1"]),
-                                              "target_system": msg.system_id,
-                                              "target_component": msg.component_id})
+                await self._write(("TIMESYNC", {"tc1": now, "ts1": int(fields["ts1"]),
+                                                "target_system": msg.system_id,
+                                                "target_component": msg.component_id},
+                                   (0, 0)))
                 self.counters["timesync_answered"] += 1
             self._store(name, msg.system_id, msg.component_id, now, fields)
 
@@ -298,20 +233,15 @@ class MavsdkBridge:
         if value is None:
             return
         item = Telemetry(name, sysid, compid, now, value)
-        if not self._origin_ok and origin_seen(item):
-            self._origin_ok = True
-            self.statustext("EKF origin confirmed")
+        self._note_origin(item)
         self._hub.publish(item)
 
     def _check_reboot(self, boot_ms: int) -> None:
         """time_boot_ms stepping back: the autopilot rebooted and lost its origin."""
         if self._last_boot_ms >= 0 and boot_ms + REBOOT_BACKSTEP_MS < self._last_boot_ms:
             self.reboots += 1
-            self._origin_ok = False
-            self.vision_gate.reset()
-            self.target_gate.reset()
             self.statustext("autopilot reboot detected")
-            self.streams.ask_all(self.clock_ns())
+            self._on_reboot()
         self._last_boot_ms = boot_ms
 
     def latest(self, name: str) -> Telemetry | None:
@@ -320,14 +250,6 @@ class MavsdkBridge:
     def subscribe(self, *names: str) -> AsyncGenerator[Telemetry, None]:
         """Every new message of the given names; bounded, a slow reader loses the oldest."""
         return self._hub.subscribe(*names)
-
-    @property
-    def link_up(self) -> bool:
-        return self._connected
-
-    @property
-    def origin_confirmed(self) -> bool:
-        return self._origin_ok
 
     async def wait_link(self, up: bool = True, timeout_s: float = 5.0) -> bool:
         deadline = time.monotonic() + timeout_s
@@ -338,17 +260,8 @@ class MavsdkBridge:
         return True
 
     def stats(self) -> dict[str, Any]:
-        return {**self.counters, "link_up": self._connected, "origin_confirmed": self._origin_ok,
-                "reboots": self.reboots,
-                "vision": dict(self.vision_gate.counts),
-                "landing_target": dict(self.target_gate.counts),
-                "streams": self.stream_report()}
-
-    def stream_report(self) -> dict[str, dict[str, Any]]:
-        return self.streams.report(self.clock_ns())
-
-    def stream_warnings(self) -> list[str]:
-        return self.streams.missing()
+        return {**self.counters, "link_up": self._connected, "reboots": self.reboots,
+                **self._policy_stats()}
 
 
 def _cov(values: list[float]) -> Covariance:

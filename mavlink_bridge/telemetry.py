@@ -12,6 +12,8 @@ from collections.abc import AsyncGenerator, Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from mavlink_bridge.messages import euler_to_quaternion
+
 TELEMETRY_NAMES = (
     "HEARTBEAT", "ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME",
     "TIMESYNC", "HOME_POSITION", "EKF_STATUS_REPORT", "DISTANCE_SENSOR", "STATUSTEXT",
@@ -19,6 +21,9 @@ TELEMETRY_NAMES = (
 )
 #: Messages that carry a simulator's true pose (never a real vehicle's estimate).
 TRUTH_NAMES = ("SIM_STATE", "SIMSTATE", "HIL_STATE_QUATERNION")
+#: The one ZYX Euler -> (w, x, y, z) formula is :func:`mavlink_bridge.messages.euler_to_quaternion`;
+#: this name stays for the fake autopilot (fake_autopilot.py), which imports it from here.
+quaternion_from_rpy = euler_to_quaternion
 
 
 @dataclass(frozen=True)
@@ -161,15 +166,6 @@ def _text(d: Mapping[str, Any]) -> str:
     if isinstance(t, bytes | bytearray):
         t = t.decode("utf-8", errors="replace")
     return str(t).rstrip("\x00")
-
-
-def quaternion_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, ...]:
-    """(w, x, y, z) of the body -> NED rotation R = Rz(yaw) Ry(pitch) Rx(roll) (ZYX)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
 
 
 def _simstate(d: Mapping[str, Any]) -> SimTruth:

@@ -22,12 +22,12 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.app import FrameResult
+from companion.core.images import ImageProblem, read_image
 from companion.demo import map_landmarks
 from companion.perception import Perception
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
-from companion.sources.images import ImageProblem, read_image
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.link import MavlinkLink
 

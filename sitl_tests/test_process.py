@@ -19,7 +19,7 @@ from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
 from sitl_tests.harness import SitlAutopilot
-from sitl_tests.harness import run_config as harness_run_config
+from testsupport.flightconfig import run_config as harness_run_config
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "config" / "landmarks.geojson"

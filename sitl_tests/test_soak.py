@@ -1,26 +1,14 @@
 """The soak's short form for CI: 45 s of ``companion run`` watched for leaks.
 
 The long form (30 minutes, documented in docs/reliability.md) is ``benchmarks/soak.py``;
-both apply the same checks (:func:`verdict`).
+both run :func:`testsupport.soak.soak` and apply the same checks (``verdict``).
 """
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def soak_module() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("lmc_soak", ROOT / "benchmarks" / "soak.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+from testsupport.soak import soak
 
 
 async def test_soak_short(tmp_path: Path) -> None:
@@ -28,8 +16,7 @@ async def test_soak_short(tmp_path: Path) -> None:
     file descriptors do not grow, threads by at most one (a pool thread started late), every
     3 s interval has fused fixes and the rate does not trend down (second half's median
     >= 70 % of the first's); the process then exits 0 by itself."""
-    soak = soak_module()
-    result = await soak.soak(45.0, sample_s=3.0, tmp=tmp_path, thread_slack=1)
+    result = await soak(45.0, sample_s=3.0, tmp=tmp_path, thread_slack=1)
     v = result["verdict"]
     print("soak (short):", v)
     assert result["exit_status"] == 0, result["stderr_tail"]

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.cli import main
-from companion.landmarks.geojson_io import read_map, write_map
+from companion.core.map_file import read_map, write_map
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig

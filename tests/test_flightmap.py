@@ -5,9 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from companion.core.landmark import Appearance, Landmark
 from companion.flightmap import PracticalMap, acquisition_report, reference_image
 from companion.landmarks.geodesy import LocalFrame
-from companion.landmarks.record import Appearance, Landmark
 from companion.perception import Perception
 from tracker.camera import CameraModel
 from tracker.pose.types import MapLandmark

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from companion.cli import main
+from companion.core.stream_format import read_meta
+from companion.core.stream_io import read_telemetry, read_truth_pose
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
-from companion.sources.stream_format import read_meta
-from companion.sources.stream_io import read_telemetry, read_truth_pose
 from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
 from mavlink_bridge.vehicle import VehicleState
 from tests.run_helpers import SIM_LAYER, fake_in_thread, synth

@@ -8,9 +8,9 @@ from typing import Literal
 
 import pytest
 
+from companion.core.validate import FieldError, build, describe
 from companion.errors import ConfigError
 from companion.settings import BUILT_IN, SIM_LAYERS, load_settings, parse_set
-from companion.validate import FieldError, build, describe
 
 
 @dataclass(frozen=True)

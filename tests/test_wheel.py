@@ -25,13 +25,13 @@ from pathlib import Path
 
 import pytest
 
-from tests.calibration.boards import TRUTH, session
 from tests.calibration.still import camera_toml, still_scene, vehicle_toml
+from testsupport.boards import TRUTH, session
 from tracker.camera import CameraModel
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("pyproject.toml", "setup.py", "README.md", "companion", "tracker", "mavlink_bridge",
-           "config")
+           "fieldbounds", "config")
 
 
 def run(*cmd: str | Path, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -82,7 +82,7 @@ def empty(tmp_path: Path) -> Path:
 
 def test_the_installed_package_is_the_wheels_and_reads_its_own_config(
         installed: Path, empty: Path) -> None:
-    probe = ("import companion, companion.resources as r; "
+    probe = ("import companion, companion.core.resources as r; "
              "print(companion.__file__); print(r.config_dir())")
     out = run(installed / "python", "-c", probe, cwd=empty)
     assert out.returncode == 0, out.stderr

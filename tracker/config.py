@@ -6,8 +6,10 @@ application loader; :func:`check_config` re-checks them for direct library use.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
-from typing import Any, Literal
+from dataclasses import dataclass, field
+from typing import Literal
+
+from fieldbounds import check_bounds
 
 
 @dataclass(frozen=True)
@@ -80,19 +82,6 @@ class TrackerConfig:
 
 def check_config(config: TrackerConfig) -> None:
     """Raise ``ValueError`` naming the first field that breaks its metadata constraint."""
-    checks: dict[str, Any] = {
-        "ge": lambda v, b: v >= b,
-        "gt": lambda v, b: v > b,
-        "le": lambda v, b: v <= b,
-        "lt": lambda v, b: v < b,
-    }
-    words = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
-    for f in fields(config):
-        value = getattr(config, f.name)
-        for key, bound in f.metadata.items():
-            if key in checks and not checks[key](value, bound):
-                raise ValueError(
-                    f"config.{f.name}: expected a value {words[key]} {bound}, got {value!r}"
-                )
+    check_bounds(config, "config")
     if config.top_features > 49:
         raise ValueError("config.top_features: expected <= 49")

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from companion.core.stream_format import TruthBox
 from companion.sim import textures
 from companion.sim.effects import (
     EffectSpec,
@@ -35,9 +36,8 @@ from companion.sim.effects import (
     noise_bank,
 )
 from companion.sim.render import Renderer, polygon_area
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import TEXTURES, Quad, SimLandmark, World, face_corners
-from companion.sources.stream_format import TruthBox
 from tracker.camera import CameraModel
 from training.synth_data import CATEGORIES
 
@@ -99,15 +99,15 @@ def _street(rng: np.random.Generator) -> list[SimLandmark]:
     return out
 
 
-def _look_at(position: np.ndarray, aim: np.ndarray, roll: float) -> VehicleState:
+def _look_at(position: np.ndarray, aim: np.ndarray, roll: float) -> KinematicState:
     """A vehicle at ``position`` whose forward camera (zero mount) looks at ``aim``."""
     d = aim - position
     yaw = float(np.arctan2(d[1], d[0]))
     pitch = float(np.arctan2(-d[2], np.hypot(d[0], d[1])))
-    return VehicleState(0.0, tuple(position), (0.0, 0.0, 0.0), (roll, pitch, yaw))
+    return KinematicState(0.0, tuple(position), (0.0, 0.0, 0.0), (roll, pitch, yaw))
 
 
-def _viewpoint(rng: np.random.Generator, target: SimLandmark, fx: float) -> VehicleState:
+def _viewpoint(rng: np.random.Generator, target: SimLandmark, fx: float) -> KinematicState:
     """A camera at the distance that shows ``target`` at a random size, aimed at a point
     up to 0.35 of that distance off it (within about 19 deg: in view at 640x480)."""
     small = rng.random() < SMALL_SHARE

@@ -19,6 +19,7 @@ from companion.noise import measure_noise, noise_toml
 from companion.perception import Perception
 from companion.runtime import detector_for
 from companion.settings import Settings
+from companion.simulated import open_sim
 from companion.sources.base import EndOfStream
 from companion.sources.config import SourceConfig
 from companion.sources.factory import open_source
@@ -44,8 +45,8 @@ def source_frames(config: SourceConfig, count: int) -> Iterator[Frame]:
     fast as they can be read)."""
     loop = asyncio.new_event_loop()
     try:
-        source = loop.run_until_complete(open_source(dataclasses.replace(config,
-                                                                        realtime=False)))
+        source = loop.run_until_complete(open_source(
+            dataclasses.replace(config, realtime=False), open_sim))
         try:
             for _ in range(count):
                 try:

@@ -7,8 +7,8 @@ import json
 import sys
 
 from companion.config_checks import preflight
+from companion.core.validate import to_plain
 from companion.settings import BUILT_IN, SIM_LAYERS, Settings
-from companion.validate import to_plain
 
 
 def register(sub: argparse._SubParsersAction) -> None:

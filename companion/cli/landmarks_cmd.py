@@ -10,12 +10,12 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from companion.core.landmark import Area, Landmark, parse_area
+from companion.core.map_file import landmark_to_feature, write_map
 from companion.errors import CompanionError, InputError
 from companion.landmarks.config import LandmarksConfig
 from companion.landmarks.geodesy import LocalFrame, corners_ned, pick_one
-from companion.landmarks.geojson_io import import_map, landmark_to_feature, write_map
-from companion.landmarks.record import Area, Landmark, parse_area
-from companion.landmarks.repository import LandmarkRepository
+from companion.landmarks.repository import LandmarkRepository, import_map
 from companion.landmarks.scores import VrScorer, evaluate, tracker_vr_scorer
 from companion.landmarks.selection import Selection, busy_zones, read_busy_zones
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository

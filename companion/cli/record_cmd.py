@@ -11,15 +11,16 @@ from pathlib import Path
 from typing import Any
 
 from companion.cli import positive_seconds
+from companion.core.stream_format import StreamMeta
+from companion.core.stream_io import IMAGE_FORMATS, StreamWriter
 from companion.errors import ConfigError
 from companion.settings import Settings
 from companion.sim.source import SimCameraSource
+from companion.simulated import open_sim
 from companion.sources.base import EndOfStream, FrameSource, monotonic_us
 from companion.sources.config import SourceConfig
 from companion.sources.factory import open_source, resolve
 from companion.sources.files import RecordedStreamSource
-from companion.sources.stream_format import StreamMeta
-from companion.sources.stream_io import IMAGE_FORMATS, StreamWriter
 from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.codec import MAVLinkMessage
 from mavlink_bridge.fake_replay import REPLAYED
@@ -119,7 +120,7 @@ async def record(config: SourceConfig, out: Path, camera: CameraModel, *, second
         if not await bridge.wait_link(True, 5.0):
             log.warning("record: no heartbeat from the autopilot at %s yet: recording the "
                         "frames, telemetry from when it comes", bridge.config.endpoint)
-    source = await open_source(config)
+    source = await open_source(config, open_sim)
     writer: StreamWriter | None = None
     count, first_t, offset_us = 0, None, 0
     try:

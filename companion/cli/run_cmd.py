@@ -17,6 +17,7 @@ from companion.cli import positive_seconds
 from companion.config_checks import preflight
 from companion.errors import EXIT_FAILURE, EXIT_OK, ConfigError, SourceError
 from companion.flightmap import PracticalMap, load_practical_map
+from companion.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.nofix import AttitudeSource
 from companion.perception import Perception, PerceptionWrapper
 from companion.recorded import (
@@ -29,10 +30,10 @@ from companion.recorded import (
 from companion.runtime import bridge_for, fly, perception_for
 from companion.sensors import SensorHistory
 from companion.settings import Settings
-from companion.sim.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.square import FlightAbortedError, SquareFlight
+from companion.simulated import open_sim
 from companion.sources.factory import open_source, resolve
 from companion.sources.files import RecordedStreamSource
 from mavlink_bridge.bridge import VisionBridge
@@ -143,7 +144,7 @@ async def open_run_source(settings: Settings, bridge: VisionBridge, pmap: Practi
         state = follow.rendered_state
         return RunSource(follow, follow.sim.scenario.camera,
                          truth_of=lambda f: getattr(state(f.index), "position_ned_m", None))
-    source = await open_source(settings.source)
+    source = await open_source(settings.source, open_sim)
     sim = simulator_of(source)
     if c.kind not in RECORDED_KINDS:
         return RunSource(source, sim.scenario.camera if sim is not None else settings.camera)

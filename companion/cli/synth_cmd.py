@@ -8,13 +8,13 @@ import logging
 from pathlib import Path
 
 from companion.cli import positive_seconds
+from companion.core.stream_io import IMAGE_FORMATS
 from companion.errors import ConfigError
 from companion.settings import SIM_LAYERS, Settings
 from companion.sim.realworld import RealWorldSpec, synth_real
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.synth import synth_stream
-from companion.sources.stream_io import IMAGE_FORMATS
 
 log = logging.getLogger(__name__)
 

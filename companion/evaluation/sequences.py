@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from companion.core.images import ImageProblem, read_image
+from companion.core.stream_format import read_meta
+from companion.core.stream_io import read_truth_boxes
 from companion.errors import InputError
 from companion.sources.files import IMAGE_SUFFIXES, read_frame_list, read_otb_groundtruth
-from companion.sources.images import ImageProblem, read_image
-from companion.sources.stream_format import read_meta
-from companion.sources.stream_io import read_truth_boxes
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ admission criteria (:mod:`.scores`), a *practical map* chosen from it for one ar
 PostGIS in the cloud (:mod:`.postgis_repo`), behind one interface (:mod:`.repository`).
 """
 
-from companion.landmarks.record import (
+from companion.core.landmark import (
     Appearance,
     Area,
     BBox,

@@ -14,8 +14,8 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
+from companion.core.landmark import Landmark
 from companion.errors import InputError
-from companion.landmarks.record import Landmark
 from companion.landmarks.repository import LandmarkRepository
 from tracker.pose.landmarks import corners_about, face_rotation
 

@@ -9,24 +9,21 @@ schema version lives in ``landmark_schema``; migrations run under an advisory lo
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Iterator, Sequence
-from types import TracebackType
+from collections.abc import Iterator, Sequence
+from contextlib import AbstractContextManager
 from typing import Any
 
 import psycopg
 
-from companion.errors import InputError
-from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
-from companion.landmarks.repository import (
+from companion.core.landmark import BBox, spatial_order
+from companion.core.landmark_rows import (
     APPEARANCE_COLUMNS,
     COLUMNS,
     LandmarkRows,
-    Progress,
-    ScoreUpdate,
-    check_new_ids,
-    paused_gc,
-    row_to_landmark,
 )
+from companion.errors import InputError
+from companion.landmarks.repository import Progress
+from companion.landmarks.sql_repo import SqlLandmarkRepository, first_line
 
 _GEOM_INDEX = "CREATE INDEX landmarks_geom ON landmarks USING gist (geom)"
 _NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"
@@ -119,71 +116,61 @@ def migrate(conn: psycopg.Connection[Any]) -> int:
     return version
 
 
-class PostgisLandmarkRepository:
-    """:class:`~companion.landmarks.repository.LandmarkRepository` over PostGIS."""
+class PostgisLandmarkRepository(SqlLandmarkRepository):
+    """:class:`~companion.landmarks.repository.LandmarkRepository` over PostGIS: the
+    PostgreSQL dialect of :class:`~companion.landmarks.sql_repo.SqlLandmarkRepository`."""
+
+    MARK = "%s"
+    TRUE = "true"
+    APPEARANCE_KEY = "id"
+    AREA_FROM = "landmarks l"
+    ID_CHUNK = 5000
+    INTEGRITY_ERROR = psycopg.errors.IntegrityError
 
     def __init__(self, url: str) -> None:
         self.url = url
         try:
             self._conn: psycopg.Connection[Any] = psycopg.connect(url)
         except psycopg.Error as err:
-            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
             raise InputError(f"{redact(url)}: cannot connect to the landmark repository "
-                             f"({first})") from None
+                             f"({first_line(err)})") from None
         try:
             migrate(self._conn)
         except psycopg.Error as err:
             self._conn.close()
             raise InputError(f"{redact(url)}: cannot prepare the landmark schema "
-                             f"({str(err).strip().splitlines()[0]})") from None
+                             f"({first_line(err)})") from None
         self._conn.autocommit = True
-
-    def __enter__(self) -> PostgisLandmarkRepository:
-        return self
-
-    def __exit__(self, t: type[BaseException] | None, e: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
-
-    def close(self) -> None:
-        self._conn.close()
 
     def schema_version(self) -> int:
         row = self._conn.execute("SELECT max(version) FROM landmark_schema").fetchone()
         return int(row[0]) if row and row[0] is not None else 0
 
-    def count(self) -> int:
-        row = self._conn.execute("SELECT count(*) FROM landmarks").fetchone()
-        return int(row[0]) if row else 0
+    def _transaction(self) -> AbstractContextManager[object]:
+        return self._conn.transaction()
 
-    def _existing(self, ids: list[str]) -> set[str]:
-        return {r[0] for r in self._conn.execute(
-            "SELECT id FROM landmarks WHERE id = ANY(%s)", (ids,))}
+    def _rows(self, sql: str, params: Sequence[object]) -> Iterator[tuple[Any, ...]]:
+        with self._conn.cursor(binary=True) as cur:  # binary: half the client's parsing
+            cur.execute(sql, params)
+            yield from cur
 
-    def import_landmarks(self, landmarks: Sequence[Landmark] | LandmarkRows, *,
-                         replace: bool = False, source: str = "input",
-                         progress: Progress | None = None) -> int:
-        """``COPY`` every record in one transaction (``replace`` overwrites equal ids)."""
-        conn = self._conn
-        with paused_gc():
-            batch = LandmarkRows.of(landmarks)
-            try:
-                with conn.transaction():
-                    if replace:
-                        conn.execute("DELETE FROM landmarks WHERE id = ANY(%s)", (batch.ids(),))
-                    elif self.count():
-                        check_new_ids(batch.ids(), self._existing, source, chunk=5000)
-                    bulk = len(batch) >= BULK_ROWS and len(batch) >= self.count()
-                    for sql in _BULK_DROP if bulk else ():  # DDL is undone on failure
-                        conn.execute(sql)
-                    self._copy(batch, progress)
-                    for sql in _BULK_REBUILD if bulk else ():
-                        conn.execute(sql)
-            except psycopg.errors.IntegrityError as err:
-                check_new_ids(batch.ids(), lambda ids: set(), source)  # names a repeated id
-                first = str(err).strip().splitlines()[0]
-                raise InputError(f"{source}: rejected by the database ({first})") from None
-        return len(batch)
+    def _id_in(self, ids: list[str]) -> tuple[str, Sequence[object]]:
+        return "l.id = ANY(%s)", (ids,)
+
+    def _index_clause(self, box: BBox) -> tuple[str, Sequence[object]]:
+        return ("l.geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326)",
+                (box.min_lon_deg, box.min_lat_deg, box.max_lon_deg, box.max_lat_deg))
+
+    def _delete_ids(self, ids: list[str]) -> None:
+        self._conn.execute("DELETE FROM landmarks WHERE id = ANY(%s)", (ids,))
+
+    def _write(self, batch: LandmarkRows, progress: Progress | None) -> None:
+        bulk = self._bulk(batch, BULK_ROWS)
+        for sql in _BULK_DROP if bulk else ():  # DDL is undone on failure
+            self._conn.execute(sql)
+        self._copy(batch, progress)
+        for sql in _BULK_REBUILD if bulk else ():
+            self._conn.execute(sql)
 
     def _copy(self, batch: LandmarkRows, progress: Progress | None) -> None:
         with self._conn.cursor() as cur:
@@ -203,56 +190,3 @@ class PostgisLandmarkRepository:
                         copy.write_row((batch.rows[i][0], *app))
         if progress is not None:
             progress(len(batch))
-
-    def _select(self, where: str, params: Sequence[object], with_appearance: bool
-                ) -> Iterator[Landmark]:
-        n = len(COLUMNS)
-        if with_appearance:
-            q = (f"SELECT {_COLS}, {_APP_COLS} FROM landmarks l "
-                 f"LEFT JOIN appearances a ON a.id = l.id WHERE {where}")
-        else:
-            q = f"SELECT {_COLS} FROM landmarks l WHERE {where}"
-        with self._conn.cursor(binary=True) as cur:
-            cur.execute(q, params)
-            for row in cur:
-                yield row_to_landmark(row[:n], row[n:] if with_appearance else None)
-
-    def get(self, landmark_id: str) -> Landmark | None:
-        return next(self._select("l.id = %s", (landmark_id,), True), None)
-
-    def find_by_name(self, name: str) -> list[Landmark]:
-        return list(self._select("l.name = %s ORDER BY l.id", (name,), True))
-
-    def query_area(self, area: Area, *, with_appearance: bool = False) -> list[Landmark]:
-        b = area.bbox()
-        where = ("l.geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326) "
-                 "AND l.lon_deg BETWEEN %s AND %s AND l.lat_deg BETWEEN %s AND %s ORDER BY l.id")
-        params = (b.min_lon_deg, b.min_lat_deg, b.max_lon_deg, b.max_lat_deg,
-                  b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)
-        return filter_area(list(self._select(where, params, with_appearance)), area)
-
-    def area_candidates(self, area: Area) -> Candidates:
-        b = area.bbox()
-        rows = self._conn.cursor(binary=True).execute(  # binary: half the client's parsing
-            "SELECT id, lat_deg, lon_deg, impact, status, status_reason FROM landmarks "
-            "WHERE geom && ST_MakeEnvelope(%s, %s, %s, %s, 4326) "
-            "AND lon_deg BETWEEN %s AND %s AND lat_deg BETWEEN %s AND %s",
-            (b.min_lon_deg, b.min_lat_deg, b.max_lon_deg, b.max_lat_deg,
-             b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)).fetchall()
-        return Candidates.from_rows(rows, area)
-
-    def get_many(self, ids: Sequence[str]) -> list[Landmark]:
-        found = {lm.id: lm for lm in self._select("l.id = ANY(%s)", (list(ids),), True)}
-        return [found[i] for i in ids if i in found]
-
-    def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]:
-        return self._select("true ORDER BY l.id", (), with_appearance)
-
-    def update_scores(self, updates: Iterable[ScoreUpdate]) -> int:
-        rows = [(u.scores.distinctiveness, u.scores.flatness, u.scores.static, u.scores.impact,
-                 u.status, u.status_reason, u.id) for u in updates]
-        with self._conn.transaction(), self._conn.cursor() as cur:
-            cur.executemany(
-                "UPDATE landmarks SET distinctiveness = %s, flatness = %s, static = %s, "
-                "impact = %s, status = %s, status_reason = %s WHERE id = %s", rows)
-        return len(rows)

@@ -23,8 +23,8 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
+from companion.core.landmark import Appearance, Landmark, Point3, Scores, Status
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.record import Appearance, Landmark, Point3, Scores, Status
 from companion.landmarks.repository import ScoreUpdate
 from tracker.distinctiveness import best_variance_ratio
 

@@ -21,9 +21,9 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
+from companion.core.landmark import Candidates, Landmark
 from companion.errors import InputError
 from companion.landmarks.config import BusyZone, LandmarksConfig
-from companion.landmarks.record import Candidates, Landmark
 
 
 @dataclass(frozen=True)

@@ -21,26 +21,23 @@ The R*Tree stores 32-bit floats rounded outwards, so queries re-check exact coor
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from companion.errors import CompanionError, InputError
-from companion.landmarks.record import Area, Candidates, Landmark, filter_area, spatial_order
-from companion.landmarks.repository import (
+from companion.core.landmark import BBox, spatial_order
+from companion.core.landmark_rows import (
     APPEARANCE_COLUMNS,
     COLUMNS,
     LandmarkRows,
-    Progress,
-    ScoreUpdate,
-    check_new_ids,
-    paused_gc,
-    row_to_landmark,
 )
+from companion.errors import CompanionError, InputError
+from companion.landmarks.repository import Progress
+from companion.landmarks.sql_repo import SqlLandmarkRepository
 
 _ID_INDEX = "CREATE UNIQUE INDEX landmarks_id ON landmarks (id)"
 _NAME_INDEX = "CREATE INDEX landmarks_name ON landmarks (name)"
@@ -193,8 +190,16 @@ def _rollback(conn: sqlite3.Connection) -> None:
         conn.execute("ROLLBACK")
 
 
-class SqliteLandmarkRepository:
-    """:class:`~companion.landmarks.repository.LandmarkRepository` over one SQLite file."""
+class SqliteLandmarkRepository(SqlLandmarkRepository):
+    """:class:`~companion.landmarks.repository.LandmarkRepository` over one SQLite file: the
+    SQLite dialect of :class:`~companion.landmarks.sql_repo.SqlLandmarkRepository`."""
+
+    MARK = "?"
+    TRUE = "1"
+    APPEARANCE_KEY = "rid"
+    AREA_FROM = _RTREE_JOIN
+    ID_CHUNK = 500
+    INTEGRITY_ERROR = sqlite3.IntegrityError
 
     def __init__(self, path: str | Path) -> None:
         self.path = str(path)
@@ -211,63 +216,40 @@ class SqliteLandmarkRepository:
         except sqlite3.DatabaseError as err:  # not a database, corrupt: the input is bad
             raise InputError(f"{self.path}: cannot open landmark database ({err})") from None
 
-    def __enter__(self) -> SqliteLandmarkRepository:
-        return self
-
-    def __exit__(self, t: type[BaseException] | None, e: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
-
-    def close(self) -> None:
-        self._conn.close()
-
     def schema_version(self) -> int:
         return int(self._conn.execute("PRAGMA user_version").fetchone()[0])
 
-    def count(self) -> int:
-        return int(self._conn.execute("SELECT count(*) FROM landmarks").fetchone()[0])
-
-    def _existing(self, ids: list[str]) -> set[str]:
-        q = f"SELECT id FROM landmarks WHERE id IN ({','.join('?' * len(ids))})"
-        return {r[0] for r in self._conn.execute(q, ids)}
-
-    def import_landmarks(self, landmarks: Sequence[Landmark] | LandmarkRows, *,
-                         replace: bool = False, source: str = "input",
-                         progress: Progress | None = None) -> int:
-        """Insert all records in one transaction (``replace`` overwrites equal ids)."""
-        with paused_gc():
-            return self._import(LandmarkRows.of(landmarks), replace, source, progress)
-
-    def _import(self, batch: LandmarkRows, replace: bool, source: str,
-                progress: Progress | None) -> int:
-        conn = self._conn
-        conn.execute("BEGIN IMMEDIATE")
+    @contextmanager
+    def _transaction(self) -> Iterator[None]:
+        self._conn.execute("BEGIN IMMEDIATE")
         try:
-            if replace:
-                self._delete_ids(batch.ids())
-            elif self.count():
-                check_new_ids(batch.ids(), self._existing, source)
-            # never reuse a rid inside an existing bucket's range (that row would be found twice)
-            (rid0,) = conn.execute(
-                "SELECT max(coalesce((SELECT max(rid) FROM landmarks), 0), "
-                "coalesce((SELECT max(rid_hi) FROM landmarks_rtree), 0))").fetchone()
-            bulk = len(batch) >= BULK_ROWS and len(batch) >= self.count()
-            if bulk:  # inside the transaction: a failure restores the indexes too
-                conn.execute("DROP INDEX landmarks_id")
-                conn.execute("DROP INDEX landmarks_name")
-            self._insert(batch, rid0 + 1, progress)
-            if bulk:
-                conn.execute(_ID_INDEX)  # fails on a repeated id: rolled back below
-                conn.execute(_NAME_INDEX)
-            conn.execute("COMMIT")
-        except sqlite3.IntegrityError as err:
-            _rollback(conn)
-            check_new_ids(batch.ids(), lambda ids: set(), source)  # names a repeated id
-            raise InputError(f"{source}: rejected by the database ({err})") from None
+            yield
+            self._conn.execute("COMMIT")
         except BaseException:
-            _rollback(conn)
+            _rollback(self._conn)
             raise
-        return len(batch)
+
+    def _id_in(self, ids: list[str]) -> tuple[str, Sequence[object]]:
+        return f"l.id IN ({','.join('?' * len(ids))})", ids
+
+    def _index_clause(self, box: BBox) -> tuple[str, Sequence[object]]:
+        return ("r.min_lon <= ? AND r.max_lon >= ? AND r.min_lat <= ? AND r.max_lat >= ?",
+                (box.max_lon_deg, box.min_lon_deg, box.max_lat_deg, box.min_lat_deg))
+
+    def _write(self, batch: LandmarkRows, progress: Progress | None) -> None:
+        conn = self._conn
+        # never reuse a rid inside an existing bucket's range (that row would be found twice)
+        (rid0,) = conn.execute(
+            "SELECT max(coalesce((SELECT max(rid) FROM landmarks), 0), "
+            "coalesce((SELECT max(rid_hi) FROM landmarks_rtree), 0))").fetchone()
+        bulk = self._bulk(batch, BULK_ROWS)
+        if bulk:  # inside the transaction: a failure restores the indexes too
+            conn.execute("DROP INDEX landmarks_id")
+            conn.execute("DROP INDEX landmarks_name")
+        self._insert(batch, rid0 + 1, progress)
+        if bulk:
+            conn.execute(_ID_INDEX)  # fails on a repeated id: rolled back by the caller
+            conn.execute(_NAME_INDEX)
 
     def _insert(self, batch: LandmarkRows, rid0: int, progress: Progress | None) -> None:
         """Rows ``rid0 ..`` in Morton order with their R*Tree buckets, chunk by chunk, then
@@ -298,67 +280,3 @@ class SqliteLandmarkRepository:
             if rids:
                 rm = ",".join("?" * len(rids))
                 self._conn.execute(f"DELETE FROM landmarks WHERE rid IN ({rm})", rids)
-
-    def _select(self, where: str, params: Sequence[object], with_appearance: bool,
-                rtree: bool = False) -> Iterator[Landmark]:
-        frm = _RTREE_JOIN if rtree else "landmarks l"
-        if with_appearance:
-            q = (f"SELECT {_COLS}, {_APP_COLS} FROM {frm} "
-                 f"LEFT JOIN appearances a ON a.rid = l.rid WHERE {where}")
-            n = len(COLUMNS)
-            for row in self._conn.execute(q, params):
-                yield row_to_landmark(row[:n], row[n:])
-        else:
-            for row in self._conn.execute(f"SELECT {_COLS} FROM {frm} WHERE {where}", params):
-                yield row_to_landmark(row)
-
-    def get(self, landmark_id: str) -> Landmark | None:
-        return next(self._select("l.id = ?", (landmark_id,), True), None)
-
-    def find_by_name(self, name: str) -> list[Landmark]:
-        return list(self._select("l.name = ? ORDER BY l.id", (name,), True))
-
-    def query_area(self, area: Area, *, with_appearance: bool = False) -> list[Landmark]:
-        b = area.bbox()
-        where = ("r.min_lon <= ? AND r.max_lon >= ? AND r.min_lat <= ? AND r.max_lat >= ? "
-                 "AND l.lon_deg BETWEEN ? AND ? AND l.lat_deg BETWEEN ? AND ? ORDER BY l.id")
-        params = (b.max_lon_deg, b.min_lon_deg, b.max_lat_deg, b.min_lat_deg,
-                  b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)
-        return filter_area(list(self._select(where, params, with_appearance, rtree=True)), area)
-
-    def area_candidates(self, area: Area) -> Candidates:
-        b = area.bbox()
-        rows = self._conn.execute(
-            "SELECT l.id, l.lat_deg, l.lon_deg, l.impact, l.status, l.status_reason "
-            f"FROM {_RTREE_JOIN} "
-            "WHERE r.min_lon <= ? AND r.max_lon >= ? AND r.min_lat <= ? AND r.max_lat >= ? "
-            "AND l.lon_deg BETWEEN ? AND ? AND l.lat_deg BETWEEN ? AND ?",
-            (b.max_lon_deg, b.min_lon_deg, b.max_lat_deg, b.min_lat_deg,
-             b.min_lon_deg, b.max_lon_deg, b.min_lat_deg, b.max_lat_deg)).fetchall()
-        return Candidates.from_rows(rows, area)
-
-    def get_many(self, ids: Sequence[str]) -> list[Landmark]:
-        found: dict[str, Landmark] = {}
-        for start in range(0, len(ids), 500):
-            part = list(ids[start:start + 500])
-            marks = ",".join("?" * len(part))
-            found.update((lm.id, lm) for lm in self._select(f"l.id IN ({marks})", part, True))
-        return [found[i] for i in ids if i in found]
-
-    def iter_all(self, *, with_appearance: bool = True) -> Iterator[Landmark]:
-        return self._select("1 ORDER BY l.id", (), with_appearance)
-
-    def update_scores(self, updates: Iterable[ScoreUpdate]) -> int:
-        rows = [(u.scores.distinctiveness, u.scores.flatness, u.scores.static, u.scores.impact,
-                 u.status, u.status_reason, u.id) for u in updates]
-        conn = self._conn
-        conn.execute("BEGIN IMMEDIATE")
-        try:
-            conn.executemany(
-                "UPDATE landmarks SET distinctiveness = ?, flatness = ?, static = ?, impact = ?, "
-                "status = ?, status_reason = ? WHERE id = ?", rows)
-            conn.execute("COMMIT")
-        except BaseException:
-            _rollback(conn)
-            raise
-        return len(rows)

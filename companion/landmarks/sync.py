@@ -7,12 +7,11 @@ import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
+from companion.core.landmark import Area
 from companion.errors import InputError
 from companion.extras import require
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.geojson_io import import_map
-from companion.landmarks.record import Area
-from companion.landmarks.repository import LandmarkRepository
+from companion.landmarks.repository import LandmarkRepository, import_map
 from companion.landmarks.selection import Selection, ZonePolygon, select_practical_map
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 

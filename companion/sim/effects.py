@@ -18,11 +18,11 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from companion.core.frames import ImageU8
+from companion.core.stream_format import TruthBox
 from companion.sim import textures
 from companion.sim.render import clip_halfspace, clip_rect
 from companion.sim.world import Quad, World, seeded_rng
-from companion.sources.base import ImageU8
-from companion.sources.stream_format import TruthBox
 from tracker.geometry import FloatArray
 
 EffectKind = Literal[

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import Quad, World
 from tracker.geometry import FloatArray
 
@@ -56,7 +56,7 @@ class RangeFinder:
         self.world = world
         self._quads = [*world.facades, *(lm.quad for lm in world.landmarks)]
 
-    def true_range(self, state: VehicleState) -> float | None:
+    def true_range(self, state: KinematicState) -> float | None:
         """Exact distance to the nearest surface along the beam (no noise, no limits)."""
         origin = np.asarray(state.position_ned_m, dtype=np.float64)
         d = state.r_ned_body @ self.axis_body
@@ -67,7 +67,7 @@ class RangeFinder:
                 hits.append(float(t))
         return min(hits) if hits else None
 
-    def measure(self, state: VehicleState, rng: np.random.Generator) -> float | None:
+    def measure(self, state: KinematicState, rng: np.random.Generator) -> float | None:
         """A reading with noise, or None for a dropout or nothing within range."""
         cfg = self.config
         if not cfg.enabled or rng.uniform() < cfg.dropout_prob:

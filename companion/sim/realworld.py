@@ -24,16 +24,16 @@ import cv2
 import numpy as np
 import pymap3d
 
+from companion.core.frames import ImageU8
+from companion.core.landmark import Appearance, Landmark
+from companion.core.map_file import write_map
 from companion.errors import InputError
-from companion.landmarks.geojson_io import write_map
-from companion.landmarks.record import Appearance, Landmark
 from companion.sim.effects import EffectSpec
 from companion.sim.scenario import OriginConfig, ScenarioConfig
 from companion.sim.simulator import Simulator
 from companion.sim.synth import synth_stream
 from companion.sim.trajectory import TrajectoryConfig, Waypoint
 from companion.sim.world import Quad, WorldConfig
-from companion.sources.base import ImageU8
 from tracker.camera import CameraModel
 
 ROOT = Path(__file__).resolve().parents[2]

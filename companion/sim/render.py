@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from companion.core.frames import ImageU8
+from companion.core.stream_format import TruthBox, TruthCamera, TruthPose
 from companion.sim.textures import sky_gradient
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import Quad, World
-from companion.sources.base import ImageU8
-from companion.sources.stream_format import TruthBox, TruthCamera, TruthPose
 from tracker.camera import CameraModel
 from tracker.geometry import FloatArray
 
@@ -112,12 +112,12 @@ class Renderer:
         map_y = (und[:, 1] + my).reshape(cam.height, cam.width).astype(np.float32)
         self._maps = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
 
-    def camera_pose(self, state: VehicleState) -> tuple[FloatArray, FloatArray]:
+    def camera_pose(self, state: KinematicState) -> tuple[FloatArray, FloatArray]:
         """(camera position NED, R_ned_cam) for a vehicle state (camera at the body origin)."""
         r_ned_cam = state.r_ned_body @ self.camera.r_body_cam
         return np.asarray(state.position_ned_m, dtype=np.float64), r_ned_cam
 
-    def render(self, state: VehicleState, extra: Sequence[Quad] = ()) -> Rendered:
+    def render(self, state: KinematicState, extra: Sequence[Quad] = ()) -> Rendered:
         """The frame seen from ``state``; ``extra`` quads (distractors) are drawn, not truth."""
         pos, r = self.camera_pose(state)
         img = self._sky.copy()

@@ -12,14 +12,14 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from companion.core.resources import scenario_dir, scenario_path
+from companion.core.stream_format import Origin
+from companion.core.validate import FieldError, build
 from companion.errors import ConfigError
-from companion.resources import scenario_dir
 from companion.sim.effects import EffectSpec
 from companion.sim.rangefinder import RangeFinderConfig
 from companion.sim.trajectory import TrajectoryConfig
 from companion.sim.world import WorldConfig
-from companion.sources.stream_format import Origin
-from companion.validate import FieldError, build
 from tracker.camera import CameraModel
 
 #: The built-in scenarios: shipped configuration, found through importlib.resources.
@@ -57,14 +57,6 @@ class ScenarioConfig:
     rangefinder: RangeFinderConfig = field(default_factory=RangeFinderConfig)
     effects: tuple[EffectSpec, ...] = ()
     path: str = field(default="", metadata={"internal": True})  # set by the loader
-
-
-def scenario_path(name_or_file: str) -> Path:
-    """A scenario name (config/scenarios/NAME.toml) or a file path."""
-    path = Path(name_or_file)
-    if path.suffix == ".toml" or path.exists():
-        return path
-    return SCENARIO_DIR / f"{name_or_file}.toml"
 
 
 def load_scenario(name_or_file: str) -> ScenarioConfig:

@@ -7,17 +7,16 @@ from dataclasses import replace
 import numpy as np
 
 from companion import __version__
+from companion.core.frames import ImageU8
+from companion.core.stream_format import FrameTruth, StreamMeta
 from companion.errors import ConfigError
 from companion.sim.effects import EffectStack
 from companion.sim.rangefinder import RangeFinder
 from companion.sim.render import Renderer
 from companion.sim.scenario import ScenarioConfig, landmarks_path
-from companion.sim.trajectory import Trajectory, VehicleState
+from companion.sim.trajectory import KinematicState, Trajectory
 from companion.sim.world import World, load_landmark_map
-from companion.sources.base import ImageU8
-from companion.sources.stream_format import FrameTruth, StreamMeta
-from mavlink_bridge.vehicle import TruthFn
-from mavlink_bridge.vehicle import VehicleState as AutopilotState
+from mavlink_bridge.vehicle import TruthFn, VehicleState
 
 RANGE_STREAM = 7919  # keeps range-finder randomness apart from effect randomness
 
@@ -48,11 +47,11 @@ class Simulator:
         """Frames per second of the simulated camera."""
         return self.scenario.fps
 
-    def state_at(self, t_s: float) -> VehicleState:
+    def state_at(self, t_s: float) -> KinematicState:
         """The vehicle state at ``t_s`` scenario seconds (shared with the fake autopilot)."""
         return self.trajectory.state_at(t_s)
 
-    def autopilot_truth(self, t_s: float) -> AutopilotState:
+    def autopilot_truth(self, t_s: float) -> VehicleState:
         """Truth for the fake autopilot at ``t_s``: hand ``simulator.autopilot_truth`` (a
         ``mavlink_bridge.vehicle.TruthFn``) to ``FakeAutopilot(config, truth=...)``.
 
@@ -64,7 +63,7 @@ class Simulator:
         rng = np.random.default_rng([self.scenario.seed, round(t_s * 1000.0), RANGE_STREAM])
         reading = self.rangefinder.measure(state, rng)
         range_m = self.rangefinder.config.max_range_m + 1.0 if reading is None else reading
-        return AutopilotState(t_s, state.position_ned_m, state.velocity_ned_m_s,
+        return VehicleState(t_s, state.position_ned_m, state.velocity_ned_m_s,
                               state.attitude_rpy_rad, range_m)
 
     @property
@@ -77,7 +76,7 @@ class Simulator:
         t = index / self.fps if t_s is None else t_s
         return self.render_state(self.state_at(t), index, t)
 
-    def render_state(self, state: VehicleState, index: int, t_s: float
+    def render_state(self, state: KinematicState, index: int, t_s: float
                      ) -> tuple[ImageU8, FrameTruth]:
         """Frame ``index`` seen from ``state`` (scripted or followed), effects at ``t_s``."""
         rendered = self.renderer.render(state, self.effects.world_quads(t_s))

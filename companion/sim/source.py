@@ -8,10 +8,10 @@ import multiprocessing
 import time
 from collections import OrderedDict
 
+from companion.core.frames import EndOfStream, Frame, ImageU8, SourceStatus, monotonic_us
+from companion.core.stream_format import FrameTruth
 from companion.sim.scenario import ScenarioConfig
 from companion.sim.simulator import Simulator
-from companion.sources.base import EndOfStream, Frame, ImageU8, SourceStatus, monotonic_us
-from companion.sources.stream_format import FrameTruth
 
 TRUTH_KEPT = 256
 #: The next frame is rendered ahead, starting its expected render time plus this margin

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import cv2
 
-from companion.landmarks.geojson_io import read_map, write_map
-from companion.landmarks.record import Appearance
+from companion.core.frames import Frame
+from companion.core.landmark import Appearance
+from companion.core.map_file import read_map, write_map
+from companion.core.stream_io import StreamWriter
 from companion.sim.scenario import landmarks_path
 from companion.sim.simulator import Simulator
-from companion.sources.base import Frame
-from companion.sources.stream_io import StreamWriter
 
 
 def synth_stream(

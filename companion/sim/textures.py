@@ -8,7 +8,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from companion.sources.base import ImageU8
+from companion.core.frames import ImageU8
 
 PX_PER_M = 128.0
 MAX_SIDE_PX = 256

@@ -47,8 +47,12 @@ class TrajectoryConfig:
 
 
 @dataclass(frozen=True)
-class VehicleState:
-    """The vehicle at one time: NED position/velocity, ZYX attitude and body rates."""
+class KinematicState:
+    """The vehicle's motion at one time: NED position/velocity, ZYX attitude and body rates.
+
+    Not ``mavlink_bridge.vehicle.VehicleState``, the truth the fake autopilot reports
+    (with the range finder's reading): :meth:`Simulator.autopilot_truth` makes one of this.
+    """
 
     t_s: float
     position_ned_m: Vec3
@@ -119,7 +123,7 @@ class Trajectory:
                 return leg, t - leg.t0_s
         return self._legs[0], 0.0
 
-    def state_at(self, t_s: float) -> VehicleState:
+    def state_at(self, t_s: float) -> KinematicState:
         """The vehicle state at ``t_s`` seconds after the start (clamped at the end)."""
         leg, dt = self._find(t_s)
         if leg.move_s > 0 and dt < leg.move_s:
@@ -133,7 +137,7 @@ class Trajectory:
             yaw, yaw_rate = leg.yaw0 + leg.dyaw, 0.0
         pos, vel = self._sway(t_s, pos, vel)
         roll, pitch = self._tilt(vel, yaw)
-        return VehicleState(
+        return KinematicState(
             t_s=float(t_s),
             position_ned_m=(float(pos[0]), float(pos[1]), float(pos[2])),
             velocity_ned_m_s=(float(vel[0]), float(vel[1]), float(vel[2])),

@@ -11,12 +11,12 @@ import cv2
 import numpy as np
 import pymap3d
 
+from companion.core.frames import ImageU8
+from companion.core.landmark import Appearance, Landmark
+from companion.core.map_file import read_map
+from companion.core.stream_format import Origin
 from companion.errors import InputError
-from companion.landmarks.geojson_io import read_map
-from companion.landmarks.record import Appearance, Landmark
 from companion.sim import textures
-from companion.sources.base import ImageU8
-from companion.sources.stream_format import Origin
 from tracker.geometry import FloatArray
 from tracker.pose.landmarks import corners_about
 
@@ -127,7 +127,7 @@ def sim_landmark(record: Landmark, origin: Origin, seed: int) -> SimLandmark:
 
 
 def load_landmark_map(path: Path, origin: Origin, seed: int = 0) -> list[SimLandmark]:
-    """Read a GeoJSON landmark map (validated by ``companion.landmarks.geojson_io``) and
+    """Read a GeoJSON landmark map (validated by ``companion.core.map_file``) and
     place every landmark in NED about ``origin``; the point is the face's centre."""
     path = Path(path)
     if not path.is_file():

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
+from companion.core.resources import scenario_path
 from companion.errors import InputError
 from companion.sources.base import FrameSource
 from companion.sources.config import SourceConfig, SourceKind
@@ -12,6 +14,11 @@ from companion.sources.files import OtbSource, RecordedStreamSource
 from companion.sources.live import VIDEO_SUFFIXES, CameraSource, VideoFileSource
 
 KINDS = ("sim", "stream", "otb", "video", "camera", "follow")
+
+#: Opens the simulated camera (kind ``sim``) for a resolved config. The frame sources do not
+#: import the simulator (docs/architecture.md): a command that offers simulated sources
+#: passes :func:`companion.simulated.open_sim` to :func:`open_source`.
+SimOpener = Callable[[SourceConfig], FrameSource]
 
 
 def split_spec(spec: str) -> tuple[SourceKind, str]:
@@ -28,8 +35,6 @@ def split_spec(spec: str) -> tuple[SourceKind, str]:
 def guess_kind(spec: str) -> SourceKind:
     """What a spec names: a camera (digits, /dev/..., a URL, a GStreamer pipeline), a stream
     folder (has stream.toml), an OTB folder (has img/), a video file, or a scenario."""
-    from companion.sim.scenario import scenario_path
-
     s = spec.strip()
     if s.isdigit() or s.startswith("/dev/") or "://" in s or "!" in s:
         return "camera"
@@ -58,8 +63,11 @@ def resolve(config: SourceConfig) -> SourceConfig:
     return dataclasses.replace(config, kind=kind, spec=spec)
 
 
-async def open_source(config: SourceConfig) -> FrameSource:
-    """Open the source a config names; one-line :class:`InputError`/``SourceError`` if not."""
+async def open_source(config: SourceConfig, simulated: SimOpener | None = None) -> FrameSource:
+    """Open the source a config names; one-line :class:`InputError`/``SourceError`` if not.
+
+    ``simulated`` opens a scenario (kind ``sim``); without it a scenario is refused.
+    """
     c = resolve(config)
     if c.kind == "follow":
         raise InputError("source.kind = \"follow\": the camera follows an autopilot "
@@ -79,16 +87,7 @@ async def open_source(config: SourceConfig) -> FrameSource:
         return await CameraSource.open(c.spec, open_timeout_s=c.open_timeout_s,
                                        camera_id=c.camera_id, stall_timeout_s=c.stall_timeout_s,
                                        size=size)
-    return open_sim(c)
-
-
-def open_sim(c: SourceConfig) -> FrameSource:
-    """The simulated camera for a scenario name or file."""
-    from companion.sim.scenario import load_scenario
-    from companion.sim.simulator import Simulator
-    from companion.sim.source import SimCameraSource
-
-    scenario = load_scenario(c.spec)
-    if c.seed:
-        scenario = dataclasses.replace(scenario, seed=c.seed)
-    return SimCameraSource(Simulator(scenario), realtime=c.realtime, loop=c.loop)
+    if simulated is None:
+        raise InputError(f"{c.spec}: a simulated camera (source kind sim) is not available "
+                         "here; use a stream, OTB folder, video or camera")
+    return simulated(c)

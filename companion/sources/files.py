@@ -11,17 +11,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.errors import InputError
-from companion.sources.base import EndOfStream, Frame, ImageU8, Pacer, SourceStatus
-from companion.sources.images import ImageProblem, read_image
-from companion.sources.stream_format import (
+from companion.core.images import ImageProblem, read_image
+from companion.core.stream_format import (
     FRAMES_HEADER,
     FrameTruth,
     StreamMeta,
     open_csv,
     read_meta,
 )
-from companion.sources.stream_io import read_truth
+from companion.core.stream_io import read_truth
+from companion.errors import InputError
+from companion.sources.base import EndOfStream, Frame, ImageU8, Pacer, SourceStatus
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 

@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 
 from companion.calibration import ImageU8
-from companion.sim.boards import BoardCamera, spread_views
-from tests.calibration.boards import CHESSBOARD, PX_PER_SQUARE, TRUTH
+from companion.calibration_boards import BoardCamera, spread_views
+from testsupport.boards import CHESSBOARD, PX_PER_SQUARE, TRUTH
 
 
 @dataclass

@@ -11,11 +11,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.resources import config_dir
+from companion.core.resources import config_dir
+from companion.core.stream_io import StreamWriter
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
-from companion.sources.stream_io import StreamWriter
 from tracker.camera import CameraModel
 
 ORIGIN = (47.3769, 8.5417, 408.0)  # config/landmarks.geojson's

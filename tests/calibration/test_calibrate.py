@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from companion.calibration import BoardDetector
+from companion.calibration_boards import BoardCamera, spread_views
 from companion.cli import main
 from companion.settings import load_settings
-from companion.sim.boards import BoardCamera, spread_views
-from tests.calibration.boards import (
+from testsupport.boards import (
     CHARUCO,
     CHESSBOARD,
     PX_PER_SQUARE,

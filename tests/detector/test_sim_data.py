@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
+from companion.core.stream_format import TruthBox
 from companion.sim import textures
 from companion.sim.world import TEXTURES, Quad, SimLandmark, World, face_corners
-from companion.sources.stream_format import TruthBox
 from training import sim_pool
 from training.sim_data import MIN_BOX_PX, SimScene, _hidden_share, sim_scene
 from training.sim_pool import MIN_IN_VIEW, SCALE, pool_item

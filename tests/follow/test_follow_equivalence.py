@@ -27,10 +27,10 @@ from dataclasses import replace
 import numpy as np
 
 from companion.demo import map_landmarks
+from companion.follow import FollowCameraSource
 from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception
 from companion.settings import SIM_LAYERS, load_settings
-from companion.sim.follow import FollowCameraSource
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame

@@ -19,8 +19,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import SourceError
-from companion.landmarks.geodesy import LocalFrame
-from companion.sim.follow import (
+from companion.follow import (
     FollowCameraSource,
     TruthSample,
     add_sample,
@@ -29,13 +28,15 @@ from companion.sim.follow import (
     state_at,
     truth_sample,
 )
+from companion.landmarks.geodesy import LocalFrame
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.config import FollowConfig
 from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
-from mavlink_bridge.telemetry import SimTruth, Telemetry, convert, quaternion_from_rpy
+from mavlink_bridge.messages import euler_to_quaternion
+from mavlink_bridge.telemetry import SimTruth, Telemetry, convert
 from tracker.geometry import rotation_from_rpy
 
 ORIGIN = LocalFrame(47.3769, 8.5417, 408.0)
@@ -83,7 +84,7 @@ def test_simstate_has_position_and_attitude_but_no_altitude() -> None:
 
 
 def test_hil_state_quaternion_units_and_attitude() -> None:
-    q = quaternion_from_rpy(0.1, -0.05, 2.0)
+    q = euler_to_quaternion(0.1, -0.05, 2.0)
     msg = mavlink.MAVLink_hil_state_quaternion_message(
         123456, list(q), 0, 0, 0, 473977420, 85455940, 488123, 150, -250, 30,
         0, 0, 0, 0, -1000)
@@ -105,7 +106,7 @@ def test_truth_sample_converts_to_ned_about_the_origin() -> None:
 # ------------------------------------------------------------------ interpolation
 def sample(t_ns: int, pos: tuple[float, float, float], yaw: float) -> TruthSample:
     return TruthSample(t_ns, np.asarray(pos, float),
-                       np.asarray(quaternion_from_rpy(0.0, 0.0, yaw)), np.zeros(3))
+                       np.asarray(euler_to_quaternion(0.0, 0.0, yaw)), np.zeros(3))
 
 
 def test_interpolation_between_samples_is_linear_in_position_and_slerp_in_attitude() -> None:
@@ -150,17 +151,17 @@ def test_steady_samples_are_never_merged() -> None:
 
 
 def test_slerp_matches_rotation_of_intermediate_angle() -> None:
-    q0 = np.asarray(quaternion_from_rpy(0.3, 0.0, 0.0))
-    q1 = np.asarray(quaternion_from_rpy(0.9, 0.0, 0.0))
+    q0 = np.asarray(euler_to_quaternion(0.3, 0.0, 0.0))
+    q1 = np.asarray(euler_to_quaternion(0.9, 0.0, 0.0))
     q = slerp(q0, q1, 0.5)
-    assert q == pytest.approx(np.asarray(quaternion_from_rpy(0.6, 0.0, 0.0)), abs=1e-9)
+    assert q == pytest.approx(np.asarray(euler_to_quaternion(0.6, 0.0, 0.0)), abs=1e-9)
 
 
 def test_quaternion_from_rpy_agrees_with_tracker_geometry() -> None:
-    from companion.sim.follow import rotation_from_quaternion
+    from companion.follow import rotation_from_quaternion
 
     rpy = (0.2, -0.4, 2.5)
-    r = rotation_from_quaternion(np.asarray(quaternion_from_rpy(*rpy)))
+    r = rotation_from_quaternion(np.asarray(euler_to_quaternion(*rpy)))
     assert r == pytest.approx(rotation_from_rpy(*rpy), abs=1e-12)
 
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from companion.cli import main
+from companion.core.map_file import read_map
 from companion.landmarks.geodesy import LocalFrame
-from companion.landmarks.geojson_io import read_map
 from companion.settings import load_settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator

@@ -10,7 +10,7 @@ import psycopg
 import pytest
 
 from tests.landmarks.helpers import ORIGIN_LAT, ORIGIN_LON, collection, grid_features, write_json
-from tests.landmarks.pgcluster import throwaway_cluster
+from testsupport.pgcluster import throwaway_cluster
 
 
 @pytest.fixture()

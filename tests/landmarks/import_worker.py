@@ -10,7 +10,7 @@ import sys
 import time
 
 from companion.landmarks import sqlite_repo
-from companion.landmarks.geojson_io import import_map
+from companion.landmarks.repository import import_map
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 
 

@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from companion.cli import main
-from companion.landmarks.geojson_io import import_map, read_map
+from companion.core.landmark import Scores
+from companion.core.map_file import read_map
 from companion.landmarks.postgis_repo import PostgisLandmarkRepository
-from companion.landmarks.record import Scores
-from companion.landmarks.repository import ScoreUpdate
+from companion.landmarks.repository import ScoreUpdate, import_map
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 from tests.landmarks.helpers import ORIGIN_LAT, ORIGIN_LON, collection, grid_features, write_json
 

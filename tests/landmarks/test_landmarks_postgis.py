@@ -9,13 +9,13 @@ import numpy as np
 import psycopg
 import pytest
 
+from companion.core.landmark import BBox, Circle, Landmark, Scores
+from companion.core.map_file import read_map
 from companion.errors import InputError
 from companion.landmarks import postgis_repo
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.geojson_io import import_map, read_map
 from companion.landmarks.postgis_repo import SCHEMA_VERSION, PostgisLandmarkRepository, redact
-from companion.landmarks.record import BBox, Circle, Landmark, Scores
-from companion.landmarks.repository import ScoreUpdate
+from companion.landmarks.repository import ScoreUpdate, import_map
 from companion.landmarks.sqlite_repo import SqliteLandmarkRepository
 from companion.landmarks.sync import sync_practical_map
 from tests.landmarks.helpers import ORIGIN_LAT, ORIGIN_LON

@@ -11,10 +11,10 @@ import numpy as np
 import pymap3d
 import pytest
 
+from companion.core.landmark import Appearance, Landmark, Scores
 from companion.errors import InputError
 from companion.landmarks.config import AdmissionThresholds, LandmarksConfig
 from companion.landmarks.geodesy import LocalFrame, NameTable, corners_ned, facing_normal_ned
-from companion.landmarks.record import Appearance, Landmark, Scores
 from companion.landmarks.scores import (
     distinctiveness_from_vr,
     evaluate,

@@ -10,9 +10,9 @@ import numpy as np
 import pymap3d
 import pytest
 
+from companion.core.landmark import Landmark, Scores
 from companion.errors import InputError
 from companion.landmarks.config import BusyZone, LandmarksConfig
-from companion.landmarks.record import Landmark, Scores
 from companion.landmarks.selection import (
     busy_zones,
     read_busy_zones,

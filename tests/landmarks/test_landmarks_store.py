@@ -17,12 +17,12 @@ import numpy as np
 import pymap3d
 import pytest
 
+from companion.core.landmark import BBox, Circle, Landmark, Scores, parse_area
+from companion.core.map_file import read_map, write_map
 from companion.errors import InputError
 from companion.landmarks import sqlite_repo
 from companion.landmarks.config import LandmarksConfig
-from companion.landmarks.geojson_io import import_map, read_map, write_map
-from companion.landmarks.record import BBox, Circle, Landmark, Scores, parse_area
-from companion.landmarks.repository import ScoreUpdate
+from companion.landmarks.repository import ScoreUpdate, import_map
 from companion.landmarks.sqlite_repo import MIGRATIONS, SCHEMA_VERSION, SqliteLandmarkRepository
 from companion.landmarks.sync import open_onboard
 from tests.landmarks.helpers import (

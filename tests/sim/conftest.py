@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import Quad, SimLandmark, World, WorldConfig, face_corners
 from tracker.camera import CameraModel
 
@@ -29,9 +29,9 @@ def one_landmark_world() -> World:
 
 
 @pytest.fixture
-def east_state() -> VehicleState:
+def east_state() -> KinematicState:
     """Hovering at the origin 4 m up, facing east, slightly rolled."""
-    return VehicleState(0.0, (0.3, 0.0, -4.2), (0.0, 0.0, 0.0), (0.05, 0.02, np.deg2rad(88.0)))
+    return KinematicState(0.0, (0.3, 0.0, -4.2), (0.0, 0.0, 0.0), (0.05, 0.02, np.deg2rad(88.0)))
 
 
 @pytest.fixture

@@ -10,12 +10,12 @@ import pytest
 
 from companion.sim.effects import EffectSpec, EffectStack
 from companion.sim.render import Renderer
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import World
 
 
 @pytest.fixture
-def scene(one_landmark_world: World, east_state: VehicleState, camera):  # type: ignore[no-untyped-def]
+def scene(one_landmark_world: World, east_state: KinematicState, camera):  # type: ignore[no-untyped-def]
     out = Renderer(camera, one_landmark_world).render(east_state)
     return one_landmark_world, out
 
@@ -122,7 +122,7 @@ def test_motion_blur_changes_only_pixels_near_horizontal_change(scene) -> None:
 
 
 def test_distractor_draws_a_similar_plate_and_leaves_truth_alone(
-    one_landmark_world: World, east_state: VehicleState, camera
+    one_landmark_world: World, east_state: KinematicState, camera
 ) -> None:
     spec = EffectSpec("distractor", landmark_id="L1", offset_m=(-4.0, 0.0, 0.0))
     stack = EffectStack([spec], one_landmark_world, seed=5)

@@ -12,9 +12,9 @@ import numpy as np
 import pymap3d
 import pytest
 
+from companion.core.stream_format import Origin
 from companion.errors import InputError
 from companion.sim.world import World, load_landmark_map
-from companion.sources.stream_format import Origin
 
 ORIGIN = Origin(47.0, 8.0, 400.0)
 

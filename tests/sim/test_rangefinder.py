@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from companion.sim.rangefinder import RangeFinder, RangeFinderConfig
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import World
 
 
-def state(yaw_deg: float = 90.0, pitch_deg: float = 0.0, north: float = 0.0) -> VehicleState:
+def state(yaw_deg: float = 90.0, pitch_deg: float = 0.0, north: float = 0.0) -> KinematicState:
     att = (0.0, math.radians(pitch_deg), math.radians(yaw_deg))
-    return VehicleState(0.0, (north, 0.0, -4.0), (0, 0, 0), att)
+    return KinematicState(0.0, (north, 0.0, -4.0), (0, 0, 0), att)
 
 
 def test_down_beam_measures_height_and_tilt(one_landmark_world: World) -> None:

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from companion.cli import main
-from companion.landmarks.geojson_io import read_map
+from companion.core.map_file import read_map
+from companion.core.stream_io import read_truth
 from companion.sim.effects import EffectSpec, EffectStack, vignette_gain
 from companion.sim.realworld import RealWorldSpec, shared_data, synth_real
 from companion.sim.world import World, WorldConfig
-from companion.sources.stream_io import read_truth
 
 DATA = shared_data()
 

@@ -10,14 +10,14 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from companion.sim.render import Renderer
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import World
 from tracker.camera import CameraModel
 
 from .conftest import flat_landmark
 
 
-def landmark_mask(camera: CameraModel, world: World, state: VehicleState) -> np.ndarray:
+def landmark_mask(camera: CameraModel, world: World, state: KinematicState) -> np.ndarray:
     """Pixels that change by more than half the landmark's contrast when it is added.
 
     (Half, because lens distortion resamples the frame bilinearly: a pixel half covered by
@@ -94,7 +94,7 @@ def test_truth_with_lens_distortion(one_landmark_world, east_state) -> None:
 def test_flat_landmark_seen_from_above(make_landmark) -> None:
     world = World([make_landmark("F", (5.0, 0.0, 0.0), (2.0, 1.0), None)], seed=1)
     down = CameraModel(mount_rpy_deg=(0.0, -90.0, 0.0))
-    state = VehicleState(0.0, (5.2, 0.1, -10.0), (0, 0, 0), (0.0, 0.0, 0.3))
+    state = KinematicState(0.0, (5.2, 0.1, -10.0), (0, 0, 0), (0.0, 0.0, 0.3))
     box = Renderer(down, world).render(state).boxes[0]
     check_mask_matches(landmark_mask(down, world, state), box.corners_px)
     # facing north (yaw 0.3 rad): the landmark's north (top) edge is up in the image
@@ -102,15 +102,15 @@ def test_flat_landmark_seen_from_above(make_landmark) -> None:
 
 
 def test_back_face_and_out_of_view_are_not_truth(one_landmark_world, camera) -> None:
-    behind = VehicleState(0.0, (0.0, 20.0, -4.0), (0, 0, 0), (0.0, 0.0, -np.pi / 2))
+    behind = KinematicState(0.0, (0.0, 20.0, -4.0), (0, 0, 0), (0.0, 0.0, -np.pi / 2))
     assert Renderer(camera, one_landmark_world).render(behind).boxes == ()
-    away = VehicleState(0.0, (0.0, 0.0, -4.0), (0, 0, 0), (0.0, 0.0, -np.pi / 2))
+    away = KinematicState(0.0, (0.0, 0.0, -4.0), (0, 0, 0), (0.0, 0.0, -np.pi / 2))
     assert Renderer(camera, one_landmark_world).render(away).boxes == ()
 
 
 def test_partly_in_view_is_clipped(one_landmark_world, camera) -> None:
     # yaw so that the landmark straddles the right image border
-    state = VehicleState(0.0, (0.0, 0.0, -4.0), (0, 0, 0), (0.0, 0.0, np.deg2rad(62.0)))
+    state = KinematicState(0.0, (0.0, 0.0, -4.0), (0, 0, 0), (0.0, 0.0, np.deg2rad(62.0)))
     box = Renderer(camera, one_landmark_world).render(state).boxes[0]
     assert 0.0 < box.in_view_frac < 1.0
     assert box.corners_px[:, 0].max() > camera.width - 1
@@ -135,7 +135,7 @@ def test_truth_matches_pixels_for_random_poses(
     world = World([lm], seed=0)
     cam = CameraModel(mount_rpy_deg=(0.0, -5.0, 0.0))
     att = (np.deg2rad(roll_deg), np.deg2rad(pitch_deg), np.deg2rad(yaw_deg))
-    state = VehicleState(0.0, (0.0, 0.0, down), (0, 0, 0), att)
+    state = KinematicState(0.0, (0.0, 0.0, down), (0, 0, 0), att)
     boxes = Renderer(cam, world).render(state).boxes
     assume(len(boxes) == 1 and boxes[0].in_view_frac == 1.0)
     mask = landmark_mask(cam, world, state)

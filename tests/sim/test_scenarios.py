@@ -12,15 +12,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from companion.core.stream_io import read_truth_boxes, read_truth_pose
 from companion.errors import ConfigError
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
 from companion.sim.synth import synth_stream
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sources.base import EndOfStream
 from companion.sources.files import RecordedStreamSource
-from companion.sources.stream_io import read_truth_boxes, read_truth_pose
 
 REQUIRED = ("hover", "survey", "illumination_ramp", "sudden_light", "occlusion")
 
@@ -174,7 +174,7 @@ def test_any_pose_renders_without_error(
 ) -> None:
     """Looking anywhere from anywhere (even underground) gives a frame and sane truth."""
     sim = _distorted_sim()
-    out = sim.renderer.render(VehicleState(0.0, pos, (0, 0, 0), att))
+    out = sim.renderer.render(KinematicState(0.0, pos, (0, 0, 0), att))
     assert out.image.shape == (480, 640, 3) and out.image.dtype == np.uint8
     for box in out.boxes:
         assert 0 <= box.x <= 639 and 0 <= box.y <= 479 and 0 < box.in_view_frac <= 1

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from companion.core.images import write_image
+from companion.core.stream_format import StreamMeta
+from companion.core.stream_io import StreamWriter
 from companion.errors import InputError
 from companion.sources.base import EndOfStream, Frame
 from companion.sources.files import OtbSource, RecordedStreamSource, read_otb_groundtruth
-from companion.sources.images import write_image
-from companion.sources.stream_format import StreamMeta
-from companion.sources.stream_io import StreamWriter
 from tracker.camera import CameraModel
 
 CAM = CameraModel(width=32, height=24, fx=30.0, fy=30.0, cx=15.5, cy=11.5)
@@ -117,7 +117,7 @@ def test_real_otb_sequence_if_present() -> None:
 
 
 def test_truncated_jpeg_and_png_are_detected(tmp_path: Path) -> None:
-    from companion.sources.images import ImageProblem, read_image
+    from companion.core.images import ImageProblem, read_image
 
     img = np.random.default_rng(0).integers(0, 256, (24, 32, 3), dtype=np.uint8)
     for suffix in (".jpg", ".png"):

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from companion.core.stream_format import read_meta
+from companion.core.stream_io import read_truth_boxes, read_truth_range
 from companion.sources.files import RecordedStreamSource
-from companion.sources.stream_format import read_meta
-from companion.sources.stream_io import read_truth_boxes, read_truth_range
 
 ROOT = Path(__file__).resolve().parents[2]
 

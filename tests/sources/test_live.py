@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from companion.errors import InputError, SourceError
+from companion.simulated import open_sim
 from companion.sources.base import EndOfStream
 from companion.sources.config import SourceConfig
 from companion.sources.factory import guess_kind, open_source, resolve, split_spec
@@ -163,5 +164,5 @@ async def test_open_source_sim_and_otb(tmp_path: Path) -> None:
     cv2.imwrite(str(tmp_path / "o" / "img" / "0001.jpg"), np.zeros((8, 8, 3), np.uint8))
     otb = await open_source(SourceConfig(spec=str(tmp_path / "o"), realtime=False))
     assert (await otb.recv()).image.shape == (8, 8, 3)
-    sim = await open_source(SourceConfig(spec="sim:hover", realtime=False))
+    sim = await open_source(SourceConfig(spec="sim:hover", realtime=False), open_sim)
     assert (await sim.recv()).image.shape == (480, 640, 3)

@@ -8,10 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.errors import InputError
-from companion.sources.base import EndOfStream, Frame
-from companion.sources.files import RecordedStreamSource
-from companion.sources.stream_format import (
+from companion.core.stream_format import (
     FrameTruth,
     Origin,
     StreamMeta,
@@ -20,7 +17,7 @@ from companion.sources.stream_format import (
     TruthPose,
     read_meta,
 )
-from companion.sources.stream_io import (
+from companion.core.stream_io import (
     StreamWriter,
     read_telemetry,
     read_truth_boxes,
@@ -28,6 +25,9 @@ from companion.sources.stream_io import (
     read_truth_pose,
     read_truth_range,
 )
+from companion.errors import InputError
+from companion.sources.base import EndOfStream, Frame
+from companion.sources.files import RecordedStreamSource
 from tracker.camera import CameraModel
 
 CAM = CameraModel(width=64, height=48, fx=60.0, fy=61.0, cx=31.5, cy=23.5,

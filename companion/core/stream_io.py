@@ -11,10 +11,9 @@ from typing import IO, Any
 
 import cv2
 
-from companion.errors import InputError
-from companion.sources.base import Frame
-from companion.sources.images import write_image
-from companion.sources.stream_format import (
+from companion.core.frames import Frame
+from companion.core.images import write_image
+from companion.core.stream_format import (
     BOXES_HEADER,
     CAMERA_HEADER,
     CORNER_COLUMNS,
@@ -37,6 +36,7 @@ from companion.sources.stream_format import (
     parse_pose_row,
     pose_row,
 )
+from companion.errors import InputError
 
 FRAMES_DIR = "frames"
 VIDEO_NAME = "frames.mkv"

@@ -27,10 +27,10 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
+from fieldbounds import bounds_text, within_bounds
+
 T = TypeVar("T")
 
-_BOUNDS = (("ge", ">=", lambda v, b: v >= b), ("gt", ">", lambda v, b: v > b),
-           ("le", "<=", lambda v, b: v <= b), ("lt", "<", lambda v, b: v < b))
 
 
 class FieldError(Exception):
@@ -77,7 +77,7 @@ def describe(tp: Any, meta: Mapping[str, Any] | None = None) -> str:
             text = f"a string matching {meta['pattern']}"
         elif tp is str and "min_len" in meta:
             text = "a non-empty string" if meta["min_len"] == 1 else text
-        bounds = [f"{sym} {meta[k]}" for k, sym, _ in _BOUNDS if k in meta]
+        bounds = bounds_text(meta)
         return " ".join([text, " and ".join(bounds)]).strip()
     if dataclasses.is_dataclass(tp):
         return "a table"
@@ -165,7 +165,7 @@ def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any],
         number = tp(value)
         if not math.isfinite(number):  # TOML's inf and nan: no setting means either
             raise FieldError(key, f"expected a finite number, got {show_value(value)}")
-        if not all(check(number, meta[k]) for k, _, check in _BOUNDS if k in meta):
+        if not within_bounds(number, meta):
             raise fail()
         return number
     if tp is str:

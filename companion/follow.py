@@ -26,15 +26,16 @@ from typing import Protocol
 
 import numpy as np
 
+from companion.core.stream_format import FrameTruth
 from companion.errors import SourceError
 from companion.landmarks.geodesy import LocalFrame
 from companion.sim.scenario import OriginConfig, ScenarioConfig
 from companion.sim.simulator import Simulator
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sources.base import Frame, ImageU8, SourceStatus
 from companion.sources.config import FollowConfig
-from companion.sources.stream_format import FrameTruth
-from mavlink_bridge.telemetry import TRUTH_NAMES, SimTruth, Telemetry, quaternion_from_rpy
+from mavlink_bridge.messages import euler_to_quaternion
+from mavlink_bridge.telemetry import TRUTH_NAMES, SimTruth, Telemetry
 from tracker.geometry import FloatArray, rpy_from_rotation
 
 log = logging.getLogger(__name__)
@@ -103,7 +104,7 @@ def truth_sample(item: Telemetry, frame: LocalFrame) -> TruthSample | None:
         return None
     ned = frame.to_ned(v.lat_deg, v.lon_deg, v.alt_m)
     q = np.asarray(v.quaternion_wxyz if v.quaternion_wxyz is not None
-                   else quaternion_from_rpy(*v.attitude_rpy_rad), dtype=np.float64)
+                   else euler_to_quaternion(*v.attitude_rpy_rad), dtype=np.float64)
     vel = np.zeros(3) if v.velocity_ned_m_s is None else np.asarray(v.velocity_ned_m_s)
     return TruthSample(item.received_ns, np.asarray(ned, dtype=np.float64),
                        q / np.linalg.norm(q), vel.astype(np.float64))
@@ -127,7 +128,7 @@ def add_sample(samples: deque[TruthSample], sample: TruthSample,
 
 
 def state_at(samples: list[TruthSample] | deque[TruthSample], t_ns: int,
-             max_extrapolation_ns: int, max_gap_ns: int | None = None) -> VehicleState | None:
+             max_extrapolation_ns: int, max_gap_ns: int | None = None) -> KinematicState | None:
     """The vehicle at ``t_ns`` from time-ordered samples, or None when it is not known.
 
     Between samples a and b: p = pa + s (pb - pa), q = slerp(qa, qb, s),
@@ -155,7 +156,7 @@ def state_at(samples: list[TruthSample] | deque[TruthSample], t_ns: int,
     vel = a.velocity_ned_m_s + min(s, 1.0) * (b.velocity_ned_m_s - a.velocity_ned_m_s)
     rpy = rpy_from_rotation(rotation_from_quaternion(slerp(a.quaternion_wxyz,
                                                            b.quaternion_wxyz, s)))
-    return VehicleState(t_ns / 1e9, (float(pos[0]), float(pos[1]), float(pos[2])),
+    return KinematicState(t_ns / 1e9, (float(pos[0]), float(pos[1]), float(pos[2])),
                         (float(vel[0]), float(vel[1]), float(vel[2])), rpy)
 
 
@@ -206,7 +207,7 @@ class FollowCameraSource:
         self._samples: deque[TruthSample] = deque(maxlen=SAMPLES_KEPT)
         rate = config.request_rate_hz
         self._burst_ns = BURST_NS if rate <= 0 else min(BURST_NS, round(0.25e9 / rate))
-        self._truth: dict[int, tuple[VehicleState, FrameTruth]] = {}
+        self._truth: dict[int, tuple[KinematicState, FrameTruth]] = {}
         self._task: asyncio.Task[None] | None = None
         self._t0_ns: int | None = None
         self._next = 0
@@ -282,7 +283,7 @@ class FollowCameraSource:
         item = self._truth.get(index)
         return None if item is None else item[1]
 
-    def rendered_state(self, index: int) -> VehicleState | None:
+    def rendered_state(self, index: int) -> KinematicState | None:
         """The interpolated vehicle state frame ``index`` was rendered from."""
         item = self._truth.get(index)
         return None if item is None else item[0]
@@ -311,7 +312,7 @@ class FollowCameraSource:
             self.status.delivered += 1
             return Frame(index, shown_ns // 1000, image, self.camera_id)
 
-    def _fresh_state(self, shown_ns: int) -> VehicleState | None:
+    def _fresh_state(self, shown_ns: int) -> KinematicState | None:
         age_ms = (self._clock_ns() - self._samples[-1].t_ns) / 1e6
         state = None
         if age_ms <= self.config.stale_ms:
@@ -332,12 +333,12 @@ class FollowCameraSource:
             log.info("follow camera: truth is back")
         return state
 
-    def _render(self, state: VehicleState, index: int, t_s: float
+    def _render(self, state: KinematicState, index: int, t_s: float
                 ) -> tuple[ImageU8, FrameTruth]:
         """Simulator.render for a given state (not the scripted one), effects at ``t_s``."""
         return self.sim.render_state(state, index, t_s)
 
-    def _keep(self, index: int, state: VehicleState, truth: FrameTruth) -> None:
+    def _keep(self, index: int, state: KinematicState, truth: FrameTruth) -> None:
         self._truth[index] = (state, truth)
         while len(self._truth) > TRUTH_KEPT:
             del self._truth[next(iter(self._truth))]

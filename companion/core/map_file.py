@@ -35,16 +35,14 @@ from typing import Any
 
 import orjson
 
-from companion.errors import InputError
-from companion.landmarks.record import CATEGORIES, STATUSES, Appearance, Landmark, Point3
-from companion.landmarks.repository import (
-    LandmarkRepository,
+from companion.core.landmark import CATEGORIES, STATUSES, Appearance, Landmark, Point3
+from companion.core.landmark_rows import (
     LandmarkRows,
-    Progress,
     appearance_to_row,
     paused_gc,
     triples_json,
 )
+from companion.errors import InputError
 
 _SCORE_KEYS = ("distinctiveness", "flatness", "static", "impact")
 
@@ -338,11 +336,3 @@ def _write_image(img_dir: Path, lm: Landmark, used: set[str]) -> str:
     img_dir.mkdir(parents=True, exist_ok=True)
     (img_dir / name).write_bytes(lm.appearance.data)
     return f"{img_dir.name}/{name}"
-
-
-def import_map(repo: LandmarkRepository, path: str | Path, *, replace: bool = False,
-               progress: Progress | None = None) -> int:
-    """Validate the whole map first, then store it in one transaction (all or nothing)."""
-    with paused_gc():
-        rows = read_rows(path)
-        return repo.import_landmarks(rows, replace=replace, source=str(path), progress=progress)

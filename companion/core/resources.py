@@ -31,3 +31,11 @@ def config_dir() -> Path:
 def scenario_dir() -> Path:
     """The built-in scenarios (``config/scenarios/NAME.toml``)."""
     return config_dir() / "scenarios"
+
+
+def scenario_path(name_or_file: str) -> Path:
+    """A scenario name (``config/scenarios/NAME.toml``) or a file path."""
+    path = Path(name_or_file)
+    if path.suffix == ".toml" or path.exists():
+        return path
+    return scenario_dir() / f"{name_or_file}.toml"

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from companion.calibration import BoardSpec
-from companion.sim.boards import BoardCamera, BoardView, spread_views, write_views
+from companion.calibration_boards import BoardCamera, BoardView, spread_views, write_views
 from tracker.camera import CameraModel
 
 #: A 640x480 camera with the barrel distortion of config/scenarios/survey_distorted.toml and

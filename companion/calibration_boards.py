@@ -25,7 +25,7 @@ import numpy as np
 
 from companion.calibration import BoardSpec, board_texture
 from companion.sim.render import Renderer
-from companion.sim.trajectory import VehicleState
+from companion.sim.trajectory import KinematicState
 from companion.sim.world import Quad, World
 from companion.sources.base import ImageU8
 from tracker.camera import CameraModel
@@ -33,7 +33,7 @@ from tracker.geometry import FloatArray
 
 #: camera frame (x right, y down, z forward) -> NED of a level camera looking north
 CAM_TO_NED = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-LEVEL = VehicleState(0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+LEVEL = KinematicState(0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 
 @dataclass(frozen=True)

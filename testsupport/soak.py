@@ -1,0 +1,130 @@
+"""The soak: a long simulated flight of the real ``companion run`` process, watched for
+leaks (benchmarks/soak.py is its command line and says what it checks; sitl_tests/test_soak.py
+runs a 45 s form of the same checks)."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import signal
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+from companion.sim.scenario import SCENARIO_DIR, load_scenario
+from companion.sim.simulator import Simulator
+from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
+from testsupport.flightconfig import run_config as flight_run_config
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class Sample:
+    t_s: float
+    rss_mb: float
+    fds: int
+    threads: int
+    fused: int  # fixes fused by the autopilot in this interval
+
+
+def soak_scenario(tmp: Path, seconds: float, fps: float) -> Path:
+    """The hover scenario, ``seconds`` long at ``fps``, as a file (landmarks by absolute
+    path; the simulated camera takes its rate from the scenario)."""
+    text = (SCENARIO_DIR / "hover.toml").read_text(encoding="utf-8")
+    text = re.sub(r"(?m)^seconds = .*$", f"seconds = {seconds:.1f}", text)
+    text = re.sub(r"(?m)^fps = .*$", f"fps = {fps:.1f}", text)
+    text = re.sub(r'(?m)^landmarks = .*$',
+                  f'landmarks = "{(ROOT / "config" / "landmarks.geojson").as_posix()}"', text)
+    path = tmp / "soak.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def run_config(tmp: Path, scenario: Path, port: int) -> Path:
+    """``companion run``'s config for the soak (the same builder the scenario tests use)."""
+    return flight_run_config(tmp, port, scenario=scenario.as_posix(),
+                              extra="[logging]\nlevel = \"warning\"\n", name="soak-run.toml")
+
+
+async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
+               tmp: Path | None = None, thread_slack: int = 0) -> dict[str, Any]:
+    """Fly ``seconds`` and return the samples and the verdicts."""
+    tmp = tmp or Path(tempfile.mkdtemp(prefix="lmc-soak-"))
+    scenario = soak_scenario(tmp, seconds + 60.0, fps)
+    sim = Simulator(load_scenario(str(scenario)))
+    samples: list[Sample] = []
+    async with FakeAutopilot(FakeAutopilotConfig(), truth=sim.truth_fn) as fake:
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "companion", "--config",
+            str(run_config(tmp, scenario, fake.local_port)), "run", "--seconds",
+            str(seconds), cwd=tmp, env=env, stderr=asyncio.subprocess.PIPE)
+        ps = psutil.Process(proc.pid)
+        start, seen = time.monotonic(), 0
+        try:
+            while proc.returncode is None and time.monotonic() - start < seconds + 60:
+                try:
+                    await asyncio.wait_for(proc.wait(), sample_s)
+                    break
+                except TimeoutError:
+                    pass
+                fused = sum(1 for r in fake.vision[seen:] if r.accepted)
+                seen = len(fake.vision)
+                mem = ps.memory_info().rss / 2**20
+                samples.append(Sample(round(time.monotonic() - start, 1), round(mem, 2),
+                                      ps.num_fds(), ps.num_threads(), fused))
+        finally:
+            if proc.returncode is None:
+                proc.send_signal(signal.SIGTERM)
+            _, err = await proc.communicate()
+    return {"seconds": seconds, "sample_s": sample_s, "fps": fps,
+            "exit_status": proc.returncode, "stderr_tail": err.decode()[-500:],
+            "samples": [asdict(s) for s in samples],
+            "verdict": verdict(samples, seconds, thread_slack)}
+
+
+def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0) -> dict[str, Any]:
+    """The soak's checks on samples after the warm-up (``thread_slack``: threads the last
+    third may have beyond the first third's peak; the short CI form allows 1, for a pool
+    thread started late under load)."""
+    warm = max(15.0, 0.1 * seconds)
+    after = [s for s in samples if s.t_s >= warm]
+    if len(after) < 3:
+        return {"ok": False, "reason": f"only {len(after)} samples after warm-up"}
+    base = after[0]
+    third = max(1, len(after) // 3)
+    first, last = after[:third], after[-third:]
+    rates = [s.fused for s in after[1:]]
+    median = statistics.median(rates)
+    half = len(rates) // 2
+    first_half, second_half = statistics.median(rates[:half]), statistics.median(rates[half:])
+    out: dict[str, Any] = {
+        "warm_up_s": warm,
+        "rss_mb_at_warm_up": base.rss_mb,
+        "rss_mb_last": after[-1].rss_mb,
+        "rss_mb_peak": max(s.rss_mb for s in after),
+        "rss_growth_pct": round(100 * (after[-1].rss_mb - base.rss_mb) / base.rss_mb, 2),
+        "rss_peak_growth_pct": round(100 * (max(s.rss_mb for s in after) - base.rss_mb)
+                                     / base.rss_mb, 2),
+        # pools start threads lazily: growth = the last third's peak over the first third's
+        "fds_first_last_third": [max(s.fds for s in first), max(s.fds for s in last)],
+        "threads_first_last_third": [max(s.threads for s in first),
+                                     max(s.threads for s in last)],
+        "fused_per_interval": {"min": min(rates), "median": median, "max": max(rates),
+                               "median_first_half": first_half,
+                               "median_second_half": second_half},
+    }
+    out["ok"] = bool(out["rss_growth_pct"] <= 5.0 and out["rss_peak_growth_pct"] <= 5.0
+                     and max(s.fds for s in last) <= max(s.fds for s in first)
+                     and max(s.threads for s in last)
+                     <= max(s.threads for s in first) + thread_slack
+                     and min(rates) > 0 and second_half >= 0.7 * first_half)
+    return out
