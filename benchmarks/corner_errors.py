@@ -24,10 +24,10 @@ import numpy as np
 
 from benchmarks.perception_stream import ATT_SIGMA_RAD, frames, load_stream_map
 from benchmarks.perception_survey import noisy_attitude
+from companion.core.stream_format import read_meta
+from companion.core.stream_io import read_truth
 from companion.perception import Perception, SideSensors
 from companion.settings import SIM_LAYERS, load_settings
-from companion.sources.stream_format import read_meta
-from companion.sources.stream_io import read_truth
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import AttitudeSample
 

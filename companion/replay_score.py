@@ -30,11 +30,11 @@ import numpy as np
 
 from companion.app import CompanionApp, Frame, FrameResult
 from companion.autopilot import outcome_lines
+from companion.core.stream_format import TruthPose
 from companion.demo import DemoResult, TruthRecorder, print_summary, summary
 from companion.perception import Perception
 from companion.recorded import RecordedTruth
 from companion.sensors import SensorHistory
-from companion.sources.stream_format import TruthPose
 from mavlink_bridge.bridge import VisionBridge
 from mavlink_bridge.fake_autopilot import FakeAutopilot
 from tracker.boxes import box_iou
