@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.acquisition import Acquisition
+from companion.acquisition import TRACK_MIN_CORRELATION, Acquisition
 from companion.app import Frame, FrameResult
 from companion.fixgate import FixGate, FixGateConfig
 from companion.perception_types import (
@@ -59,6 +59,7 @@ from tracker.boxes import (
     saturated_share,
 )
 from tracker.camera import CameraModel, Rectifier
+from tracker.edge_align import align_cut
 from tracker.pose.attitude_bias import AttitudeBias
 from tracker.pose.config import PoseConfig
 from tracker.pose.solve import solve_pose
@@ -76,13 +77,21 @@ FloatArray = npt.NDArray[np.float64]
 
 #: How many frames' fixes are kept for housekeeping to look up.
 RECENT_FIXES = 8
+#: A cut plate's corner is measured when its outline puts it this far inside the image (px).
+EDGE_MARGIN_PX = 3.0
 
 
-def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
+def moved_to_box(ref: Reference, hom: FloatArray, box: Box, size: tuple[int, int]
+                 ) -> FloatArray:
     """``hom`` moved so that the outline it projects is centred on the tracker's ``box``
-    (a track without corners this frame: its last homography, where the tracker is)."""
+    (a track without corners this frame: its last homography, where the tracker is).
+    An outline cut by the image's edge (``size``: width, height) stays where it is: the
+    tracker's box then holds only the part in view, and its centre is not the plate's."""
+    outline = project_corners(ref, hom)
+    if not inside(outline, *size, margin=0.0):
+        return hom
     x, y, w, h = box
-    dx, dy = np.array([x + w / 2, y + h / 2]) - project_corners(ref, hom).mean(axis=0)
+    dx, dy = np.array([x + w / 2, y + h / 2]) - outline.mean(axis=0)
     return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ hom
 
 
@@ -188,11 +197,12 @@ class Perception(Acquisition):
         appearance; one that failed is left out of fixes, dropped after repeated failures."""
         events: list[dict[str, Any]] = []
         cfg = self.config
+        size = (self.camera.width, self.camera.height)
         for track in list(self.tracks.values()):
             ref = self.matcher.references[track.landmark_id]
             hom = track.homography
             if hom is not None and track.corners is None:
-                hom = moved_to_box(ref, hom, track.box)  # no corners this frame: at the box
+                hom = moved_to_box(ref, hom, track.box, size)  # no corners: at the box
             ncc, fit = (0.0, None) if hom is None else check_appearance(ref, image, hom)
             track.fit_sigma = fit if cfg.corner_sigma_from_fit else None
             track.verify_failures = 0 if ncc >= cfg.track_appearance_ncc \
@@ -286,7 +296,8 @@ class Perception(Acquisition):
             return True
         if track.homography is not None:
             predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
-            aligned = self._align(track, image, predicted)
+            aligned = self._align_cut(track, image, predicted) if self._is_cut(
+                track.landmark_id, predicted) else self._align(track, image, predicted)
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
             if aligned is not None:
@@ -315,11 +326,26 @@ class Perception(Acquisition):
         # the outline predicted (the last one, moved with the tracker's box) against the
         # outline found: a rotated plate's outline fills its axis-aligned box poorly, so
         # outlines are compared, not boxes
-        predicted = project_corners(ref, hom)
-        predicted = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
+        predicted = project_corners(ref, moved_to_box(ref, hom, box, (image.shape[1],
+                                                                       image.shape[0])))
         if quad_iou(corners, predicted) < self.config.min_corner_agreement:
             return None  # the alignment wandered off: keep the box, drop the corners
         return aligned
+
+    def _is_cut(self, landmark_id: str, hom: FloatArray) -> bool:
+        """Is the outline ``hom`` projects cut by the image's edge below
+        ``min_corner_in_view`` (its tracker's box then holds only the part in view)?"""
+        outline = project_corners(self.matcher.references[landmark_id], hom)
+        share = in_view_share(outline, self.camera.width, self.camera.height)
+        return share < self.config.min_corner_in_view
+
+    def _align_cut(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray
+                   ) -> FloatArray | None:
+        """A cut plate's homography moved by the affine alignment of its part in view
+        (tracker/edge_align.py): a full alignment on a corner region bends the rest."""
+        return align_cut(self.matcher.references[track.landmark_id], image, hom,
+                         self.config.ecc_iterations, TRACK_MIN_CORRELATION,
+                         track.align_weights)
 
     def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """Get the homography back: align the reference onto the tracked box (held to
@@ -357,6 +383,10 @@ class Perception(Acquisition):
     def observations(self, frame_index: int) -> list[Observation]:
         """One observation per live track (corners when the alignment holds).
 
+        A plate cut by the image's edge (less than ``min_corner_in_view`` of it in view)
+        gives the corners its outline puts inside the image by ``EDGE_MARGIN_PX`` as
+        measured (``Observation.corners_measured``); the ones outside are extrapolations,
+        not observations.  Their sigma grows as the part in view shrinks (:meth:`_cut`).
         When some tracks have corners, box-only tracks are left out: a box centre is not
         the landmark's centre under perspective, and mixing it in costs more than it adds.
         Without corners, a box that reaches out of the image is left out too: its centre is
@@ -366,30 +396,51 @@ class Perception(Acquisition):
         size = (self.camera.width, self.camera.height)
         cfg = self.config
         tracks = [t for t in self.tracks.values() if t.verify_failures == 0]
-        usable = {t.landmark_id: t.corners is not None
-                  and in_view_share(t.corners, *size) >= cfg.min_corner_in_view
-                  and t.saturated <= cfg.max_corner_saturated and self._fits(t)
-                  for t in tracks}
-        if any(usable.values()):
-            tracks = [t for t in tracks if usable[t.landmark_id]]
+        usable = {t.landmark_id: self._cut(t) for t in tracks
+                  if t.corners is not None and t.saturated <= cfg.max_corner_saturated}
+        # a cut plate's fit sigma is its whole outline's (the extrapolated corners' too):
+        # not held against the size model, but stated (the larger of the two, _corner_sigma)
+        usable = {lid: cut for lid, cut in usable.items() if cut is not None
+                  and (cut[0] is not None or self._fits(self.tracks[lid]))}
+        if usable:
+            tracks = [t for t in tracks if t.landmark_id in usable]
         else:  # boxes only: a box reaching out of the image is not centred on its plate
             tracks = [t for t in tracks if inside(box_corners(t.box), *size, margin=1.0)]
         for t in tracks:
             x, y, w, h = t.box
-            corners = None if t.corners is None or not usable[t.landmark_id] else tuple(
+            cut = usable.get(t.landmark_id)
+            corners = None if t.corners is None or cut is None else tuple(
                 (float(u), float(v)) for u, v in t.corners)
             centre = ((x + w / 2, y + h / 2) if corners is None
                       else tuple(float(c) for c in np.mean(corners, axis=0)))
             stretch = 1.0 if corners is None else self._stretch(corners)  # once a plate
             scale = None if corners is None else self.config.corner_scale_sigma_px * stretch
+            sigma = self._corner_sigma(corners, stretch, t.fit_sigma)
+            measured, grow = (None, 1.0) if cut is None else cut
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
                                    frame_index=frame_index,
-                                   corner_sigma_px=self._corner_sigma(corners, stretch,
-                                                                      t.fit_sigma),
-                                   corner_scale_sigma_px=scale))
+                                   corner_sigma_px=None if sigma is None else sigma * grow,
+                                   corner_scale_sigma_px=scale, corners_measured=measured))
         return out
+
+    def _cut(self, track: Track) -> tuple[tuple[bool, bool, bool, bool] | None, float] | None:
+        """Which of a track's corners are measured (None: all four) and the factor on their
+        sigma; None when none is.  In view by ``min_corner_in_view`` or more: all four, as
+        they are.  Less: the corners inside the image by ``EDGE_MARGIN_PX``, their sigma
+        grown by ``1 / sqrt(share in view)`` (the alignment rests on that part of the plate
+        only: fewer pixels, and none around the corners outside)."""
+        assert track.corners is not None
+        size = (self.camera.width, self.camera.height)
+        share = in_view_share(track.corners, *size)
+        if share >= self.config.min_corner_in_view:
+            return None, 1.0
+        flags = tuple(bool(inside(np.asarray([c]), *size, margin=EDGE_MARGIN_PX))
+                      for c in track.corners)
+        if share <= 0.0 or not any(flags):
+            return None
+        return (flags[0], flags[1], flags[2], flags[3]), 1.0 / float(np.sqrt(share))
 
     def _fits(self, track: Track) -> bool:
         """The alignment's fit sigma is within ``max_fit_sigma_ratio`` of the size model's."""
