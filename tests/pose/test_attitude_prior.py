@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tracker.camera import CameraModel
-from tracker.pose import AttitudeSample, NoFix, PoseFix, solve_pose
+from tracker.pose import AttitudeSample, MapLandmark, NoFix, Observation, PoseFix, solve_pose
 from tracker.pose.simulate import SensorNoise
 
 from .conftest import TRUE_P, TRUE_RPY, see, wall
@@ -101,7 +101,8 @@ def test_without_an_observable_view_the_attitude_is_used_and_its_sigma_propagate
     assert np.trace(loose.covariance[:3, :3]) > 4.0 * np.trace(tight.covariance[:3, :3])
 
 
-def _one_plate(camera: CameraModel, seed: int) -> tuple[list, tuple]:  # type: ignore[type-arg]
+def _one_plate(camera: CameraModel, seed: int
+               ) -> tuple[list[Observation], tuple[MapLandmark, ...]]:
     """Plate A alone, 20 m off, as the perception's corners give it."""
     lms = wall()[:1]
     return see(lms, camera, noise=NOISE, seed=seed), lms
