@@ -122,7 +122,7 @@ def test_a_plate_cut_by_the_edge_gives_only_its_corners_inside_the_image() -> No
     """Issue 19: a plate a fifth in view was left out of the fix (the square's 6-7 s gap);
     now its corners inside the image are measured, the extrapolated ones flagged, their
     sigma grown by 1 / sqrt(share in view).  A plate wholly in view is unchanged."""
-    frame, plate, corners = scene()
+    _frame, plate, corners = scene()
     p = perception(plate)
     whole = track_at(p, corners, (0.0, 0.0, 1.0, 1.0))
     p.tracks["p"] = whole
