@@ -59,7 +59,7 @@ from tracker.boxes import (
     saturated_share,
 )
 from tracker.camera import CameraModel, Rectifier
-from tracker.edge_align import align_cut
+from tracker.edge_align import align_cut, box_shift, shifted
 from tracker.pose.attitude_bias import AttitudeBias
 from tracker.pose.config import PoseConfig
 from tracker.pose.solve import solve_pose
@@ -289,14 +289,14 @@ class Perception(Acquisition):
         result: TrackResult = track.tracker.update(image)
         if result.box is None or result.confidence < self.config.min_track_confidence:
             return False
-        track.box = result.box
+        last_box, track.box = track.box, result.box
         track.confidence, track.features = result.confidence, result.features
         track.corners = None
         if not self.config.refine_corners:
             return True
         if track.homography is not None:
             predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
-            aligned = self._align_cut(track, image, predicted) if self._is_cut(
+            aligned = self._align_cut(track, image, predicted, last_box) if self._is_cut(
                 track.landmark_id, predicted) else self._align(track, image, predicted)
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
@@ -339,13 +339,21 @@ class Perception(Acquisition):
         share = in_view_share(outline, self.camera.width, self.camera.height)
         return share < self.config.min_corner_in_view
 
-    def _align_cut(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray
-                   ) -> FloatArray | None:
+    def _align_cut(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
+                   last_box: Box) -> FloatArray | None:
         """A cut plate's homography moved by the affine alignment of its part in view
-        (tracker/edge_align.py): a full alignment on a corner region bends the rest."""
-        return align_cut(self.matcher.references[track.landmark_id], image, hom,
-                         self.config.ecc_iterations, TRACK_MIN_CORRELATION,
-                         track.align_weights)
+        (tracker/edge_align.py): a full alignment on a corner region bends the rest.  It
+        starts moved as the tracker's box moved since ``last_box`` (its edges inside the
+        image) when it does not align where it was: a plate sliding 10-20 px a frame is out
+        of the affine alignment's reach (and a still one's box jitters by a pixel)."""
+        ref = self.matcher.references[track.landmark_id]
+        dx, dy = box_shift(last_box, track.box, self.camera.width, self.camera.height)
+        for start in (hom, shifted(hom, dx, dy)) if max(abs(dx), abs(dy)) > 2.0 else (hom,):
+            aligned = align_cut(ref, image, start, self.config.ecc_iterations,
+                                TRACK_MIN_CORRELATION, track.align_weights)
+            if aligned is not None:
+                return aligned
+        return None
 
     def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """Get the homography back: align the reference onto the tracked box (held to

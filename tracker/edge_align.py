@@ -29,6 +29,9 @@ from tracker.geometry import FloatArray
 
 #: Fewest pixels of the plate in view that an alignment rests on.
 MIN_PIXELS = 200
+#: Largest change of scale, squash or shear a frame (the affine map's linear part less the
+#: identity) taken from a cut plate; more is the alignment wandering on too little.
+MAX_LINEAR_STEP = 0.03
 
 
 def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
@@ -69,13 +72,38 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     else:
         roi = crop.astype(np.float32)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
-    try:
-        cc, affine = cv2.findTransformECC(
-            np.asarray(rendered, np.float32), roi, np.eye(2, 3, dtype=np.float32),
-            cv2.MOTION_AFFINE, criteria, mask, 1)
+    rendered = np.asarray(rendered, np.float32)
+    try:  # the shift first (a wide basin), then the affine map from there
+        cc, affine = cv2.findTransformECC(rendered, roi, np.eye(2, 3, dtype=np.float32),
+                                          cv2.MOTION_TRANSLATION, criteria, mask, 5)
+        shift = affine.copy()
+        cc, affine = cv2.findTransformECC(rendered, roi, shift, cv2.MOTION_AFFINE, criteria,
+                                          mask, 1)
     except cv2.error:
         return None
     if float(cc) < min_correlation or not np.all(np.isfinite(affine)):
         return None
+    if float(np.abs(affine[:, :2] - np.eye(2)).max()) > MAX_LINEAR_STEP:
+        affine = shift  # a sliver's affine map wandered (shear, squash): keep the shift
     moved = np.linalg.inv(to_roi) @ np.vstack([affine, (0.0, 0.0, 1.0)]) @ to_roi @ hom
     return np.asarray(moved / moved[2, 2], np.float64)
+
+
+def box_shift(old: tuple[float, float, float, float], new: tuple[float, float, float, float],
+              width: int, height: int, margin: float = 1.0) -> tuple[float, float]:
+    """How far a cut plate moved between two of its tracker's boxes ``(x, y, w, h)``: per
+    axis, the move of an edge inside the image in both (the edges at the image's border
+    stay there while the plate slides under it); 0 when neither edge is."""
+    def axis(a0: float, a1: float, b0: float, b1: float, size: int) -> float:
+        if a0 > margin and b0 > margin:
+            return b0 - a0
+        if a1 < size - margin and b1 < size - margin:
+            return b1 - a1
+        return 0.0
+    (ox, oy, ow, oh), (nx, ny, nw, nh) = old, new
+    return (axis(ox, ox + ow, nx, nx + nw, width), axis(oy, oy + oh, ny, ny + nh, height))
+
+
+def shifted(hom: FloatArray, dx: float, dy: float) -> FloatArray:
+    """``hom`` followed by a shift of (dx, dy) px in the frame."""
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ hom
