@@ -81,17 +81,11 @@ RECENT_FIXES = 8
 EDGE_MARGIN_PX = 3.0
 
 
-def moved_to_box(ref: Reference, hom: FloatArray, box: Box, size: tuple[int, int]
-                 ) -> FloatArray:
+def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
     """``hom`` moved so that the outline it projects is centred on the tracker's ``box``
-    (a track without corners this frame: its last homography, where the tracker is).
-    An outline cut by the image's edge (``size``: width, height) stays where it is: the
-    tracker's box then holds only the part in view, and its centre is not the plate's."""
-    outline = project_corners(ref, hom)
-    if not inside(outline, *size, margin=0.0):
-        return hom
+    (a track without corners this frame: its last homography, where the tracker is)."""
     x, y, w, h = box
-    dx, dy = np.array([x + w / 2, y + h / 2]) - outline.mean(axis=0)
+    dx, dy = np.array([x + w / 2, y + h / 2]) - project_corners(ref, hom).mean(axis=0)
     return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ hom
 
 
@@ -197,12 +191,11 @@ class Perception(Acquisition):
         appearance; one that failed is left out of fixes, dropped after repeated failures."""
         events: list[dict[str, Any]] = []
         cfg = self.config
-        size = (self.camera.width, self.camera.height)
         for track in list(self.tracks.values()):
             ref = self.matcher.references[track.landmark_id]
             hom = track.homography
             if hom is not None and track.corners is None:
-                hom = moved_to_box(ref, hom, track.box, size)  # no corners: at the box
+                hom = moved_to_box(ref, hom, track.box)  # no corners this frame: at the box
             ncc, fit = (0.0, None) if hom is None else check_appearance(ref, image, hom)
             track.fit_sigma = fit if cfg.corner_sigma_from_fit else None
             track.verify_failures = 0 if ncc >= cfg.track_appearance_ncc \
@@ -326,8 +319,8 @@ class Perception(Acquisition):
         # the outline predicted (the last one, moved with the tracker's box) against the
         # outline found: a rotated plate's outline fills its axis-aligned box poorly, so
         # outlines are compared, not boxes
-        predicted = project_corners(ref, moved_to_box(ref, hom, box, (image.shape[1],
-                                                                       image.shape[0])))
+        predicted = project_corners(ref, hom)
+        predicted = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
         if quad_iou(corners, predicted) < self.config.min_corner_agreement:
             return None  # the alignment wandered off: keep the box, drop the corners
         return aligned
