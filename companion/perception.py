@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.acquisition import Acquisition
+from companion.acquisition import TRACK_MIN_CORRELATION, Acquisition
 from companion.app import Frame, FrameResult
 from companion.fixgate import FixGate, FixGateConfig
 from companion.perception_types import (
@@ -60,6 +60,7 @@ from tracker.boxes import (
     saturated_share,
 )
 from tracker.camera import CameraModel, Rectifier
+from tracker.edge_align import align_cut, box_shift, shifted
 from tracker.pose.attitude_bias import AttitudeBias
 from tracker.pose.config import PoseConfig
 from tracker.pose.landmarks import landmark_corners_ned
@@ -80,6 +81,9 @@ FloatArray = npt.NDArray[np.float64]
 RECENT_FIXES = 8
 #: Parameters a fix fits to its corners (position and attitude).
 POSE_PARAMETERS = 6
+
+#: A cut plate's corner is measured when its outline puts it this far inside the image (px).
+EDGE_MARGIN_PX = 3.0
 
 
 def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
@@ -315,14 +319,15 @@ class Perception(Acquisition):
         result: TrackResult = track.tracker.update(image)
         if result.box is None or result.confidence < self.config.min_track_confidence:
             return False
-        track.box = result.box
+        last_box, track.box = track.box, result.box
         track.confidence, track.features = result.confidence, result.features
         track.corners = None
         if not self.config.refine_corners:
             return True
         if track.homography is not None:
             predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
-            aligned = self._align(track, image, predicted)
+            aligned = self._align_cut(track, image, predicted, last_box) if self._is_cut(
+                track.landmark_id, predicted) else self._align(track, image, predicted)
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
             if aligned is not None:
@@ -356,6 +361,29 @@ class Perception(Acquisition):
         if quad_iou(corners, predicted) < self.config.min_corner_agreement:
             return None  # the alignment wandered off: keep the box, drop the corners
         return aligned
+
+    def _is_cut(self, landmark_id: str, hom: FloatArray) -> bool:
+        """Is the outline ``hom`` projects cut by the image's edge below
+        ``min_corner_in_view`` (its tracker's box then holds only the part in view)?"""
+        outline = project_corners(self.matcher.references[landmark_id], hom)
+        share = in_view_share(outline, self.camera.width, self.camera.height)
+        return share < self.config.min_corner_in_view
+
+    def _align_cut(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
+                   last_box: Box) -> FloatArray | None:
+        """A cut plate's homography moved by the affine alignment of its part in view
+        (tracker/edge_align.py): a full alignment on a corner region bends the rest.  It
+        starts moved as the tracker's box moved since ``last_box`` (its edges inside the
+        image) when it does not align where it was: a plate sliding 10-20 px a frame is out
+        of the affine alignment's reach (and a still one's box jitters by a pixel)."""
+        ref = self.matcher.references[track.landmark_id]
+        dx, dy = box_shift(last_box, track.box, self.camera.width, self.camera.height)
+        for start in (hom, shifted(hom, dx, dy)) if max(abs(dx), abs(dy)) > 2.0 else (hom,):
+            aligned = align_cut(ref, image, start, self.config.ecc_iterations,
+                                TRACK_MIN_CORRELATION, track.align_weights)
+            if aligned is not None:
+                return aligned
+        return None
 
     def _recover_corners(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """Get the homography back: align the reference onto the tracked box (held to
@@ -393,6 +421,10 @@ class Perception(Acquisition):
     def observations(self, frame_index: int) -> list[Observation]:
         """One observation per live track (corners when the alignment holds).
 
+        A plate cut by the image's edge (less than ``min_corner_in_view`` of it in view)
+        gives the corners its outline puts inside the image by ``EDGE_MARGIN_PX`` as
+        measured (``Observation.corners_measured``); the ones outside are extrapolations,
+        not observations.  Their sigma grows as the part in view shrinks (:meth:`_cut`).
         When some tracks have corners, box-only tracks are left out: a box centre is not
         the landmark's centre under perspective, and mixing it in costs more than it adds.
         Without corners, a box that reaches out of the image is left out too: its centre is
@@ -402,30 +434,51 @@ class Perception(Acquisition):
         size = (self.camera.width, self.camera.height)
         cfg = self.config
         tracks = [t for t in self.tracks.values() if t.verify_failures == 0]
-        usable = {t.landmark_id: t.corners is not None
-                  and in_view_share(t.corners, *size) >= cfg.min_corner_in_view
-                  and t.saturated <= cfg.max_corner_saturated and self._fits(t)
-                  for t in tracks}
-        if any(usable.values()):
-            tracks = [t for t in tracks if usable[t.landmark_id]]
+        usable = {t.landmark_id: self._cut(t) for t in tracks
+                  if t.corners is not None and t.saturated <= cfg.max_corner_saturated}
+        # a cut plate's fit sigma is its whole outline's (the extrapolated corners' too):
+        # not held against the size model, but stated (the larger of the two, _corner_sigma)
+        usable = {lid: cut for lid, cut in usable.items() if cut is not None
+                  and (cut[0] is not None or self._fits(self.tracks[lid]))}
+        if usable:
+            tracks = [t for t in tracks if t.landmark_id in usable]
         else:  # boxes only: a box reaching out of the image is not centred on its plate
             tracks = [t for t in tracks if inside(box_corners(t.box), *size, margin=1.0)]
         for t in tracks:
             x, y, w, h = t.box
-            corners = None if t.corners is None or not usable[t.landmark_id] else tuple(
+            cut = usable.get(t.landmark_id)
+            corners = None if t.corners is None or cut is None else tuple(
                 (float(u), float(v)) for u, v in t.corners)
             centre = ((x + w / 2, y + h / 2) if corners is None
                       else tuple(float(c) for c in np.mean(corners, axis=0)))
             stretch = 1.0 if corners is None else self._stretch(corners)  # once a plate
             scale = None if corners is None else self.config.corner_scale_sigma_px * stretch
+            sigma = self._corner_sigma(corners, stretch, t.fit_sigma)
+            measured, grow = (None, 1.0) if cut is None else cut
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
                                    landmark_id=t.landmark_id, corners_px=corners,
                                    frame_index=frame_index,
-                                   corner_sigma_px=self._corner_sigma(corners, stretch,
-                                                                      t.fit_sigma),
-                                   corner_scale_sigma_px=scale))
+                                   corner_sigma_px=None if sigma is None else sigma * grow,
+                                   corner_scale_sigma_px=scale, corners_measured=measured))
         return out
+
+    def _cut(self, track: Track) -> tuple[tuple[bool, bool, bool, bool] | None, float] | None:
+        """Which of a track's corners are measured (None: all four) and the factor on their
+        sigma; None when none is.  In view by ``min_corner_in_view`` or more: all four, as
+        they are.  Less: the corners inside the image by ``EDGE_MARGIN_PX``, their sigma
+        grown by ``1 / sqrt(share in view)`` (the alignment rests on that part of the plate
+        only: fewer pixels, and none around the corners outside)."""
+        assert track.corners is not None
+        size = (self.camera.width, self.camera.height)
+        share = in_view_share(track.corners, *size)
+        if share >= self.config.min_corner_in_view:
+            return None, 1.0
+        flags = tuple(bool(inside(np.asarray([c]), *size, margin=EDGE_MARGIN_PX))
+                      for c in track.corners)
+        if share <= 0.0 or not any(flags):
+            return None
+        return (flags[0], flags[1], flags[2], flags[3]), 1.0 / float(np.sqrt(share))
 
     def _fits(self, track: Track) -> bool:
         """The alignment's fit sigma is within ``max_fit_sigma_ratio`` of the size model's."""

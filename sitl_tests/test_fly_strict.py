@@ -66,15 +66,20 @@ def when(pred: Callable[[], bool], action: Callable[[], None], timeout_s: float)
     threading.Thread(target=watch, daemon=True).start()
 
 
+#: ``SITL_SEEDS=0,1,2,3,4``: the fake's and the simulated camera's seeds
+SEEDS = [int(v) for v in os.environ.get("SITL_SEEDS", "0").split(",")]
+
+
+@pytest.mark.parametrize("seed", SEEDS)
 def test_an_8s_outage_in_flight_lands_and_stops_fly(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], seed: int) -> None:
     blind: list[float] = []
-    with fake_thread(guided()) as (fake, loop):
+    with fake_thread(guided(seed)) as (fake, loop):
         def go_blind() -> None:
             blind.append(fake.flight_s())
             loop.call_soon_threadsafe(fake.blind, 8.0)
         when(lambda: len(fake.accepted()) >= 20, go_blind, 30.0)
-        status = fly(fake.local_port, tmp_path, 60.0)
+        status = fly(fake.local_port, tmp_path, 60.0, "--set", f"source.seed={seed}")
         events, texts = list(fake.flight.events), list(fake.statustexts_sent)
         mode, vision = fake.flight.custom_mode, list(fake.vision)
     err = capsys.readouterr().err
@@ -90,16 +95,16 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
     last = err.strip().splitlines()[-1]
     assert last.startswith("--fly stopped commanding: the autopilot changed mode to LAND"), err
     assert "EKF Failsafe" in last and "Traceback" not in err
-    print(f"blind at {blind[0]:.1f} s, LAND {land[0] - blind[0]:.1f} s later; {last}")
+    print(f"seed {seed}: blind at {blind[0]:.1f} s, LAND {land[0] - blind[0]:.1f} s later; {last}")
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a finding, measured on i19link after merging issue "
-                   "19's pose side: no failsafe, but fixes still stop for 6.6 s on a leg and "
-                   "the fake's estimate is 0.109 m median / 1.34 m max off truth (seed 0); "
-                   "cause: at (6, 6) both landmarks in view are cut by the image edge and "
-                   "perception drops them (docs/sitl.md)")
-@pytest.mark.parametrize("seed", [int(v) for v in os.environ.get("SITL_SEEDS", "0").split(",")])
+@pytest.mark.xfail(strict=True, reason="a finding (issue 19, open): cut plates now give "
+                   "their corners (offline lap: gap 6.5 -> 0.7-1.9 s), but wall-01's corners "
+                   "carry a ~1 px keystone bias that puts lone-plate fixes 0.83 m off at a "
+                   "stated 0.11 m, a plate entering cut by the edge is acquired late, and on "
+                   "a loaded machine fixes go stale (docs/sitl.md, 'Measured')")
+@pytest.mark.parametrize("seed", SEEDS)
 def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
     with fake_thread(guided(seed)) as (fake, _loop):
         status = fly(fake.local_port, tmp_path, 110.0, "--set", f"source.seed={seed}")

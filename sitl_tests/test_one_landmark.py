@@ -35,11 +35,14 @@ the tilt and hid it (the issue's "parked 0.40 m off truth").
 
 from __future__ import annotations
 
+import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from companion.sim.scenario import load_scenario
 from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
 from sitl_tests.harness import Flight, sitl_settings
 
@@ -55,13 +58,24 @@ CASES = {
 }
 
 
+#: ``SITL_SEEDS=0,1,2``: the scenario's and the fake's seeds (noise, attitude error); by
+#: default the scenario's own (3) and the fake's (0)
+SEEDS = [int(v) for v in os.environ["SITL_SEEDS"].split(",")] if "SITL_SEEDS" in os.environ \
+    else [None]
+
+
+@pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("case", ["box", "box+laser"])
-async def test_one_landmark_for_10_s_gives_honest_fixes(tmp_path: Path, case: str) -> None:
+async def test_one_landmark_for_10_s_gives_honest_fixes(tmp_path: Path, case: str,
+                                                        seed: int | None) -> None:
     perception, laser, solvers = CASES[case]
     settings = sitl_settings(tmp_path, deployment_prior=True, perception=perception,
                              pose={"rangefinder": laser})
-    fake = FakeAutopilotConfig(rangefinder_orientation=0)  # the scenario's laser: forward
-    flight = await Flight("one_landmark", SECONDS, settings, autopilot=fake).run()
+    # the scenario's laser: forward
+    fake = FakeAutopilotConfig(rangefinder_orientation=0, seed=seed or 0)
+    scenario = load_scenario("one_landmark")
+    scenario = scenario if seed is None else dataclasses.replace(scenario, seed=seed)
+    flight = await Flight(scenario, SECONDS, settings, autopilot=fake).run()
     window = [f for f in flight.frames if WINDOW_S[0] <= f.t_s <= WINDOW_S[1]]
     assert window[-1].t_s - window[0].t_s >= 10.0
     seen = {lid for f in window for lid, share in f.visible.items() if share > 0.0}
@@ -74,7 +88,8 @@ async def test_one_landmark_for_10_s_gives_honest_fixes(tmp_path: Path, case: st
     nees = [f.fix_nees for f in fixes if f.fix_nees is not None]
     inside = float(np.mean([n <= NEES_95_3DOF for n in nees]))
     errors = [float(np.linalg.norm(np.subtract(f.fix_ned_m, f.truth_ned_m))) for f in fixes]
-    print(f"{case}: {len(fixes)}/{len(window)} frames with a fix, longest gap {gap:.2f} s, "
+    print(f"{case} seed {seed}: {len(fixes)}/{len(window)} frames with a fix, longest gap "
+          f"{gap:.2f} s, "
           f"solvers {sorted(used)}, NEES below the 95 % bound {inside:.3f} (median "
           f"{np.median(nees):.1f}), "
           f"error median {np.median(errors):.3f} m, max {max(errors):.3f} m")

@@ -181,3 +181,22 @@ def test_a_track_whose_corners_the_pose_keeps_leaving_out_is_dropped() -> None:
     assert p._drop_rejected(obs, without) == [] and p._drop_rejected(obs, without) == []
     (event,) = p._drop_rejected(obs, without)
     assert "p" not in p.tracks and event["event"] == "lost" and "3 fixes" in event["why"]
+
+
+def test_a_plate_cut_by_the_edge_gives_only_its_corners_inside_the_image() -> None:
+    """Issue 19: a plate a fifth in view was left out of the fix (the square's 6-7 s gap);
+    now its corners inside the image are measured, the extrapolated ones flagged, their
+    sigma grown by 1 / sqrt(share in view).  A plate wholly in view is unchanged."""
+    _frame, plate, corners = scene()
+    p = perception(plate)
+    whole = track_at(p, corners, (0.0, 0.0, 1.0, 1.0))
+    p.tracks["p"] = whole
+    [full] = p.observations(0)
+    assert full.corners_measured is None and full.corners_px is not None
+    cut_corners = corners + (np.array([320.0, 240.0]) - corners[0]) - 40.0  # TL 40 px inside
+    p.tracks["p"] = track_at(p, cut_corners, (0.0, 0.0, 1.0, 1.0))
+    [cut] = p.observations(0)
+    assert cut.corners_measured == (True, False, False, False)
+    assert cut.corners_px is not None and np.allclose(cut.corners_px, cut_corners)
+    assert cut.corner_sigma_px is not None and full.corner_sigma_px is not None
+    assert cut.corner_sigma_px > 1.5 * full.corner_sigma_px

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tracker.camera import CameraModel
-from tracker.pose import AttitudeSample, NoFix, PoseFix, solve_pose
+from tracker.pose import AttitudeSample, MapLandmark, NoFix, Observation, PoseFix, solve_pose
 from tracker.pose.simulate import SensorNoise
 
 from .conftest import TRUE_P, TRUE_RPY, see, wall
@@ -99,3 +99,33 @@ def test_without_an_observable_view_the_attitude_is_used_and_its_sigma_propagate
         0, *TRUE_RPY, float(np.deg2rad(0.2)), float(np.deg2rad(1.0)))))
     assert loose.attitude_prior == tight.attitude_prior == "used"
     assert np.trace(loose.covariance[:3, :3]) > 4.0 * np.trace(tight.covariance[:3, :3])
+
+
+def _one_plate(camera: CameraModel, seed: int
+               ) -> tuple[list[Observation], tuple[MapLandmark, ...]]:
+    """Plate A alone, 20 m off, as the perception's corners give it."""
+    lms = wall()[:1]
+    return see(lms, camera, noise=NOISE, seed=seed), lms
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2], ids=["roll", "pitch", "yaw"])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_fix_does_not_follow_an_attitude_step_within_its_sigma(
+    camera: CameraModel, axis: int, seed: int
+) -> None:
+    """The issue's rule: landmarks still, the attitude stepped by its own stated sigma
+    (2.5 deg roll/pitch, 5 deg yaw): the one-plate fix, whose rotation its corners fix only
+    weakly, moves by no more than its own covariance allows (Mahalanobis distance of the
+    move under 1), or the prior is refused."""
+    obs, lms = _one_plate(camera, seed)
+    sig = AttitudeSample(0, *TRUE_RPY)
+    step = (sig.roll_pitch_sigma_rad, sig.roll_pitch_sigma_rad, sig.yaw_sigma_rad)[axis]
+    before = _fix(solve_pose(obs, lms, camera, 0, attitude=sig))
+    after = _fix(solve_pose(obs, lms, camera, 0, attitude=AttitudeSample(
+        0, *_wrong(float(np.rad2deg(step)), axis))))
+    moved = np.asarray(after.position_ned_m) - np.asarray(before.position_ned_m)
+    m2 = float(moved @ np.linalg.solve(after.covariance[:3, :3], moved))
+    print(f"{('roll', 'pitch', 'yaw')[axis]} +{np.rad2deg(step):.1f} deg: moved "
+          f"{np.linalg.norm(moved):.3f} m, {np.sqrt(m2):.2f} sigma, prior "
+          f"{after.attitude_prior}")
+    assert after.attitude_prior == "rejected" or m2 < 1.0

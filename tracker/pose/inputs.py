@@ -106,15 +106,17 @@ def make_groups(
     for i, lm in best.values():
         obs = observations[i]
         if obs.corners_px is not None:
-            pts = landmark_corners_ned(lm)
+            measured = np.array(obs.corners_measured or (True,) * 4)  # cut by the edge: some
+            pts = landmark_corners_ned(lm)[measured]
             sig = cfg.pixel_sigma_px if obs.corner_sigma_px is None else obs.corner_sigma_px
-            px = np.array(obs.corners_px, dtype=np.float64)
+            px = np.array(obs.corners_px, dtype=np.float64)[measured]
         else:
             pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma
             px = np.array([obs.centre_px], dtype=np.float64)
         ideal = _undistort(ctx, px) if ctx.distorted else px
-        scale = obs.corner_scale_sigma_px if obs.corners_px is not None else None
-        outline = cfg.one_plate_outline_sigma_rel * sig if obs.corners_px is not None else 0.0
+        # a whole outline's common errors; a cut one's measured corners are points
+        scale = obs.corner_scale_sigma_px if obs.all_corners else None
+        outline = cfg.one_plate_outline_sigma_rel * sig if obs.all_corners else 0.0
         groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale),
                             outline))
     return groups
@@ -171,7 +173,7 @@ def point_set(groups: list[Group]) -> PointSet:
     all the fix has) also gets its outline's common scale and perspective errors
     (:func:`_outline_modes`): one plate cannot average them out."""
     if len(groups) == 1 and groups[0].outline_sigma_px > 0.0 and (
-            groups[0].observation.corners_px is not None):
+            groups[0].observation.all_corners):
         g = groups[0]
         dirs, betas = _outline_modes(g)
         k = g.points_ned.shape[0]
@@ -221,6 +223,8 @@ def size_if_needed(
     altitude fixes its distance better: the altitude fixes it to ``sigma / |b_down|``,
     poorly for a landmark near the camera's height (a nearly level bearing ``b``).  The
     size is a coarse measure (a box is not the plate's outline), used only where needed."""
+    if g.observation.corners_px is not None:
+        return None  # a plate cut by the image's edge: its box is not its size
     size = _size_distance(ctx, g)
     if size is None or laser is not None:
         return None

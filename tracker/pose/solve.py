@@ -302,7 +302,7 @@ def _solve_once(
     spread = float(np.max(np.ptp(pts.pixels, axis=0)))
     if pts.pixels.shape[0] > 1 and spread < ctx.config.min_point_spread_px:
         return _Failure(f"degenerate geometry: all image points within {spread:.1f} px")
-    if len(groups) == 1 and groups[0].observation.corners_px is not None:
+    if len(groups) == 1 and groups[0].observation.all_corners:
         return _solve_ippe(ctx, groups[0], pts)
     if ctx.attitude is not None:
         return _solve_with_attitude(ctx, groups, pts)
@@ -351,8 +351,9 @@ def _solve_with_attitude(ctx: Context, groups: list[Group], pts: PointSet) -> _S
             x0[:3] = size.point_ned - size.distance_m * b[0]
     if not single:
         rng = laser_for(ctx, groups, x0)
-    solver = "bearing_ls" if not single else (
-        "range_bearing" if rng else "altitude_bearing" if ctx.altitude else "size_bearing")
+    solver = "bearing_ls" if not single else (  # one plate's measured corners: bearing_ls
+        "range_bearing" if rng else "altitude_bearing" if ctx.altitude
+        else "size_bearing" if size else "bearing_ls")
     out = _as_outcome(solver, _refine(ctx, pts, make_priors(ctx, rng, size), x0), pts, groups)
     if single:
         return out
@@ -396,7 +397,8 @@ def _solve_without_attitude(
     """
     n = pts.points_ned.shape[0]
     if len(groups) == 1:
-        return _Failure("one landmark without corners and no attitude: pose unobservable")
+        return _Failure("one landmark without its four corners and no attitude: "
+                        "pose unobservable")
     if n < 4:
         return _Failure(f"{n} points and no attitude: need four or more (P3P is ambiguous)")
     centred = pts.points_ned - pts.points_ned.mean(axis=0)

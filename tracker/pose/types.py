@@ -41,6 +41,10 @@ class Observation:
     quadrilateral about its centre, given as the change of the plate's width in pixels (an
     alignment's outline is drawn in or out as a whole); None or 0: the corners' errors are
     independent.
+    ``corners_measured``: which of the four corners were measured (a plate cut by the
+    image's edge: the corners outside the image are only extrapolated, and are not
+    observations); None: all four.  A partly measured plate gives its measured corners as
+    points, without the outline's common errors.
     """
 
     centre_px: tuple[float, float]
@@ -53,6 +57,13 @@ class Observation:
     signature: tuple[float, ...] | None = None
     corner_sigma_px: float | None = None
     corner_scale_sigma_px: float | None = None
+    corners_measured: tuple[bool, bool, bool, bool] | None = None
+
+    @property
+    def all_corners(self) -> bool:
+        """Four measured corners (a whole outline)?"""
+        return self.corners_px is not None and (
+            self.corners_measured is None or all(self.corners_measured))
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,10 @@ def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
             return f"corners_px must be four (u, v) pairs, got {len(obs.corners_px)}"
         if not _finite(flat):
             return "corners_px contains a value that is not finite"
+    measured = obs.corners_measured
+    if measured is not None and (obs.corners_px is None or len(measured) != 4
+                                 or not any(measured)):
+        return "corners_measured must flag four corners_px, at least one of them measured"
     sigma = obs.corner_sigma_px
     if sigma is not None and (not _finite((sigma,)) or sigma <= 0.0):
         return f"corner_sigma_px must be finite and > 0, got {sigma!r}"
@@ -43,7 +47,8 @@ def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
         return f"corner_scale_sigma_px must be finite and >= 0, got {scale!r}"
     if obs.signature is not None and not _finite(tuple(obs.signature)):
         return "signature contains a value that is not finite"
-    pts = [obs.centre_px, *(obs.corners_px or ())]
+    flags = obs.corners_measured or (True,) * 4  # an unmeasured corner may lie anywhere
+    pts = [obs.centre_px, *(c for c, m in zip(obs.corners_px or (), flags, strict=False) if m)]
     if any(
         not (-width_px <= u <= 2 * width_px and -height_px <= v <= 2 * height_px) for u, v in pts
     ):

@@ -1,0 +1,87 @@
+"""A plate cut by the image's edge keeps its homography (tracker/edge_align.py, issue 19).
+
+A full homography aligned on the corner of a plate still in view bends the corners
+outside; the affine move of the last homography keeps them, and holds the corner inside.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from tracker.acquire import ReferenceMatcher, homography_to, project_corners, refine_ecc
+from tracker.edge_align import align_cut, box_shift, shifted
+
+from .test_acquire import place, textured_poster
+
+
+def _frames(seed: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A 256x170 poster drawn 300x200 px with only its top-left part in the image (about
+    a sixth of it), moving 1.5 px left and up (and growing 0.5 %) a frame for 12 frames."""
+    rng = np.random.default_rng(seed)
+    start = np.array([[540.0, 390.0], [840.0, 396.0], [836.0, 596.0], [544.0, 590.0]])
+    start += rng.uniform(-5, 5, (4, 2))
+    out = []
+    for k in range(12):
+        centre = start.mean(axis=0)
+        out.append(centre + (start - centre) * (1.0 + 0.005 * k) - 1.5 * k)
+    return start, out
+
+
+def test_a_cut_plate_holds_its_corners_where_a_full_alignment_bends_them() -> None:
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    for seed in range(3):
+        _, truths = _frames(seed)
+        hom_cut = hom_full = homography_to(ref, truths[0])
+        err_cut, err_full = [], []
+        for k, truth in enumerate(truths[1:], start=1):
+            gray = cv2.cvtColor(place(poster, truth, seed=seed + k), cv2.COLOR_BGR2GRAY)
+            moved = align_cut(ref, gray, hom_cut)
+            assert moved is not None, (seed, k)
+            hom_cut = moved
+            full = refine_ecc(ref, gray, hom_full)
+            hom_full = hom_full if full is None else full
+            err_cut.append(np.abs(project_corners(ref, hom_cut) - truth).max(axis=1))
+            err_full.append(np.abs(project_corners(ref, hom_full) - truth).max(axis=1))
+        inside = np.array(err_cut)[:, 0]  # the top-left corner, in the image
+        print(f"seed {seed}: cut: inside corner {inside.max():.2f} px, outside "
+              f"{np.array(err_cut)[:, 1:].max():.1f} px; full homography: outside "
+              f"{np.array(err_full)[:, 1:].max():.1f} px")
+        assert inside.max() < 0.5
+        assert np.array(err_cut)[:, 1:].max() < 1.0
+        assert np.array(err_full)[:, 1:].max() > 2.0  # what the affine move avoids
+
+
+def test_too_little_in_view_is_refused() -> None:
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    corners = np.array([[636.0, 476.0], [936.0, 476.0], [936.0, 676.0], [636.0, 676.0]])
+    gray = cv2.cvtColor(place(poster, corners), cv2.COLOR_BGR2GRAY)
+    assert align_cut(ref, gray, homography_to(ref, corners)) is None
+
+
+def test_the_box_shift_follows_the_edges_inside_the_image() -> None:
+    """A plate cut at the right: its box's left edge moves with it, its right edge (out of
+    the image) says nothing; a plate cut on both sides of an axis gives no shift there."""
+    assert box_shift((500.0, 100.0, 200.0, 80.0), (488.0, 103.0, 200.0, 80.0), 640, 480) \
+        == (-12.0, 3.0)
+    assert box_shift((-50.0, 100.0, 200.0, 80.0), (-40.0, 100.0, 200.0, 80.0), 640, 480) \
+        == (10.0, 0.0)
+    assert box_shift((-5.0, 0.0, 700.0, 80.0), (-9.0, 0.0, 700.0, 80.0), 640, 480)[0] == 0.0
+
+
+def test_a_cut_plate_sliding_fast_is_held_from_its_box_shift() -> None:
+    """18 px a frame: started where the plate was, the alignment lost it at the third frame
+    (measured); started where its box moved (``shifted``), it holds the corner inside."""
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    start = np.array([[400.0, 330.0], [700.0, 336.0], [696.0, 536.0], [404.0, 530.0]])
+    hom = homography_to(ref, start)
+    for k in range(1, 6):
+        truth = start - np.array([18.0 * k, 0.0])
+        gray = cv2.cvtColor(place(poster, truth, seed=k), cv2.COLOR_BGR2GRAY)
+        moved = align_cut(ref, gray, shifted(hom, -18.0, 0.0))
+        assert moved is not None
+        hom = moved
+        assert np.abs(project_corners(ref, hom)[0] - truth[0]).max() < 0.5
