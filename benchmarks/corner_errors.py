@@ -67,7 +67,7 @@ def sightings(folder: Path, args: argparse.Namespace) -> list[tuple[float, ...]]
             continue
         p = ft.pose
         pos = np.array([p.north_m, p.east_m, p.down_m])
-        used = {o.landmark_id: perception._residual_floor(o)
+        used = {o.landmark_id: perception.noise.floor(o, perception.tracks)
                 for o in perception.observations(frame.index)}
         for lid, track in perception.tracks.items():
             obs = used.get(lid)
@@ -81,7 +81,7 @@ def sightings(folder: Path, args: argparse.Namespace) -> list[tuple[float, ...]]
             err = np.asarray(obs.corners_px) - true
             quad = np.asarray(obs.corners_px)
             width = float(np.ptp(quad[:, 0]))
-            model = perception._corner_sigma(obs.corners_px) or float("nan")
+            model = perception.noise.sigma(obs.corners_px) or float("nan")
             fit = float("nan") if track.fit_sigma is None else track.fit_sigma
             out.append((width, float(np.sqrt(np.mean(err**2))), obs.corner_sigma_px or 0.0,
                         model, fit, frame.index, *err.mean(axis=0)))

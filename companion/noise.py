@@ -4,7 +4,7 @@ A landmark is held still in front of the camera (camera on a tripod, or the vehi
 the ground); the real perception (acquisition, tracking, ECC corner alignment) runs on
 every frame and the spread of each corner about its mean is the jitter the pose solver
 will see.  The perception gives a plate of width W the corner sigma
-``pixel_sigma_px * s * (ref * s / W) ** exponent`` (``Perception._corner_sigma``; s is
+``pixel_sigma_px * s * (ref * s / W) ** exponent`` (``CornerNoise.sigma``; s is
 the rectification's stretch), so the value written is the jitter divided by that factor:
 on this plate, the perception then states exactly the jitter measured.  (In flight the
 perception states the larger of that and the alignment's own fit sigma times
@@ -68,7 +68,7 @@ def measure_noise(perception: Perception, frames: Iterable[Frame], landmark_id: 
         if track is not None and track.corners is not None:
             quad = np.asarray(track.corners, dtype=np.float64).copy()
             corners.append(quad)
-            sigma = perception._corner_sigma([(float(u), float(v)) for u, v in quad])
+            sigma = perception.noise.sigma([(float(u), float(v)) for u, v in quad])
             factors.append((sigma or unit) / unit)
         if progress is not None and read % 30 == 0:
             progress(f"{read} frames, {len(corners)} with {landmark_id}'s corners")

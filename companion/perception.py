@@ -26,7 +26,6 @@ Algorithms live in ``tracker/``; this module only keeps state and glues them tog
 from __future__ import annotations
 
 import concurrent.futures
-import dataclasses
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -37,6 +36,7 @@ import numpy.typing as npt
 
 from companion.acquisition import TRACK_MIN_CORRELATION, Acquisition
 from companion.app import Frame, FrameResult
+from companion.corner_noise import CornerNoise
 from companion.fixgate import FixGate, FixGateConfig
 from companion.perception_types import (
     DetectFn,
@@ -63,7 +63,6 @@ from tracker.camera import CameraModel, Rectifier
 from tracker.edge_align import align_cut, box_shift, shifted
 from tracker.pose.attitude_bias import AttitudeBias
 from tracker.pose.config import PoseConfig
-from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.solve import solve_pose
 from tracker.pose.types import (
     MapLandmark,
@@ -79,11 +78,7 @@ FloatArray = npt.NDArray[np.float64]
 
 #: How many frames' fixes are kept for housekeeping to look up.
 RECENT_FIXES = 8
-#: Parameters a fix fits to its corners (position and attitude).
-POSE_PARAMETERS = 6
 
-#: A cut plate's corner is measured when its outline puts it this far inside the image (px).
-EDGE_MARGIN_PX = 3.0
 
 
 def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
@@ -116,6 +111,8 @@ class Perception(Acquisition):
         self.tracker_config = tracker_config
         self.pose_config = pose_config or PoseConfig()
         self.sensors = sensors
+        self.noise = CornerNoise(self.camera, self.config, self.pose_config, self._rectify,
+                                 self.landmarks)
         self.matcher = ReferenceMatcher(acquire_config)  # housekeeping's
         self.unmatchable: dict[str, str] = {}
         for lid, image in references.items():
@@ -422,9 +419,10 @@ class Perception(Acquisition):
         """One observation per live track (corners when the alignment holds).
 
         A plate cut by the image's edge (less than ``min_corner_in_view`` of it in view)
-        gives the corners its outline puts inside the image by ``EDGE_MARGIN_PX`` as
+        gives the corners its outline puts inside the image by ``EDGE_MARGIN_PX``
+        (:mod:`companion.corner_noise`) as
         measured (``Observation.corners_measured``); the ones outside are extrapolations,
-        not observations.  Their sigma grows as the part in view shrinks (:meth:`_cut`).
+        not observations.  Their sigma grows as the part in view shrinks (:meth:`CornerNoise.cut`).
         When some tracks have corners, box-only tracks are left out: a box centre is not
         the landmark's centre under perspective, and mixing it in costs more than it adds.
         Without corners, a box that reaches out of the image is left out too: its centre is
@@ -434,12 +432,12 @@ class Perception(Acquisition):
         size = (self.camera.width, self.camera.height)
         cfg = self.config
         tracks = [t for t in self.tracks.values() if t.verify_failures == 0]
-        usable = {t.landmark_id: self._cut(t) for t in tracks
+        usable = {t.landmark_id: self.noise.cut(t) for t in tracks
                   if t.corners is not None and t.saturated <= cfg.max_corner_saturated}
         # a cut plate's fit sigma is its whole outline's (the extrapolated corners' too):
-        # not held against the size model, but stated (the larger of the two, _corner_sigma)
+        # not held against the size model, but stated (the larger of the two, CornerNoise.sigma)
         usable = {lid: cut for lid, cut in usable.items() if cut is not None
-                  and (cut[0] is not None or self._fits(self.tracks[lid]))}
+                  and (cut[0] is not None or self.noise.fits(self.tracks[lid]))}
         if usable:
             tracks = [t for t in tracks if t.landmark_id in usable]
         else:  # boxes only: a box reaching out of the image is not centred on its plate
@@ -451,9 +449,9 @@ class Perception(Acquisition):
                 (float(u), float(v)) for u, v in t.corners)
             centre = ((x + w / 2, y + h / 2) if corners is None
                       else tuple(float(c) for c in np.mean(corners, axis=0)))
-            stretch = 1.0 if corners is None else self._stretch(corners)  # once a plate
+            stretch = 1.0 if corners is None else self.noise.stretch(corners)  # once a plate
             scale = None if corners is None else self.config.corner_scale_sigma_px * stretch
-            sigma = self._corner_sigma(corners, stretch, t.fit_sigma)
+            sigma = self.noise.sigma(corners, stretch, t.fit_sigma)
             measured, grow = (None, 1.0) if cut is None else cut
             out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                    box_wh_px=(w, h), confidence=t.confidence,
@@ -462,96 +460,6 @@ class Perception(Acquisition):
                                    corner_sigma_px=None if sigma is None else sigma * grow,
                                    corner_scale_sigma_px=scale, corners_measured=measured))
         return out
-
-    def _cut(self, track: Track) -> tuple[tuple[bool, bool, bool, bool] | None, float] | None:
-        """Which of a track's corners are measured (None: all four) and the factor on their
-        sigma; None when none is.  In view by ``min_corner_in_view`` or more: all four, as
-        they are.  Less: the corners inside the image by ``EDGE_MARGIN_PX``, their sigma
-        grown by ``1 / sqrt(share in view)`` (the alignment rests on that part of the plate
-        only: fewer pixels, and none around the corners outside)."""
-        assert track.corners is not None
-        size = (self.camera.width, self.camera.height)
-        share = in_view_share(track.corners, *size)
-        if share >= self.config.min_corner_in_view:
-            return None, 1.0
-        flags = tuple(bool(inside(np.asarray([c]), *size, margin=EDGE_MARGIN_PX))
-                      for c in track.corners)
-        if share <= 0.0 or not any(flags):
-            return None
-        return (flags[0], flags[1], flags[2], flags[3]), 1.0 / float(np.sqrt(share))
-
-    def _fits(self, track: Track) -> bool:
-        """The alignment's fit sigma is within ``max_fit_sigma_ratio`` of the size model's."""
-        if track.fit_sigma is None or track.corners is None:
-            return True
-        corners = [(float(u), float(v)) for u, v in track.corners]
-        model = self._corner_sigma(corners) or 0.0
-        return track.fit_sigma <= self.config.max_fit_sigma_ratio * model
-
-    def _stretch(self, corners: Sequence[tuple[float, float]]) -> float:
-        """Rectified px per raw px at the plate's centre (1 without rectification)."""
-        if self._rectify is None:
-            return 1.0
-        centre = np.asarray(corners, np.float64).mean(axis=0)
-        return self._rectify.scale_at((float(centre[0]), float(centre[1])))
-
-    def _corner_sigma(self, corners: Sequence[tuple[float, float]] | None,
-                      s: float | None = None, fit: float | None = None) -> float | None:
-        """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``).
-
-        In a rectified frame, the plate was imaged ``s`` times smaller than it is drawn
-        (``s``: rectified px per raw px at its centre, :meth:`_stretch`, above 1 towards the
-        edges of a barrel-distorted frame), so its corners have the raw sigma of a plate
-        ``width / s`` wide, stretched by ``s`` (computed when not given).  ``fit``: the
-        alignment's own estimate (:func:`tracker.verify.fit_corner_sigma`); the larger of
-        the two is stated."""
-        if corners is None:
-            return None
-        s = self._stretch(corners) if s is None else s
-        cfg = self.config
-        quad = np.asarray(corners, np.float64)
-        width = max(float(np.ptp(quad[:, 0])), 1.0)
-        model = float(s * self.pose_config.pixel_sigma_px
-                      * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
-        return model if fit is None else max(model, cfg.fit_sigma_scale * fit)
-
-    def _residual_floor(self, obs: Observation) -> Observation:
-        """``obs`` with its corner sigma raised for saturation (``saturated_sigma_gain``)
-        and to what its track's corners have really missed by in recent fixes
-        (``residual_sigma_fixes``); unchanged without corners."""
-        track = None if obs.landmark_id is None else self.tracks.get(obs.landmark_id)
-        if obs.corner_sigma_px is None or track is None:
-            return obs
-        sigma = obs.corner_sigma_px * (1.0 + self.config.saturated_sigma_gain * track.saturated)
-        if track.residual_var is not None and self.config.residual_sigma_fixes > 0:
-            sigma = max(sigma, float(np.sqrt(track.residual_var)))
-        return obs if sigma == obs.corner_sigma_px else \
-            dataclasses.replace(obs, corner_sigma_px=sigma)
-
-    def _learn_residuals(self, observations: Sequence[Observation], fix: PoseFix) -> None:
-        """Average each track's corner residuals against a fix from two or more plates'
-        corners: mean square per coordinate times n / (n - 6), n the fix's corner
-        coordinates, 6 the pose parameters fitted to them."""
-        used = [(o.landmark_id, o) for o in observations if o.corners_px is not None
-                and o.landmark_id in fix.landmark_ids and o.landmark_id in self.tracks]
-        fixes = self.config.residual_sigma_fixes
-        if len(used) < 2 or fixes <= 0:
-            return
-        n = 8 * len(used)
-        by_id = {lm.landmark_id: lm for lm in self.landmarks}
-        pos = np.asarray(fix.position_ned_m, np.float64)
-        for lid, o in used:
-            if lid is None:
-                continue
-            pts = self.camera.world_to_camera(landmark_corners_ned(by_id[lid]),
-                                              pos, fix.attitude_rpy_rad)
-            if not np.all(pts[:, 2] > 0):
-                continue
-            resid = np.asarray(o.corners_px) - self.camera.project_camera_points(pts)
-            var = float(np.mean(resid**2)) * n / (n - POSE_PARAMETERS)
-            track = self.tracks[lid]
-            last = track.residual_var
-            track.residual_var = var if last is None else last + (var - last) / fixes
 
     def _drop_rejected(self, observations: Sequence[Observation], fix: PoseFix
                        ) -> list[dict[str, Any]]:
@@ -585,14 +493,15 @@ class Perception(Acquisition):
         side = self.sensors(frame.t_us)
         bias = self.attitude_bias
         attitude = side.attitude if bias is None else bias.correct(side.attitude)
-        observations = [self._residual_floor(o) for o in self.observations(frame.index)]
+        observations = [self.noise.floor(o, self.tracks)
+                        for o in self.observations(frame.index)]
         fix = solve_pose(observations, self.landmarks, self.camera,
                          frame.t_us, attitude=attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
         if bias is not None:
             bias.learn(side.attitude, fix)
         if isinstance(fix, PoseFix):
-            self._learn_residuals(observations, fix)
+            self.noise.learn(observations, fix, self.tracks)
             events += self._drop_rejected(observations, fix)
         if isinstance(fix, NoFix):
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),

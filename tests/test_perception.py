@@ -78,7 +78,7 @@ def test_no_track_for_a_landmark_out_of_view() -> None:
     obs = [o for o in perception.observations(199) if o.corners_px is not None]
     assert obs, "no corners: the rest would prove nothing"
     for o in obs:
-        assert o.corner_sigma_px == perception._corner_sigma(o.corners_px)
+        assert o.corner_sigma_px == perception.noise.sigma(o.corners_px)
         assert o.corner_scale_sigma_px == perception.config.corner_scale_sigma_px
     perception.config = dataclasses.replace(perception.config, corner_scale_sigma_px=0.2)
     assert all(o.corner_scale_sigma_px == 0.2 for o in perception.observations(199)
@@ -143,7 +143,7 @@ def test_small_plates_corners_carry_a_larger_sigma() -> None:
     def plate(width: float) -> tuple[tuple[float, float], ...]:
         return ((100.0, 100.0), (100.0 + width, 100.0), (100.0 + width, 160.0), (100.0, 160.0))
 
-    sigma = perception._corner_sigma
+    sigma = perception.noise.sigma
     assert sigma(plate(100.0)) == pytest.approx(0.2)
     assert sigma(plate(50.0)) == pytest.approx(0.2 * 2.0**0.8)
     assert (sigma(plate(200.0)) or 1.0) < 0.2
@@ -151,7 +151,7 @@ def test_small_plates_corners_carry_a_larger_sigma() -> None:
     flat = Perception(sim.scenario.camera, landmarks, references,
                       config=PerceptionConfig(corner_sigma_exponent=0.0),
                       pose_config=PoseConfig(pixel_sigma_px=0.2))
-    assert flat._corner_sigma(plate(37.0)) == pytest.approx(0.2)
+    assert flat.noise.sigma(plate(37.0)) == pytest.approx(0.2)
     perception.close()
     flat.close()
 
@@ -169,14 +169,14 @@ def test_a_plate_at_the_edge_of_a_rectified_frame_carries_a_larger_corner_sigma(
         return ((x - 40, y - 30), (x + 40, y - 30), (x + 40, y + 30), (x - 40, y + 30))
 
     assert perception._rectify is not None
-    centre = perception._corner_sigma(plate(319.5, 239.5))
+    centre = perception.noise.sigma(plate(319.5, 239.5))
     assert centre == pytest.approx(0.2 * (100 / 80) ** 0.8, rel=1e-3)
     s = perception._rectify.scale_at((580.0, 420.0))
     assert s > 1.2
-    assert perception._corner_sigma(plate(580.0, 420.0)) == pytest.approx(centre * s**1.8,
+    assert perception.noise.sigma(plate(580.0, 420.0)) == pytest.approx(centre * s**1.8,
                                                                         rel=1e-6)
-    assert perception._stretch(plate(580.0, 420.0)) == s  # the outline's scale error too
-    assert perception._stretch(plate(319.5, 239.5)) == pytest.approx(1.0, abs=1e-3)
+    assert perception.noise.stretch(plate(580.0, 420.0)) == s  # the outline's scale error too
+    assert perception.noise.stretch(plate(319.5, 239.5)) == pytest.approx(1.0, abs=1e-3)
     perception.close()
 
 

@@ -77,7 +77,7 @@ def test_a_track_on_its_landmark_passes_the_check_and_states_the_fit_sigma() -> 
     assert p._verify_tracks(frame) == [] and track.verify_failures == 0
     track.fit_sigma = 1e-4
     (obs,) = p.observations(0)
-    model = p._corner_sigma(obs.corners_px)
+    model = p.noise.sigma(obs.corners_px)
     assert model is not None and obs.corner_sigma_px == model
     track.fit_sigma = 2.0 * model
     (obs,) = p.observations(0)
@@ -127,7 +127,7 @@ def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
     two plates state at least that RMS (times n / (n - 6)); a track whose corners matched
     keeps its sigma; one-plate fixes teach nothing.  A saturated plate's sigma grows with
     its saturated share."""
-    from companion.perception import POSE_PARAMETERS
+    from companion.corner_noise import POSE_PARAMETERS
     from tracker.pose.landmarks import landmark_corners_ned
     from tracker.pose.types import Observation, PoseFix
 
@@ -150,16 +150,16 @@ def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
                                corners_px=tuple((float(u), float(v)) for u, v in true)))
     fix = PoseFix(0, pos, rpy, np.eye(6), 90, ("a", "b"), "bearing_ls")
     one = PoseFix(0, pos, rpy, np.eye(6), 90, ("b",), "ippe")
-    p._learn_residuals(obs[1:], one)
+    p.noise.learn(obs[1:], one, p.tracks)
     assert p.tracks["b"].residual_var is None  # one plate: nothing learnt
     for _ in range(30):
-        p._learn_residuals(obs, fix)
+        p.noise.learn(obs, fix, p.tracks)
     expected = 1.0 * 16 / (16 - POSE_PARAMETERS)
     assert abs(p.tracks["b"].residual_var - expected) < 1e-6  # type: ignore[operator]
-    assert p._residual_floor(obs[1]).corner_sigma_px == pytest.approx(np.sqrt(expected))
-    assert p._residual_floor(obs[0]).corner_sigma_px == 0.2  # matched: unchanged
+    assert p.noise.floor(obs[1], p.tracks).corner_sigma_px == pytest.approx(np.sqrt(expected))
+    assert p.noise.floor(obs[0], p.tracks).corner_sigma_px == 0.2  # matched: unchanged
     p.tracks["a"].saturated = 0.5  # half its pixels saturated: 1 + 5.5 x 0.5
-    assert p._residual_floor(obs[0]).corner_sigma_px == pytest.approx(0.2 * 3.75)
+    assert p.noise.floor(obs[0], p.tracks).corner_sigma_px == pytest.approx(0.2 * 3.75)
 
 
 def test_a_track_whose_corners_the_pose_keeps_leaving_out_is_dropped() -> None:

@@ -1,0 +1,134 @@
+"""The corners' noise model: the 1-sigma a perception states for a plate's corners.
+
+Pure (no frames, no threads): from the corners' size in the image, the rectification's
+stretch there, the alignment's own fit, saturation, the residuals the corners really
+showed in fixes from two or more plates (issue 25), and, for a plate cut by the image's
+edge, which corners are measured (issue 19).  :class:`companion.perception.Perception`
+keeps the tracks and asks this model; docs/pose.md ("Corner noise") says where each term
+comes from.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from companion.perception_types import PerceptionConfig, Track
+from tracker.boxes import in_view_share, inside
+from tracker.camera import CameraModel, Rectifier
+from tracker.pose.config import PoseConfig
+from tracker.pose.landmarks import landmark_corners_ned
+from tracker.pose.types import MapLandmark, Observation, PoseFix
+
+#: A cut plate's corner is measured when its outline puts it this far inside the image (px).
+EDGE_MARGIN_PX = 3.0
+#: Parameters a fix fits to its corners (position and attitude).
+POSE_PARAMETERS = 6
+
+
+class CornerNoise:
+    """The corner sigma of a plate seen by ``camera`` (rectified by ``rectify`` if any).
+
+    It holds the configurations it was given: a perception whose ``config`` is replaced
+    later builds a new model (``Perception.noise``) for the change to reach it."""
+
+    def __init__(self, camera: CameraModel, config: PerceptionConfig, pose_config: PoseConfig,
+                 rectify: Rectifier | None, landmarks: Sequence[MapLandmark]) -> None:
+        self.camera = camera
+        self.config = config
+        self.pose_config = pose_config
+        self.rectify = rectify
+        self.landmarks = list(landmarks)
+
+    def cut(self, track: Track) -> tuple[tuple[bool, bool, bool, bool] | None, float] | None:
+        """Which of a track's corners are measured (None: all four) and the factor on their
+        sigma; None when none is.  In view by ``min_corner_in_view`` or more: all four, as
+        they are.  Less: the corners inside the image by ``EDGE_MARGIN_PX``, their sigma
+        grown by ``1 / sqrt(share in view)`` (the alignment rests on that part of the plate
+        only: fewer pixels, and none around the corners outside)."""
+        assert track.corners is not None
+        size = (self.camera.width, self.camera.height)
+        share = in_view_share(track.corners, *size)
+        if share >= self.config.min_corner_in_view:
+            return None, 1.0
+        flags = tuple(bool(inside(np.asarray([c]), *size, margin=EDGE_MARGIN_PX))
+                      for c in track.corners)
+        if share <= 0.0 or not any(flags):
+            return None
+        return (flags[0], flags[1], flags[2], flags[3]), 1.0 / float(np.sqrt(share))
+
+    def fits(self, track: Track) -> bool:
+        """The alignment's fit sigma is within ``max_fit_sigma_ratio`` of the size model's."""
+        if track.fit_sigma is None or track.corners is None:
+            return True
+        corners = [(float(u), float(v)) for u, v in track.corners]
+        model = self.sigma(corners) or 0.0
+        return track.fit_sigma <= self.config.max_fit_sigma_ratio * model
+
+    def stretch(self, corners: Sequence[tuple[float, float]]) -> float:
+        """Rectified px per raw px at the plate's centre (1 without rectification)."""
+        if self.rectify is None:
+            return 1.0
+        centre = np.asarray(corners, np.float64).mean(axis=0)
+        return self.rectify.scale_at((float(centre[0]), float(centre[1])))
+
+    def sigma(self, corners: Sequence[tuple[float, float]] | None,
+                      s: float | None = None, fit: float | None = None) -> float | None:
+        """The corners' 1-sigma for a plate of their size (see ``corner_sigma_exponent``).
+
+        In a rectified frame, the plate was imaged ``s`` times smaller than it is drawn
+        (``s``: rectified px per raw px at its centre, :meth:`stretch`, above 1 towards the
+        edges of a barrel-distorted frame), so its corners have the raw sigma of a plate
+        ``width / s`` wide, stretched by ``s`` (computed when not given).  ``fit``: the
+        alignment's own estimate (:func:`tracker.verify.fit_corner_sigma`); the larger of
+        the two is stated."""
+        if corners is None:
+            return None
+        s = self.stretch(corners) if s is None else s
+        cfg = self.config
+        quad = np.asarray(corners, np.float64)
+        width = max(float(np.ptp(quad[:, 0])), 1.0)
+        model = float(s * self.pose_config.pixel_sigma_px
+                      * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
+        return model if fit is None else max(model, cfg.fit_sigma_scale * fit)
+
+    def floor(self, obs: Observation, tracks: Mapping[str, Track]) -> Observation:
+        """``obs`` with its corner sigma raised for saturation (``saturated_sigma_gain``)
+        and to what its track's corners have really missed by in recent fixes
+        (``residual_sigma_fixes``); unchanged without corners."""
+        track = None if obs.landmark_id is None else tracks.get(obs.landmark_id)
+        if obs.corner_sigma_px is None or track is None:
+            return obs
+        sigma = obs.corner_sigma_px * (1.0 + self.config.saturated_sigma_gain * track.saturated)
+        if track.residual_var is not None and self.config.residual_sigma_fixes > 0:
+            sigma = max(sigma, float(np.sqrt(track.residual_var)))
+        return obs if sigma == obs.corner_sigma_px else \
+            dataclasses.replace(obs, corner_sigma_px=sigma)
+
+    def learn(self, observations: Sequence[Observation], fix: PoseFix,
+              tracks: Mapping[str, Track]) -> None:
+        """Average each track's corner residuals against a fix from two or more plates'
+        corners: mean square per coordinate times n / (n - 6), n the fix's corner
+        coordinates, 6 the pose parameters fitted to them."""
+        used = [(o.landmark_id, o) for o in observations if o.corners_px is not None
+                and o.landmark_id in fix.landmark_ids and o.landmark_id in tracks]
+        fixes = self.config.residual_sigma_fixes
+        if len(used) < 2 or fixes <= 0:
+            return
+        n = 8 * len(used)
+        by_id = {lm.landmark_id: lm for lm in self.landmarks}
+        pos = np.asarray(fix.position_ned_m, np.float64)
+        for lid, o in used:
+            if lid is None:
+                continue
+            pts = self.camera.world_to_camera(landmark_corners_ned(by_id[lid]),
+                                              pos, fix.attitude_rpy_rad)
+            if not np.all(pts[:, 2] > 0):
+                continue
+            resid = np.asarray(o.corners_px) - self.camera.project_camera_points(pts)
+            var = float(np.mean(resid**2)) * n / (n - POSE_PARAMETERS)
+            track = tracks[lid]
+            last = track.residual_var
+            track.residual_var = var if last is None else last + (var - last) / fixes
