@@ -329,6 +329,44 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     tracker's best feature separates the plate from what surrounds it, where grey levels
     may not: an edge without grey contrast cannot hold a corner).
     """
+    start = ecc_start(ref, frame, hom, weights_bgr)
+    if start is None:
+        return None
+    template, roi, warp = start.template, start.roi, start.warp
+    try:
+        cc, warp = _ecc_coarse(template, roi, warp, iterations)
+        if fine_iterations > 0:
+            cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1)
+    except cv2.error:
+        return None
+    out = start.from_roi @ warp @ start.to_template
+    if cc < min_correlation or not np.all(np.isfinite(out)):
+        return None
+    return np.asarray(out / out[2, 2], np.float64)
+
+
+@dataclass(frozen=True)
+class EccStart:
+    """What an ECC alignment of a reference in a frame starts from (:func:`ecc_start`)."""
+
+    #: the reference's plane at its size in the frame (float32)
+    template: npt.NDArray[np.float32]
+    #: the frame's window around the outline: grey, or the colour feature (float32)
+    roi: npt.NDArray[np.float32]
+    #: reference px -> template px
+    to_template: FloatArray
+    #: window px -> frame px
+    from_roi: FloatArray
+    #: template px -> window px, from the homography the alignment starts at
+    warp: FloatArray
+
+
+def ecc_start(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
+              weights_bgr: Weights | None = None) -> EccStart | None:
+    """The template, the window and the starting warp for aligning ``ref`` at ``hom``
+    (reference -> frame) in ``frame`` (grey, or BGR: grey levels of the window only, or
+    ``weights_bgr``'s colour feature); None when the outline is not finite or not in view.
+    The window is the outline's box, 15 % of its size plus 6 px larger."""
     corners = project_corners(ref, hom)
     if not np.all(np.isfinite(corners)):
         return None
@@ -338,11 +376,10 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     if window is None:
         return None
     x0, y0, x1, y1 = window
-    w, h = ref.size_px
     size = size_in_frame(ref, corners, 8)
     template = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
                                      interpolation=cv2.INTER_AREA), np.float32)
-    s_ref = resize_map((w, h), template.shape[1::-1])  # ref -> template
+    s_ref = resize_map(ref.size_px, template.shape[1::-1])  # ref -> template
     t_roi = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # roi -> frame
     warp = np.linalg.inv(t_roi) @ hom @ np.linalg.inv(s_ref)  # template -> roi
     crop = frame[y0:y1, x0:x1]
@@ -352,16 +389,7 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
         roi = np.asarray(cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY), np.float32)
     else:
         roi = crop.astype(np.float32)
-    try:
-        cc, warp = _ecc_coarse(template, roi, warp, iterations)
-        if fine_iterations > 0:
-            cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1)
-    except cv2.error:
-        return None
-    out = t_roi @ warp @ s_ref
-    if cc < min_correlation or not np.all(np.isfinite(out)):
-        return None
-    return np.asarray(out / out[2, 2], np.float64)
+    return EccStart(template, roi, s_ref, t_roi, warp)
 
 
 #: The coarse ECC stage runs at half resolution when the template's short side is at

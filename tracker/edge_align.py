@@ -15,16 +15,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.acquire import (
-    Reference,
-    Weights,
-    outline_window,
-    project,
-    project_corners,
-    reference_plane,
-    resize_map,
-    size_in_frame,
-)
+from tracker.acquire import Reference, Weights, ecc_start
 from tracker.geometry import FloatArray
 
 #: Fewest pixels of the plate in view that an alignment rests on.
@@ -43,34 +34,17 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
 
     ``frame`` is grey or BGR; with ``weights_bgr`` (BGR) aligned on that colour feature,
     as :func:`tracker.acquire.refine_ecc`."""
-    corners = project_corners(ref, hom)
-    if not np.all(np.isfinite(corners)):
+    start = ecc_start(ref, frame, hom, weights_bgr)
+    if start is None:
         return None
-    height, width = frame.shape[:2]
-    margin = 0.15 * float(np.ptp(corners, axis=0).max()) + 6.0
-    window = outline_window(corners, width, height, margin, 8)
-    if window is None:
-        return None
-    x0, y0, x1, y1 = window
-    size = size_in_frame(ref, corners, 8)
-    plane = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
-                                  interpolation=cv2.INTER_AREA), np.float32)
-    to_roi = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]])
-    warp = to_roi @ hom @ np.linalg.inv(resize_map(ref.size_px, size))
-    roi_size = (x1 - x0, y1 - y0)
+    plane, roi, warp = start.template, start.roi, start.warp
+    roi_size = roi.shape[1::-1]
     rendered = cv2.warpPerspective(plane, warp, roi_size, flags=cv2.INTER_LINEAR,
                                    borderMode=cv2.BORDER_REPLICATE)
     mask = cv2.erode(cv2.warpPerspective(np.ones(plane.shape, np.uint8), warp, roi_size,
                                          flags=cv2.INTER_NEAREST), np.ones((3, 3), np.uint8))
     if int(np.count_nonzero(mask)) < MIN_PIXELS:
         return None
-    crop = frame[y0:y1, x0:x1]
-    if weights_bgr is not None:
-        roi = project(crop, weights_bgr)
-    elif crop.ndim == 3:
-        roi = np.asarray(cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY), np.float32)
-    else:
-        roi = crop.astype(np.float32)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
     rendered = np.asarray(rendered, np.float32)
     try:  # the shift first (a wide basin), then the affine map from there
@@ -85,7 +59,8 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
         return None
     if float(np.abs(affine[:, :2] - np.eye(2)).max()) > MAX_LINEAR_STEP:
         affine = shift  # a sliver's affine map wandered (shear, squash): keep the shift
-    moved = np.linalg.inv(to_roi) @ np.vstack([affine, (0.0, 0.0, 1.0)]) @ to_roi @ hom
+    to_roi = np.linalg.inv(start.from_roi)
+    moved = start.from_roi @ np.vstack([affine, (0.0, 0.0, 1.0)]) @ to_roi @ hom
     return np.asarray(moved / moved[2, 2], np.float64)
 
 
