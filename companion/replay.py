@@ -113,7 +113,7 @@ class ReplaySource(OnCompanionClock):
         #: :data:`READY_S`, before the first frame)
         self.ready: Callable[[], bool] = lambda: True
         self.first_us: int | None = None
-        self.delivered = self.finished = 0
+        self.delivered = self.finished = self.settled = 0
         self._done = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
         times = [e.t_us for e in stream.entries]
@@ -139,6 +139,16 @@ class ReplaySource(OnCompanionClock):
     def done(self) -> None:
         """Called from the worker thread as it finished a frame."""
         self.finished += 1
+        self._wake()
+
+    def housekept(self) -> None:
+        """Called from the background lane's thread as it finished a frame's after-work
+        (acquisition: ``--fast`` waits for it too, so that a replay's result depends on
+        the stream and the settings alone, not on how the threads happened to run)."""
+        self.settled += 1
+        self._wake()
+
+    def _wake(self) -> None:
         if self._loop is not None:
             self._loop.call_soon_threadsafe(self._done.set)
 
@@ -151,7 +161,8 @@ class ReplaySource(OnCompanionClock):
             self.clock.start()
         r_us = frame.t_us - self.first_us
         if self.clock.fast:
-            while self.finished < self.delivered:  # the worker is still on the last one
+            # the worker, or the after-work's lane, is still on the last one
+            while min(self.finished, self.settled) < self.delivered:
                 self._done.clear()
                 await self._done.wait()
             self._step_to(r_us)
@@ -287,7 +298,7 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
 
     def processor(sensors: SensorHistory) -> ReplayScorer:
         scorers.append(ReplayScorer(perception_for(settings, camera, pmap, sensors), truth,
-                                    pmap.landmarks, sensors, source.done))
+                                    pmap.landmarks, sensors, source.done, source.housekept))
         return scorers[0]
 
     await fake.start()

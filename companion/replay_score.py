@@ -50,16 +50,18 @@ LIGHT_STEP = 1.25
 
 class ReplayScorer(TruthRecorder):
     """The demo's truth recorder on a recording, plus which frames got a fix and the
-    attitude the solver was given; ``done()`` is called as a frame is finished."""
+    attitude the solver was given; ``done()`` is called as a frame is finished (scored
+    too) and ``housekept()`` as its after-work is (``--fast`` waits for both)."""
 
     def __init__(self, perception: Perception, truth: RecordedTruth,
                  landmarks: Sequence[MapLandmark], sensors: SensorHistory,
-                 done: Callable[[], None]) -> None:
+                 done: Callable[[], None], housekept: Callable[[], None]) -> None:
         super().__init__(perception, lambda f: truth.position(f.t_us),
                          {lm.landmark_id: lm for lm in landmarks})
         self.truth = truth
         self.sensors = sensors
         self.done = done
+        self.housekept = housekept
         self.fixed: set[int] = set()
         self.attitude_errors: list[tuple[float, float, float]] = []
         self.wrong_run: dict[str, int] = {}
@@ -69,9 +71,18 @@ class ReplayScorer(TruthRecorder):
 
     def process(self, frame: Frame) -> FrameResult:
         try:
-            result: FrameResult = super().process(frame)
+            return self._scored(frame)
         finally:
             self.done()
+
+    def housekeeping(self, frame: Frame) -> None:
+        try:
+            super().housekeeping(frame)
+        finally:
+            self.housekept()
+
+    def _scored(self, frame: Frame) -> FrameResult:
+        result: FrameResult = super().process(frame)
         if result.fix is not None:
             self.fixed.add(frame.index)
         found = self.truth.pose_at(frame.t_us)
