@@ -12,8 +12,8 @@ latency ...) plus what a recording needs:
 * ``fixes_solved``, ``fixes_refused`` by reason (the bridge's), ``attitude_error_deg``: the
   attitude the solver was given against the true one (RMS per axis, and the mean yaw);
 * ``longest_wrong_track_frames``: the longest run of frames one track sat on a wrong place
-  (its box overlaps its landmark's true box, the projected corners' bounding box cut to the
-  image, at IoU < ``WRONG_IOU``, or its landmark is not in view);
+  (its box's part in the image overlaps its landmark's true box, the projected corners'
+  bounding box cut to the image, at IoU < ``WRONG_IOU``, or its landmark is not in view);
 * ``light_steps``: each frame whose mean grey level jumped by ``LIGHT_STEP`` or more from
   the frame before (recorded time ``at_s``) and ``fix_after_s``, the recorded time from it
   to the next fix (0: that frame had one; None: none came).
@@ -109,7 +109,7 @@ class ReplayScorer(TruthRecorder):
         for lid, track in tracks.items():
             lm = self.landmarks.get(lid)
             true = None if lm is None else true_box(camera, position, rpy, lm)
-            on = true is not None and box_iou(track.box, true) >= WRONG_IOU
+            on = on_its_landmark(track.box, true, camera)
             self.wrong_run[lid] = 0 if on else self.wrong_run.get(lid, 0) + 1
             self.longest_wrong = max(self.longest_wrong, self.wrong_run[lid])
 
@@ -134,9 +134,28 @@ def true_box(camera: CameraModel, position_ned: Sequence[float],
     if not np.all(pts[:, 2] > 0):
         return None
     uv = camera.project_camera_points(pts)
-    x0, y0 = max(float(uv[:, 0].min()), 0.0), max(float(uv[:, 1].min()), 0.0)
-    x1 = min(float(uv[:, 0].max()), camera.width - 1.0)
-    y1 = min(float(uv[:, 1].max()), camera.height - 1.0)
+    x0, y0 = float(uv[:, 0].min()), float(uv[:, 1].min())
+    return in_image((x0, y0, float(uv[:, 0].max()) - x0, float(uv[:, 1].max()) - y0),
+                    camera)
+
+
+def on_its_landmark(box: Sequence[float], true: tuple[float, float, float, float] | None,
+                    camera: CameraModel) -> bool:
+    """Is a track's ``box`` on its landmark, whose true box (:func:`true_box`) is ``true``
+    (None: not in view)?  Its part in the image must overlap the true box at IoU
+    ``WRONG_IOU`` or more."""
+    seen = in_image(box, camera)
+    return true is not None and seen is not None and box_iou(seen, true) >= WRONG_IOU
+
+
+def in_image(box: Sequence[float], camera: CameraModel
+             ) -> tuple[float, float, float, float] | None:
+    """The part of ``box`` (x, y, w, h) inside the image, None when nothing is: a track's
+    box is scored on it as the true box is, since a tracker box following a plate out of
+    the image reaches past the edge where the plate's true box is cut."""
+    x0, y0 = max(float(box[0]), 0.0), max(float(box[1]), 0.0)
+    x1 = min(float(box[0] + box[2]), camera.width - 1.0)
+    y1 = min(float(box[1] + box[3]), camera.height - 1.0)
     return None if x1 <= x0 or y1 <= y0 else (x0, y0, x1 - x0, y1 - y0)
 
 
