@@ -84,6 +84,13 @@ def companion_messages_in_tlog(folder: Path) -> dict[str, int]:
     return seen
 
 
+def logged(folder: Path, kind: str) -> int:
+    """How many ``kind`` messages of the companion's MAVProxy's tlog holds so far."""
+    if not list(folder.rglob("mav.tlog")):
+        return 0
+    return companion_messages_in_tlog(folder).get(kind, 0)
+
+
 @pytest.mark.skipif(not os.path.exists(MAVPROXY), reason="mavproxy.py not installed")
 async def test_mavproxy_routes_and_parses_the_companions_messages(tmp_path: Path) -> None:
     from mavlink_bridge.fake_autopilot import FakeAutopilot
@@ -111,6 +118,9 @@ async def test_mavproxy_routes_and_parses_the_companions_messages(tmp_path: Path
             assert await wait_for(lambda: len(fake.vision) == sent, 3.0)
             assert {r.reason for r in fake.vision} == {"fused"}
             assert await wait_for(lambda: "LMC: through mavproxy" in fake.statustexts, 3.0)
+            # MAVProxy writes its tlog from a thread of its own: let it catch up before it
+            # is stopped (at load 5 the last ODOMETRY was still unwritten at terminate)
+            await wait_for(lambda: logged(tmp_path, "ODOMETRY") >= sent, 5.0)
         finally:
             await bridge.stop()
             proc.terminate()
