@@ -85,11 +85,13 @@ class AdaptiveTracker:
         self._size0 = (w, h)
         self._state = np.array([x + w / 2.0, y + h / 2.0, 1.0])
         window = self._window(image, self._state, 0.0, 1.0)
-        self._cue: Cue = "grayscale" if is_grayscale(window.patch, cfg.gray_tolerance) else "colour"
+        self._cue: Cue = (
+            "grayscale" if is_grayscale(window.patch, cfg.features.gray_tolerance) else "colour"
+        )
         self._candidates = GRAY_FEATURES if self._cue == "grayscale" else tuple(range(49))
         self._first = (window, self._state.copy())
         self._refiner = Refiner(
-            cfg,
+            cfg.refine,
             as_float(window.patch, self._cue == "grayscale"),
             window.to_patch(self._state[:2]),
             2.0 * self._half(1.0, window)[0],
@@ -103,9 +105,9 @@ class AdaptiveTracker:
         self._gain = np.ones(3)
         self._p_first: FloatArray | None = None
         self._model = self._rank(window, self._state)
-        self._particles = np.tile(self._state, (cfg.particles, 1))
+        self._particles = np.tile(self._state, (cfg.filter.particles, 1))
         self._history: list[tuple[float, float]] = [(self._state[0], self._state[1])]
-        self._since_rank = rank_phase % cfg.rerank_every_frames
+        self._since_rank = rank_phase % cfg.features.rerank_every_frames
         self._low_frames = 0
         self._lost_frames = 0
 
@@ -142,7 +144,10 @@ class AdaptiveTracker:
         """
         image = check_image(image_bgr)
         planes = feature_bins(
-            image, self._model.features, self.config.bins, self.config.stretch_features
+            image,
+            self._model.features,
+            self.config.features.bins,
+            self.config.features.stretch_features,
         )
         return [
             (fid, self._model.llr[i][planes[i]].astype(np.float32))
@@ -160,15 +165,15 @@ class AdaptiveTracker:
         self, image: npt.NDArray[np.uint8], state: FloatArray, extra_px: float, widen: float
     ) -> Window:
         w, h = self._size0[0] * state[2], self._size0[1] * state[2]
-        grow = (0.5 + self.config.search_margin_frac) * widen
+        grow = (0.5 + self.config.filter.search_margin_frac) * widen
         extent = (w * grow + extra_px, h * grow + extra_px)
-        factor = work_factor(w, h, self.config.work_area_px)
+        factor = work_factor(w, h, self.config.filter.work_area_px)
         return cut_window(image, (state[0], state[1]), extent, factor)
 
     def _box_mean(self, window: Window, state: FloatArray) -> FloatArray:
         """Mean BGR of the central part (``gain_core_frac`` of the size) of the box ``state``."""
         c = window.to_patch(state[None, :2])[0]
-        half = self._half(state[2], window)[0] * self.config.gain_core_frac
+        half = self._half(state[2], window)[0] * self.config.illumination.gain_core_frac
         h, w = window.patch.shape[:2]
         x0, x1 = clamp_index(c[0] - half[0], 0, w - 1), clamp_index(c[0] + half[0], 1, w)
         y0, y1 = clamp_index(c[1] - half[1], 0, h - 1), clamp_index(c[1] + half[1], 1, h)
@@ -184,20 +189,20 @@ class AdaptiveTracker:
         return Window(window.x0, window.y0, window.fx, window.fy, patch)
 
     def _gain_applies(self) -> bool:
-        mode = self.config.gain_compensation
+        mode = self.config.illumination.gain_compensation
         return mode == "always" or (mode == "colour" and self._cue == "colour")
 
     def _effective_gain(self, gain: FloatArray) -> FloatArray:
         """The gain applied: a dead band (``gain_deadband``) keeps small drifts uncorrected."""
-        band = self.config.gain_deadband
+        band = self.config.illumination.gain_deadband
         return 1.0 + np.sign(gain - 1.0) * np.maximum(np.abs(gain - 1.0) - band, 0.0)
 
     def _frame_gain(self, image: npt.NDArray[np.uint8]) -> None:
         """gain <- (1-r) gain + r * (first frame's mean / this frame's mean), on a 1/8 grid."""
         ratio = self._ref_frame_mean / frame_mean(image)
-        if self.config.gain_mode == "grey":
+        if self.config.illumination.gain_mode == "grey":
             ratio = np.full(3, float(self._ref_frame_mean.sum() / frame_mean(image).sum()))
-        rate = self.config.gain_rate
+        rate = self.config.illumination.gain_rate
         self._gain = (1.0 - rate) * self._gain + rate * np.clip(ratio, 0.25, 4.0)
 
     def _update_gain(self, raw: Window, state: FloatArray, known: FloatArray | None) -> None:
@@ -208,11 +213,11 @@ class AdaptiveTracker:
         """
         current = self._box_mean(raw, state)
         ratio = np.clip(self._ref_mean / current, 0.25, 4.0)
-        if self.config.gain_mode == "grey":
+        if self.config.illumination.gain_mode == "grey":
             ratio = np.full(3, min(max(float(self._ref_mean.sum() / current.sum()), 0.25), 4.0))
-        rate = self.config.gain_rate
+        rate = self.config.illumination.gain_rate
         proposed = (1.0 - rate) * self._gain + rate * ratio
-        if self.config.gain_check and self._gain_applies():
+        if self.config.illumination.gain_check and self._gain_applies():
             if known is None:
                 now = self._rho_under_gains(raw, state, self._gain[None])
             else:
@@ -226,16 +231,23 @@ class AdaptiveTracker:
         cfg = self.config
         centre = raw.to_patch(state[None, :2])
         channels = np.moveaxis(raw.patch, 2, 0).astype(np.intp)
-        pixels = sample_bins(channels, centre, self._half(state[2], raw), cfg.sample_grid)[:, 0].T
+        pixels = sample_bins(channels, centre, self._half(state[2], raw), cfg.filter.sample_grid)[
+            :, 0
+        ].T
         effective = np.stack([self._effective_gain(g) for g in gains])
         lit = np.clip(pixels[None] * effective[:, None, :], 0, 255).astype(np.uint8)
-        planes = feature_bins(lit, self._model.features, cfg.bins, cfg.stretch_features)
+        planes = feature_bins(
+            lit, self._model.features, cfg.features.bins, cfg.features.stretch_features
+        )
         return bhattacharyya(self._sample_histograms(planes), self._model_hist())
 
     def _likelihood(self, window: Window) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float32]]:
         """Bin images of the selected features and their mean back-projected LLR image."""
         planes = feature_bins(
-            window.patch, self._model.features, self.config.bins, self.config.stretch_features
+            window.patch,
+            self._model.features,
+            self.config.features.bins,
+            self.config.features.stretch_features,
         )
         llr = self._model.llr
         image = llr[0][planes[0]]
@@ -254,36 +266,40 @@ class AdaptiveTracker:
         centre = window.to_patch(state[None, :2])[0]
         half = self._half(state[2], window)[0]
         patch_box = (centre[0] - half[0], centre[1] - half[1], 2 * half[0], 2 * half[1])
-        inner, ring = ring_masks(window.patch.shape[:2], patch_box, cfg.ring_area_ratio)
-        if self._cue == "colour" and not cfg.stretch_features:  # per pixel: box and ring only
+        inner, ring = ring_masks(window.patch.shape[:2], patch_box, cfg.features.ring_area_ratio)
+        if (
+            self._cue == "colour" and not cfg.features.stretch_features
+        ):  # per pixel: box and ring only
             used = inner | ring
             inner, ring = inner[used][None], ring[used][None]
-            planes = feature_bins(window.patch[used][None], self._candidates, cfg.bins)
+            planes = feature_bins(window.patch[used][None], self._candidates, cfg.features.bins)
         else:  # the grey features are neighbourhood operators: the whole window
-            planes = feature_bins(window.patch, self._candidates, cfg.bins, cfg.stretch_features)
-        p_now = masked_histograms(planes, inner, cfg.bins)
-        q = masked_histograms(planes, ring, cfg.bins)
+            planes = feature_bins(
+                window.patch, self._candidates, cfg.features.bins, cfg.features.stretch_features
+            )
+        p_now = masked_histograms(planes, inner, cfg.features.bins)
+        q = masked_histograms(planes, ring, cfg.features.bins)
         if self._p_first is None:
             self._p_first = p_now
-        anchor = cfg.anchor_weight if trusted else 1.0
+        anchor = cfg.features.anchor_weight if trusted else 1.0
         p = anchor * self._p_first + (1.0 - anchor) * p_now
         directions = colour_weights().astype(np.float64) if self._cue == "colour" else None
         top, _ = rank_features(
             p,
             q,
             self._candidates,
-            cfg.loglik_floor,
-            cfg.top_features,
+            cfg.features.loglik_floor,
+            cfg.features.top_features,
             directions,
-            cfg.max_feature_cosine,
+            cfg.features.max_feature_cosine,
         )
         rows = [self._candidates.index(f) for f in top]
-        llr = log_likelihood_ratio(p[rows], q[rows], cfg.loglik_floor)
+        llr = log_likelihood_ratio(p[rows], q[rows], cfg.features.loglik_floor)
         first_window, first_state = self._first
         first = self._hist(first_window, first_state[None], top)[0]
-        sel = feature_bins(window.patch, top, cfg.bins, cfg.stretch_features)
+        sel = feature_bins(window.patch, top, cfg.features.bins, cfg.features.stretch_features)
         recent = self._kernel(sel, centre[None], half[None])[0] if trusted else first
-        model = cfg.anchor_weight * first + (1.0 - cfg.anchor_weight) * recent
+        model = cfg.features.anchor_weight * first + (1.0 - cfg.features.anchor_weight) * recent
         around = centre[None] + _NEIGHBOURS * 2.0 * half[None]
         halves = np.repeat(half[None], len(around), axis=0)
         bg = self._kernel(sel, around, halves)
@@ -292,7 +308,9 @@ class AdaptiveTracker:
         return _Model(top, llr, first, recent, rho_ref, min(rho_bg, rho_ref - 0.05))
 
     def _hist(self, window: Window, states: FloatArray, ids: tuple[int, ...]) -> FloatArray:
-        planes = feature_bins(window.patch, ids, self.config.bins, self.config.stretch_features)
+        planes = feature_bins(
+            window.patch, ids, self.config.features.bins, self.config.features.stretch_features
+        )
         centres = window.to_patch(states[:, :2])
         return self._kernel(planes, centres, self._half(states[:, 2], window))
 
@@ -300,17 +318,17 @@ class AdaptiveTracker:
         self, planes: npt.NDArray[np.intp], centres: FloatArray, halves: FloatArray
     ) -> FloatArray:
         """Kernel histograms (eq. 2) of the appearance model: joint or per-feature."""
-        samples = sample_bins(planes, centres, halves, self.config.sample_grid)
+        samples = sample_bins(planes, centres, halves, self.config.filter.sample_grid)
         return self._sample_histograms(samples)
 
     def _sample_histograms(self, samples: npt.NDArray[np.intp]) -> FloatArray:
         """Kernel histograms from bins sampled on the kernel grid, (k, P, m) -> (P, ...)."""
         cfg = self.config
-        if cfg.appearance == "joint":
-            joint = joint_planes(samples, cfg.bins, cfg.joint_bins)
-            nbins = cfg.joint_bins ** samples.shape[0]
-            return histograms_from_samples(joint, cfg.sample_grid, nbins)
-        return histograms_from_samples(samples, cfg.sample_grid, cfg.bins)
+        if cfg.features.appearance == "joint":
+            joint = joint_planes(samples, cfg.features.bins, cfg.features.joint_bins)
+            nbins = cfg.features.joint_bins ** samples.shape[0]
+            return histograms_from_samples(joint, cfg.filter.sample_grid, nbins)
+        return histograms_from_samples(samples, cfg.filter.sample_grid, cfg.features.bins)
 
     def _confidence(self, rho: FloatArray) -> FloatArray:
         """Calibrated confidence: 0 at the background's similarity, 1 at the first frame's."""
@@ -318,7 +336,7 @@ class AdaptiveTracker:
         return np.minimum(np.maximum((rho - m.rho_bg) / (m.rho_ref - m.rho_bg), 0.0), 1.0)
 
     def _model_hist(self) -> FloatArray:
-        a = self.config.anchor_weight
+        a = self.config.features.anchor_weight
         return a * self._model.first + (1.0 - a) * self._model.recent
 
     def _noise(self) -> float:
@@ -326,41 +344,43 @@ class AdaptiveTracker:
         side = 0.5 * (self._size0[0] + self._size0[1]) * self._state[2]
         return motion_noise(
             self._history,
-            cfg.motion_history_frames,
-            cfg.motion_gain,
-            cfg.motion_min_frac * side,
-            cfg.motion_max_frac * side,
-            cfg.motion_initial_frac * side,
+            cfg.motion.motion_history_frames,
+            cfg.motion.motion_gain,
+            cfg.motion.motion_min_frac * side,
+            cfg.motion.motion_max_frac * side,
+            cfg.motion.motion_initial_frac * side,
         )
 
     def _track(self, image: npt.NDArray[np.uint8]) -> TrackResult:
         cfg = self.config
         noise = self._noise()
-        scale_range = (cfg.min_scale, cfg.max_scale)
-        particles = propagate(self._particles, noise, cfg.scale_noise, scale_range, self.rng)
-        if cfg.drift_gain > 0 and len(self._history) >= 2:  # CONDENSATION drift: mean velocity
+        scale_range = (cfg.motion.min_scale, cfg.motion.max_scale)
+        particles = propagate(self._particles, noise, cfg.motion.scale_noise, scale_range, self.rng)
+        if (
+            cfg.motion.drift_gain > 0 and len(self._history) >= 2
+        ):  # CONDENSATION drift: mean velocity
             steps = np.diff(np.asarray(self._history), axis=0)
-            particles[:, :2] += cfg.drift_gain * steps.mean(axis=0)
-        if cfg.gain_source == "frame":
+            particles[:, :2] += cfg.motion.drift_gain * steps.mean(axis=0)
+        if cfg.illumination.gain_source == "frame":
             self._frame_gain(image)
         raw = self._window(image, self._state, 2.0 * noise, 1.0)
         window = self._compensated(raw)
         planes, lik = self._likelihood(window)
         centres = window.to_patch(particles[:, :2])
         halves = self._half(particles[:, 2], window)
-        shifted = round(cfg.particles * cfg.mean_shift_fraction)
+        shifted = round(cfg.filter.particles * cfg.filter.mean_shift_fraction)
         tables = integral_images(np.maximum(lik, 0.0))
-        if shifted and cfg.mean_shift_iterations:
+        if shifted and cfg.filter.mean_shift_iterations:
             centres[:shifted] = mean_shift(
-                tables, centres[:shifted], halves[:shifted], cfg.mean_shift_iterations
+                tables, centres[:shifted], halves[:shifted], cfg.filter.mean_shift_iterations
             )
             particles[:shifted, :2] = window.to_frame(centres[:shifted])
         model = self._model_hist()
         hists = self._kernel(planes, centres, halves)
-        weights = particle_likelihood(bhattacharyya(hists, model), cfg.omega)
-        if cfg.llr_gain > 0:
+        weights = particle_likelihood(bhattacharyya(hists, model), cfg.filter.omega)
+        if cfg.filter.llr_gain > 0:
             weights = weights * self._llr_factor(lik, centres, halves)
-        kept = np.where(weights >= cfg.weight_threshold, weights, 0.0)
+        kept = np.where(weights >= cfg.filter.weight_threshold, weights, 0.0)
         if kept.sum() <= 0:
             kept = weights
         candidates = np.stack([weighted_estimate(particles, kept), particles[np.argmax(kept)]])
@@ -372,14 +392,14 @@ class AdaptiveTracker:
         self._particles = particles[systematic_resample(kept, self.rng)]
         state, hist, rho = candidates[best], cand_hists[best], float(rhos[best])
         image_f32 = as_float(raw.patch, self._cue == "grayscale")
-        if cfg.template_refine:
+        if cfg.refine.template_refine:
             pair = (raw, window)
             state, hist, rho, score = self._refined(image, image_f32, pair, planes, state)
         else:
             score = -1.0
         features = self._model.features
         result = self._accept(window, state, hist, rho, score)
-        if result.box is not None and result.confidence >= cfg.lost_below_confidence:
+        if result.box is not None and result.confidence >= cfg.lost.lost_below_confidence:
             # the box's histogram under the current gain (window compensated, same features)
             known = hist if window is not raw and features == self._model.features else None
             self._learn((image, image_f32), raw, state, score, known)
@@ -395,9 +415,9 @@ class AdaptiveTracker:
     ) -> None:
         """After a trusted frame: the gain; where the template located the target,
         :meth:`Refiner.learn` (which templates and whether the size filters learn)."""
-        if self.config.gain_source == "target":
+        if self.config.illumination.gain_source == "target":
             self._update_gain(raw, state, known)
-        if score >= self.config.template_accept_score:
+        if score >= self.config.refine.template_accept_score:
             frame, image_f32 = images
             box = (raw.to_patch(state[:2]), 2.0 * self._half(state[2], raw)[0])
             in_frame = (state[:2], self._box_px(state))
@@ -424,7 +444,7 @@ class AdaptiveTracker:
         """
         raw, window = windows
         refined, score = self._refine(image, image_f32, raw, state)
-        if score < self.config.template_accept_score:
+        if score < self.config.refine.template_accept_score:
             refined = np.array([state[0], state[1], self._state[2]])
             score = -1.0
         else:  # aspect: width x f, height / f (area kept)
@@ -458,22 +478,22 @@ class AdaptiveTracker:
         height / f) is left in ``self._aspect_step``.
         """
         cfg = self.config
-        if not cfg.template_refine:
+        if not cfg.refine.template_refine:
             return state, -1.0
         box = 2.0 * self._half(self._state[2], raw)[0]
         found = self._refiner.locate(
             image_f32, raw.to_patch(np.stack([state[:2], self._state[:2]])), box
         )
         xy = raw.to_frame(found.centre[None])[0]
-        if found.score < cfg.template_accept_score:  # not located: the caller keeps the size
+        if found.score < cfg.refine.template_accept_score:  # not located: the caller keeps the size
             return np.array([xy[0], xy[1], self._state[2]]), found.score
-        if self._refiner.slow_score < cfg.scale_read_score:  # size unreliable: keep it
+        if self._refiner.slow_score < cfg.refine.scale_read_score:  # size unreliable: keep it
             self._aspect_step = 1.0
             return np.array([xy[0], xy[1], self._state[2]]), found.score
         change = self._refiner.size_change(image, xy, self._box_px(self._state))
         self._aspect_step = float(np.sqrt(change[0] / change[1]))
         scale = self._state[2] * float(np.sqrt(change[0] * change[1]))
-        scale = min(max(scale, cfg.min_scale), cfg.max_scale)
+        scale = min(max(scale, cfg.motion.min_scale), cfg.motion.max_scale)
         return np.array([xy[0], xy[1], scale]), found.score
 
     def _box_px(self, state: FloatArray) -> FloatArray:
@@ -491,7 +511,7 @@ class AdaptiveTracker:
         contrast drops both when background enters the box and when target enters the ring.
         """
         vote = self._vote(lik, centres, halves)
-        return np.exp(self.config.llr_gain * (vote - vote.max()))
+        return np.exp(self.config.filter.llr_gain * (vote - vote.max()))
 
     def _vote(
         self, lik: npt.NDArray[np.float32], centres: FloatArray, halves: FloatArray
@@ -500,8 +520,8 @@ class AdaptiveTracker:
         table: FloatArray = np.asarray(cv2.integral(lik, sdepth=cv2.CV_64F), np.float64)[None]
         sums, area = window_sums(table, centres, halves)
         vote = sums[0] / np.maximum(area, 1.0)
-        if self.config.llr_vote == "contrast":
-            grow = float(np.sqrt(1.0 + self.config.ring_area_ratio))
+        if self.config.filter.llr_vote == "contrast":
+            grow = float(np.sqrt(1.0 + self.config.features.ring_area_ratio))
             outer, outer_area = window_sums(table, centres, halves * grow)
             vote = vote - (outer[0] - sums[0]) / np.maximum(outer_area - area, 1.0)
         return vote
@@ -518,25 +538,25 @@ class AdaptiveTracker:
         """
         cfg = self.config
         confidence = float(self._confidence(np.array([rho]))[0])
-        located = score >= cfg.template_accept_score
-        low = confidence < cfg.lost_below_confidence and not located
+        located = score >= cfg.refine.template_accept_score
+        low = confidence < cfg.lost.lost_below_confidence and not located
         self._low_frames = self._low_frames + 1 if low else 0
-        if self._low_frames >= cfg.lost_after_frames:
+        if self._low_frames >= cfg.lost.lost_after_frames:
             self._lost_frames = 1
             return self._result(None, confidence)
         reported = max(confidence, score) if located else confidence
         self._state = state = self._inside(state)
         self._history.append((state[0], state[1]))
-        del self._history[: -cfg.motion_history_frames - 1]
-        if confidence >= cfg.rerank_below_confidence:
-            rate = cfg.model_update_rate
+        del self._history[: -cfg.motion.motion_history_frames - 1]
+        if confidence >= cfg.features.rerank_below_confidence:
+            rate = cfg.features.model_update_rate
             self._model.recent = (1.0 - rate) * self._model.recent + rate * hist
         self._since_rank += 1
-        low = confidence < cfg.rerank_below_confidence and self._since_rank >= 3
-        due = self._since_rank >= cfg.rerank_every_frames or low
+        low = confidence < cfg.features.rerank_below_confidence and self._since_rank >= 3
+        due = self._since_rank >= cfg.features.rerank_every_frames or low
         # never below lost_below_confidence: features chosen against a ring around a box the
         # target has left make that background look like the target
-        if due and confidence >= cfg.lost_below_confidence:
+        if due and confidence >= cfg.lost.lost_below_confidence:
             self._model = self._rank(window, state, not low)
             self._since_rank = 0
         return self._result(self._box(state), reported)
@@ -544,7 +564,7 @@ class AdaptiveTracker:
     def _search_lost(self, image: npt.NDArray[np.uint8]) -> TrackResult:
         """Widening search: mode of the smoothed likelihood plus scattered, mean-shifted samples."""
         cfg = self.config
-        widen = cfg.reacquire_growth**self._lost_frames
+        widen = cfg.lost.reacquire_growth**self._lost_frames
         self._lost_frames += 1
         window = self._compensated(self._window(image, self._state, 0.0, widen))
         planes, lik = self._likelihood(window)
@@ -554,25 +574,29 @@ class AdaptiveTracker:
         ksize = (int(np.clip(2 * half[0], 1, w)), int(np.clip(2 * half[1], 1, h)))
         smooth = cv2.boxFilter(positive, -1, ksize)
         iy, ix = np.unravel_index(int(np.argmax(smooth)), smooth.shape)
-        scatter = self.rng.random((cfg.particles - 1, 2)) * np.array([w, h])
+        scatter = self.rng.random((cfg.filter.particles - 1, 2)) * np.array([w, h])
         centres = np.vstack([[ix + 0.5, iy + 0.5], scatter])
         halves = np.repeat(half[None], len(centres), axis=0)
-        centres = mean_shift(integral_images(positive), centres, halves, cfg.mean_shift_iterations)
+        centres = mean_shift(
+            integral_images(positive), centres, halves, cfg.filter.mean_shift_iterations
+        )
         hists = self._kernel(planes, centres, halves)
         rhos = bhattacharyya(hists, self._model_hist())
         best = int(np.argmax(rhos))
         confidence = float(self._confidence(rhos[best : best + 1])[0])
-        if confidence < cfg.reacquire_confidence:
+        if confidence < cfg.lost.reacquire_confidence:
             return self._result(None, confidence)
         xy = window.to_frame(centres[best])
         state = np.array([xy[0], xy[1], self._state[2]])
-        if cfg.template_refine:  # the template must agree: histograms alone re-acquire clutter
+        if (
+            cfg.refine.template_refine
+        ):  # the template must agree: histograms alone re-acquire clutter
             patch = as_float(window.patch, self._cue == "grayscale")
             state, score = self._refine(image, patch, window, state)
-            if score < cfg.template_accept_score:
+            if score < cfg.refine.template_accept_score:
                 return self._result(None, confidence)
         self._state = self._inside(state)
-        self._particles = np.tile(self._state, (cfg.particles, 1))
+        self._particles = np.tile(self._state, (cfg.filter.particles, 1))
         self._history = [(self._state[0], self._state[1])]
         self._lost_frames = 0
         self._low_frames = 0
@@ -595,5 +619,5 @@ class AdaptiveTracker:
             features=self._model.features,
             lost=box is None,
             cue=self._cue,
-            particles=self.config.particles,
+            particles=self.config.filter.particles,
         )

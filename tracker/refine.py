@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from tracker.config import TrackerConfig
+from tracker.config import RefineConfig
 from tracker.scale_filter import (
     ScaleFilter,
     factor_pairs,
@@ -47,7 +47,7 @@ class Refiner:
 
     def __init__(
         self,
-        config: TrackerConfig,
+        config: RefineConfig,
         patch: Patch,
         centre: FloatArray,
         box: FloatArray,

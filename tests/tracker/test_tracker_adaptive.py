@@ -7,6 +7,7 @@ import numpy.typing as npt
 import pytest
 
 from tracker import AdaptiveTracker, TrackerConfig
+from tracker.config import replace
 from tracker.features import GRAY_FEATURES
 
 Scene = tuple[list[npt.NDArray[np.uint8]], npt.NDArray[np.float64]]
@@ -121,15 +122,15 @@ def test_bad_frames_are_value_errors_naming_image(moving_sign: Scene) -> None:
 
 
 def test_bad_config_is_a_value_error_naming_the_field() -> None:
-    with pytest.raises(ValueError, match=r"^config.particles: expected a value >= 4"):
-        AdaptiveTracker(TrackerConfig(particles=2))
+    with pytest.raises(ValueError, match=r"^config\.filter\.particles: expected a value >= 4"):
+        AdaptiveTracker(replace(TrackerConfig(), particles=2))
 
 
 def test_rank_phase_shifts_the_periodic_reranking(moving_sign: Scene) -> None:
     """Trackers started together re-rank on different frames when given different phases
     (the live pipeline's per-frame cost stays even); the phase moves the schedule only."""
     frames, truth = moving_sign
-    every = TrackerConfig().rerank_every_frames
+    every = TrackerConfig().features.rerank_every_frames
 
     def rerank_frames(phase: int) -> list[int]:
         t = AdaptiveTracker(seed=0)
