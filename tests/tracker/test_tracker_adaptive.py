@@ -133,19 +133,14 @@ def test_rank_phase_shifts_the_periodic_reranking(moving_sign: Scene) -> None:
     every = TrackerConfig().features.rerank_every_frames
 
     def rerank_frames(phase: int) -> list[int]:
+        """The frames after which the state says the features were just ranked."""
         t = AdaptiveTracker(seed=0)
         t.init(frames[0], tuple(truth[0]), rank_phase=phase)
         ranked: list[int] = []
-        now = [0]  # the frame being updated
-        rank = t._rank
-
-        def counting(*args: object, **kwargs: object) -> object:
-            ranked.append(now[0])
-            return rank(*args, **kwargs)  # type: ignore[arg-type]
-
-        t._rank = counting  # type: ignore[method-assign,assignment]
-        for now[0], image in enumerate(frames[1:31], start=1):
+        for now, image in enumerate(frames[1:31], start=1):
             t.update(image)
+            if t.state.since_rank == 0:
+                ranked.append(now)
         return ranked
 
     assert rerank_frames(0)[:3] == [every, 2 * every, 3 * every]
