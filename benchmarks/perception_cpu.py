@@ -77,6 +77,7 @@ def configs(args: argparse.Namespace) -> dict[str, Any]:
     """Perception's keyword arguments for ``--layer``, ``--max-tracks``, ``--particles``."""
     from companion.perception import PerceptionConfig
     from tracker import TrackerConfig
+    from tracker.config import replace as replace_tracker
 
     if args.layer == "flight":
         from tracker.detector import Detector
@@ -96,8 +97,7 @@ def configs(args: argparse.Namespace) -> dict[str, Any]:
     if args.max_tracks is not None:
         kw["config"] = dataclasses.replace(kw["config"], max_tracks=args.max_tracks)
     if args.particles is not None:
-        kw["tracker_config"] = dataclasses.replace(kw["tracker_config"],
-                                                   particles=args.particles)
+        kw["tracker_config"] = replace_tracker(kw["tracker_config"], particles=args.particles)
     return kw
 
 

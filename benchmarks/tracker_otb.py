@@ -10,8 +10,9 @@ the others).  Prints a markdown table (mean over seeds for the particle trackers
 the OpenCV peers MIL and, where opencv-contrib is installed, CSRT) with updates/s measured in
 the same run.  ``--ablation`` adds the adaptive tracker with all particles mean-shifted
 (Shan et al.) and with none.  ``--trackers`` runs only the named rows (exploring: our tracker
-alone, CSRT once for the table); ``--set NAME=VALUE`` overrides a ``TrackerConfig`` field of
-every adaptive row (a candidate measured on all sequences before it becomes a default);
+alone, CSRT once for the table); ``--set NAME=VALUE`` overrides a ``TrackerConfig`` field,
+named bare (``particles``, not ``filter.particles``), of every adaptive row (a candidate
+measured on all sequences before it becomes a default);
 ``--per-seed`` adds each seed's AUC and mean centre error; ``--dump DIR`` writes, per
 sequence, tracker and seed, a CSV of every frame's box, truth, confidence and centre error
 (``DIR/<sequence>-<tracker>-s<seed>.csv``) to find the frames that carry a mean.
@@ -25,7 +26,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
-import dataclasses  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -39,26 +39,26 @@ from companion.evaluation.sequences import load_sequence  # noqa: E402
 from companion.evaluation.synthetic import SynthSpec, write_otb  # noqa: E402
 from tracker import AdaptiveTracker, TrackerConfig  # noqa: E402
 from tracker.baselines import csrt_available  # noqa: E402
-from tracker.config import check_config  # noqa: E402
+from tracker.config import GROUP_OF, check_config, replace  # noqa: E402
 
 SEQUENCES = ("Coke", "Tiger1", "Car4", "Crossing", "boat1")
 PEERS = ("mil", "csrt")  # OpenCV peers: one run (the seed only seeds cv2.setRNGSeed)
 
 
 def _override(sets: list[str]) -> TrackerConfig:
-    """``TrackerConfig`` with ``NAME=VALUE`` fields replaced (the value parsed as the field's
-    type)."""
+    """``TrackerConfig`` with ``NAME=VALUE`` fields replaced (``NAME`` a field's bare name,
+    e.g. ``particles`` for ``filter.particles``; the value parsed as the field's type)."""
     base = TrackerConfig()
     changes: dict[str, object] = {}
     for item in sets:
         name, _, text = item.partition("=")
-        if not hasattr(base, name):
+        if name not in GROUP_OF:
             raise SystemExit(f"--set {item}: TrackerConfig has no field {name!r}")
-        old = getattr(base, name)
+        old = getattr(getattr(base, GROUP_OF[name]), name)
         changes[name] = (
             text.lower() in ("1", "true", "yes") if isinstance(old, bool) else type(old)(text)
         )
-    config = dataclasses.replace(base, **changes)
+    config = replace(base, **changes)
     check_config(config)
     return config
 
@@ -73,8 +73,8 @@ def _variants(ablation: bool, base: TrackerConfig) -> dict[str, TrackerConfig | 
     if csrt_available():  # opencv-contrib only: run from a separate venv (docs/benchmarks.md)
         out["csrt"] = None
     if ablation:
-        out["adaptive-allshift"] = dataclasses.replace(base, mean_shift_fraction=1.0)
-        out["adaptive-noshift"] = dataclasses.replace(base, mean_shift_fraction=0.0)
+        out["adaptive-allshift"] = replace(base, mean_shift_fraction=1.0)
+        out["adaptive-noshift"] = replace(base, mean_shift_fraction=0.0)
     return out
 
 

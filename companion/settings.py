@@ -11,8 +11,8 @@ Layers, later ones win (tables merge key by key, lists are replaced):
    word is a string).
 
 Every error is one line naming where the bad value came from, the key path and what was
-expected, e.g. ``config/default.toml: tracker.particles: expected an integer >= 4, got
-"twenty"``.  Unknown keys are errors.
+expected, e.g. ``config/default.toml: tracker.filter.particles: expected an integer >= 4,
+got "twenty"``.  Unknown keys are errors.
 """
 
 from __future__ import annotations

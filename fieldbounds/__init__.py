@@ -49,9 +49,13 @@ def broken_bound(value: Any, meta: Mapping[str, Any]) -> str | None:
 
 def check_bounds(config: Any, section: str) -> None:
     """Raise ``ValueError`` naming ``section.field`` for the first field of the dataclass
-    instance ``config`` that breaks a bound in its metadata."""
+    instance ``config`` that breaks a bound in its metadata; a field holding a dataclass
+    (a group of settings) is checked as ``section.field``."""
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            check_bounds(value, f"{section}.{f.name}")
+            continue
         need = broken_bound(value, f.metadata)
         if need is not None:
             raise ValueError(f"{section}.{f.name}: expected {need}, got {value!r}")

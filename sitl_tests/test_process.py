@@ -74,7 +74,7 @@ async def test_sigterm_mid_flight(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("extra", "expected"), [
-    ("[tracker]\nparticles = \"twenty\"", "tracker.particles: expected an integer"),
+    ("[tracker.filter]\nparticles = \"twenty\"", "tracker.filter.particles: expected an integer"),
     ("[mavlink]\nrate_hz = 500.0", "mavlink.rate_hz"),
     ("[vehicle]\nprofile = \"inav\"", "vehicle.profile"),
     ("[nonsense]\nkey = 1", "nonsense"),

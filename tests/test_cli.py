@@ -117,7 +117,7 @@ def test_config_json_names_the_layer_that_set_each_key() -> None:
     origins = doc["origins"]
     assert origins["camera.fx"] == "--set"
     assert origins["pose.pixel_sigma_px"] == "config/default.toml"
-    assert origins["tracker.particles"] == "built-in default"
+    assert origins["tracker.filter.particles"] == "built-in default"
     assert set(origins) >= {"vehicle.id", "camera.distortion", "source.follow.fps"}
     assert doc["noise"] == "uncalibrated"
     sim = json.loads(companion("config", "--sim", "--json").stdout)

@@ -3,15 +3,13 @@ built in code has its bounds checked as one read from TOML does."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 
 from companion.core.validate import FieldError, build
 from fieldbounds import broken_bound, check_bounds
 from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
-from tracker.config import TrackerConfig, check_config
+from tracker.config import TrackerConfig, check_config, replace
 
 
 def test_broken_bound_names_the_first_broken_bound() -> None:
@@ -35,10 +33,11 @@ def test_a_mavlink_config_built_in_code_has_its_bounds_checked() -> None:
 
 def test_the_three_layers_agree_on_a_bound() -> None:
     """The tracker's direct check, the TOML loader and check_bounds read one rule."""
-    bad = dataclasses.replace(TrackerConfig(), particles=2)
-    with pytest.raises(ValueError, match=r"config\.particles: expected a value >= 4, got 2"):
+    bad = replace(TrackerConfig(), particles=2)
+    need = r"filter\.particles: expected a value >= 4, got 2"
+    with pytest.raises(ValueError, match=rf"^config\.{need}"):
         check_config(bad)
-    with pytest.raises(ValueError, match=r"tracker\.particles: expected a value >= 4, got 2"):
+    with pytest.raises(ValueError, match=rf"^tracker\.{need}"):
         check_bounds(bad, "tracker")
-    with pytest.raises(FieldError, match=r"tracker\.particles: .*>= 4"):
-        build(TrackerConfig, {"particles": 2}, "tracker")
+    with pytest.raises(FieldError, match=r"tracker\.filter\.particles: .*>= 4"):
+        build(TrackerConfig, {"filter": {"particles": 2}}, "tracker")

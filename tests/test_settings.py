@@ -191,3 +191,16 @@ def test_the_sitl_configs_fly_the_simulators_layer() -> None:
         settings = load_settings([root / name])
         assert settings.pose.pixel_sigma_px == 0.15, name
         assert settings.source.kind == "follow", name
+
+
+def test_a_flat_tracker_key_says_where_it_moved(tmp_path: Path) -> None:
+    """The [tracker] keys are grouped in tables (docs/decisions.md): an old flat key is
+    not just unknown, the error names its new place."""
+    old = tmp_path / "old.toml"
+    old.write_text("[tracker]\nparticles = 30\n")
+    with pytest.raises(ConfigError) as info:
+        load_settings([old])
+    assert str(info.value) == f"{old}: tracker.particles: moved to tracker.filter.particles"
+    new = tmp_path / "new.toml"
+    new.write_text("[tracker.filter]\nparticles = 30\n")
+    assert load_settings([new]).tracker.filter.particles == 30

@@ -28,7 +28,7 @@ def best_variance_ratio(
     Uses the tracker's bin count, ring size and floor (``config``), so a landmark scores
     exactly as the tracker will see it.  ValueError for a bad image or box.
     """
-    cfg = config or TrackerConfig()
+    cfg = (config or TrackerConfig()).features
     check_image(image_bgr, "image_bgr")
     x, y, w, h = check_box(box, image_bgr.shape, "box")
     ids = tuple(range(len(colour_weights())))

@@ -4,17 +4,18 @@ The particle filter (colour histograms, mean shift) finds the target to a fracti
 this stage then locates it to a pixel on a template (:mod:`tracker.template`) and reads its
 change of width and height with two one-dimensional correlation filters
 (:mod:`tracker.scale_filter`).  :class:`Refiner` holds that state for one target; the
-:class:`tracker.adaptive.AdaptiveTracker` decides when its answers are used and when it learns.
+:func:`tracker.step.step` decides when its answers are used and when it learns.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from tracker.config import TrackerConfig
+from tracker.config import RefineConfig
 from tracker.scale_filter import (
     ScaleFilter,
     factor_pairs,
@@ -42,12 +43,14 @@ class Refiner:
     """Templates (the first frame's mixed with a fast or a slow running one) and size filters.
 
     ``patch`` is the float32 search window, ``centre``/``box`` on it in patch pixels;
-    ``frame``, ``xy``/``box_px`` in full-resolution pixels.
+    ``frame``, ``xy``/``box_px`` in full-resolution pixels.  :meth:`locate`,
+    :meth:`size_change` and :meth:`learn` change the object; :meth:`fork` gives the copy a
+    step advances, so that the state it came from stays as it was.
     """
 
     def __init__(
         self,
-        config: TrackerConfig,
+        config: RefineConfig,
         patch: Patch,
         centre: FloatArray,
         box: FloatArray,
@@ -73,6 +76,13 @@ class Refiner:
         self.rival = -1.0
         self.jumped = False  # the target moved further than template_jump_frac since the last
         self.slow_score = 1.0  # the slow template's NCC where :meth:`locate` found the target
+
+    def fork(self) -> Refiner:
+        """A copy that learns apart from this one (cheap: every update rebinds its arrays,
+        none writes into them, so the arrays are shared until then)."""
+        twin = copy.copy(self)
+        twin._sizers = [_Sizer(s.factors, s.model.fork()) for s in self._sizers]
+        return twin
 
     def _rows(self, frame: Frame, xy: FloatArray, box_px: FloatArray) -> list[FloatArray]:
         """Each size filter's rows for the box ``box_px`` at ``xy`` (one resampling for all).

@@ -160,6 +160,10 @@ class ScaleFilter:
         den = (np.conj(f) * f).real.sum(axis=1)
         return cls(num, den, target, window)
 
+    def fork(self) -> ScaleFilter:
+        """A copy that learns apart from this one (:meth:`update` rebinds the arrays)."""
+        return ScaleFilter(self.num, self.den, self.target, self.window)
+
     def spectrum(self, rows: FloatArray) -> ComplexArray:
         """The rows' spectrum as the filter uses it (Hann-weighted), for reuse."""
         return _spectrum(rows * self.window)

@@ -6,6 +6,8 @@ Every component keeps its configuration as a frozen stdlib dataclass in its own 
 * its type: ``int``, ``float``, ``bool``, ``str``, ``typing.Literal[...]``, ``tuple[T, ...]``,
   ``tuple[T1, T2]``, ``T | None`` (only as a default: TOML has no null) or another dataclass;
 * every number must be finite (TOML's ``inf`` and ``nan`` are refused);
+* a dataclass whose keys moved (e.g. into a nested table) may say where: a static method
+  ``moved_to(key) -> str | None`` turns the old key's "unknown key" into "moved to ...";
 * optional constraints in ``field(metadata=...)``: ``ge``, ``gt``, ``le``, ``lt`` (numbers),
   ``min_len`` (strings and lists), and ``path=True`` for a file path that is resolved
   relative to the config file that set it.
@@ -122,6 +124,9 @@ def build(cls: type[T], data: Mapping[str, Any], prefix: str = "",
     hints = typing.get_type_hints(cls)
     for key in data:
         if key not in fields:
+            moved = getattr(cls, "moved_to", lambda _: None)(key)
+            if moved is not None:
+                raise FieldError(_join(prefix, key), f"moved to {_join(prefix, moved)}")
             known = ", ".join(sorted(fields)) or "nothing"
             raise FieldError(_join(prefix, key), f"unknown key (expected one of: {known})")
     kwargs = {

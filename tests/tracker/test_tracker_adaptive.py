@@ -7,6 +7,7 @@ import numpy.typing as npt
 import pytest
 
 from tracker import AdaptiveTracker, TrackerConfig
+from tracker.config import replace
 from tracker.features import GRAY_FEATURES
 
 Scene = tuple[list[npt.NDArray[np.uint8]], npt.NDArray[np.float64]]
@@ -121,30 +122,25 @@ def test_bad_frames_are_value_errors_naming_image(moving_sign: Scene) -> None:
 
 
 def test_bad_config_is_a_value_error_naming_the_field() -> None:
-    with pytest.raises(ValueError, match=r"^config.particles: expected a value >= 4"):
-        AdaptiveTracker(TrackerConfig(particles=2))
+    with pytest.raises(ValueError, match=r"^config\.filter\.particles: expected a value >= 4"):
+        AdaptiveTracker(replace(TrackerConfig(), particles=2))
 
 
 def test_rank_phase_shifts_the_periodic_reranking(moving_sign: Scene) -> None:
     """Trackers started together re-rank on different frames when given different phases
     (the live pipeline's per-frame cost stays even); the phase moves the schedule only."""
     frames, truth = moving_sign
-    every = TrackerConfig().rerank_every_frames
+    every = TrackerConfig().features.rerank_every_frames
 
     def rerank_frames(phase: int) -> list[int]:
+        """The frames after which the state says the features were just ranked."""
         t = AdaptiveTracker(seed=0)
         t.init(frames[0], tuple(truth[0]), rank_phase=phase)
         ranked: list[int] = []
-        now = [0]  # the frame being updated
-        rank = t._rank
-
-        def counting(*args: object, **kwargs: object) -> object:
-            ranked.append(now[0])
-            return rank(*args, **kwargs)  # type: ignore[arg-type]
-
-        t._rank = counting  # type: ignore[method-assign,assignment]
-        for now[0], image in enumerate(frames[1:31], start=1):
+        for now, image in enumerate(frames[1:31], start=1):
             t.update(image)
+            if t.state.since_rank == 0:
+                ranked.append(now)
         return ranked
 
     assert rerank_frames(0)[:3] == [every, 2 * every, 3 * every]

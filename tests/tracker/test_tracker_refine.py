@@ -9,7 +9,8 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from tracker import AdaptiveTracker, TrackerConfig
+from tracker import AdaptiveTracker
+from tracker.config import RefineConfig
 from tracker.refine import Refiner
 from tracker.scale_filter import ScaleFilter, factor_pairs, grey_region, sample_size, samples
 from tracker.template import as_float, crop, match
@@ -135,7 +136,7 @@ def _two_copies(gap_px: int) -> tuple[npt.NDArray[np.uint8], np.ndarray, np.ndar
 
 
 def _refiner(image: npt.NDArray[np.uint8], centre: np.ndarray, **changes: float) -> Refiner:
-    config = dataclasses.replace(TrackerConfig(), template_search_frac=1.2, **changes)
+    config = dataclasses.replace(RefineConfig(), template_search_frac=1.2, **changes)
     box = np.array([30.0, 24.0])
     return Refiner(config, as_float(image, grey=False), centre, box, image, centre, box)
 
