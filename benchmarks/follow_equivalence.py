@@ -22,13 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from companion.app import Frame, FrameResult
+from companion.app import Frame, FrameResult, ResultObserver
 from companion.demo import map_landmarks, run_demo
 from companion.follow import FollowCameraSource, command_sender
 from companion.landmarks.geodesy import LocalFrame
-from companion.perception import PerceptionWrapper
-from companion.runtime import PracticalMap, bridge_for, fly, perception_for
-from companion.sensors import SensorHistory
+from companion.runtime import CompanionFlight, PracticalMap, bridge_for
 from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
@@ -64,20 +62,17 @@ async def follow_flight(settings: Settings, scenario: str, seconds: float) -> di
     source = FollowCameraSource(sim, bridge, local, profile, request=command_sender(bridge))
     errors: list[float] = []
 
-    class Recorder(PerceptionWrapper):
-        def __init__(self, sensors: SensorHistory) -> None:
-            super().__init__(perception_for(settings, sim.scenario.camera, pmap, sensors))
-
-        def process(self, frame: Frame) -> FrameResult:
-            result = self.perception.process(frame)
+    class Recorder(ResultObserver):
+        def on_result(self, frame: Frame, result: FrameResult) -> None:
             if isinstance(result.fix, PoseFix):
                 truth = sim.state_at((frame.t_us * 1000 - fake.start_ns) / 1e9)
                 errors.append(math.dist(result.fix.position_ned_m, truth.position_ned_m))
-            return result
 
+    flight = CompanionFlight(settings, source, bridge, pmap, sim.scenario.camera,
+                             prefix="follow")
+    flight.observe(Recorder())
     try:
-        app = await fly(settings, source, bridge, Recorder, pmap, seconds=seconds,
-                        prefix="follow")
+        app = await flight.run(seconds)
     finally:
         await fake.stop()
     assert source.failure is None

@@ -159,12 +159,17 @@ class Probe:
         gc.callbacks.append(self._on_gc)
         threading.Thread(target=watch_threads, args=(self.threads, self._stop),
                          daemon=True).start()
+        from companion import perception
+
+        # the perception's own calls (checkouts before the flight's observers wrapped it in
+        # the demo's TruthRecorder, and so timed the truth's lookup too)
+        outer = getattr(demo, "TruthRecorder", perception.Perception)
         for name in ("process", "housekeeping"):
-            self._wrap(demo.TruthRecorder, name)
+            self._wrap(outer, name)
         for name in HOUSEKEEPING_STEPS:  # the steps of housekeeping, where they exist
-            if hasattr(demo.Perception, name):
+            if hasattr(perception.Perception, name):
                 self.calls[name] = []
-                self._wrap(demo.Perception, name)
+                self._wrap(perception.Perception, name)
 
     def _wrap(self, cls: Any, name: str) -> None:
         inner = getattr(cls, name)

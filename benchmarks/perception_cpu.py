@@ -127,7 +127,7 @@ def main() -> int:
     from companion.sources.base import Frame
     from tracker.pose.types import AttitudeSample, PoseFix
 
-    cv2.setNumThreads(1)  # as the companion runs it (companion.runtime.fly)
+    cv2.setNumThreads(1)  # as the companion runs it (companion.runtime.CompanionFlight)
     scenario = dataclasses.replace(load_scenario(args.scenario), seconds=60)
     if args.scale != 1.0:
         cam = scenario.camera

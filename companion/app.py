@@ -1,9 +1,11 @@
 """The one asyncio pipeline: source -> perception (trackers, pose) -> MAVLink, watched live.
 
     reader task ──LatestSlot (newest frame wins)──► worker task ──► sink (MAVLink bridge)
-                                                      │  process() in the worker thread
+                                                      │  process() + observers' on_result()
+                                                      │  in the worker thread
                                                       └─► background lane (its own thread):
-                                                          housekeeping() + preview
+                                                          housekeeping() + observers'
+                                                          on_after_work() + preview
     status task (1 Hz and on every health change) ──────► monitor (Zenoh) + flight log
 
 The critical path, capture -> fix on the wire, is :meth:`FrameProcessor.process` in the
@@ -12,6 +14,10 @@ delay the next frame (looking for new landmarks, drawing the preview) goes to a
 :class:`~companion.pipeline.background.BackgroundLane` once the fix is out, and runs while
 the worker already processes the next frame.  Every task is kept in ``self._tasks`` and
 always finishes: :meth:`CompanionApp.run` returns only after all of them ended.
+
+What else wants each result (the truth it is scored against, the SITL harness's record,
+``companion replay --fast``'s pacing) subscribes as a :class:`ResultObserver`; nothing
+wraps the processor.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import concurrent.futures
 import gc
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -87,6 +93,31 @@ class FrameProcessor(Protocol):
     def housekeeping(self, frame: Frame) -> None: ...
 
 
+class ResultObserver(Protocol):
+    """Subscribes to a flight's results (docs/architecture.md, "The observer contract").
+
+    Observers are called in the order they were given to :class:`CompanionApp`; one that
+    raises is a bug and stops the flight as a failing ``process`` does.  Subclass this to
+    inherit the hooks you do not need (they do nothing).
+    """
+
+    def on_result(self, frame: Frame, result: FrameResult) -> None:
+        """Every processed frame, in the worker thread right after ``process`` and before
+        the fix goes on the wire (so keep it short): the next frame's ``process`` has not
+        begun.  ``result`` is frozen: keep what you add beside it, never in it."""
+
+    def on_after_work(self, frame: Frame) -> None:
+        """In the background lane's thread, once the frame's ``housekeeping`` returned
+        (before its preview is drawn); not called for a frame whose after-work the lane
+        skipped (it was slower than the camera) or whose housekeeping raised."""
+        return None
+
+    def pose_fields(self, result: FrameResult) -> dict[str, Any]:
+        """Fields this observer adds to the frame's ``pose`` report (flight log and Zenoh),
+        asked on the event loop after ``on_result`` of the same frame (e.g. the truth)."""
+        return {}
+
+
 class FixSink(Protocol):
     """The autopilot side (the MAVLink bridge, or a test double)."""
 
@@ -146,9 +177,11 @@ class CompanionApp:
                  clock_s: Callable[[], float] = time.monotonic,
                  preview: PreviewFn | None = None,
                  diagnose: Callable[[], Blocker | None] | None = None,
-                 facts: dict[str, Any] | None = None) -> None:
+                 facts: dict[str, Any] | None = None,
+                 observers: Sequence[ResultObserver] = ()) -> None:
         """``diagnose`` names why no fix can come (:class:`companion.nofix.NoFixWatch`);
-        ``facts`` are fixed for the flight and shown in every status (e.g. the map)."""
+        ``facts`` are fixed for the flight and shown in every status (e.g. the map);
+        ``observers`` subscribe to the results (:class:`ResultObserver`), in this order."""
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -160,6 +193,7 @@ class CompanionApp:
         self.preview = preview
         self.diagnose = diagnose
         self.facts = facts or {}
+        self.observers = tuple(observers)
         self.blocker: Blocker | None = None
         self.counters = Counters()
         self.stats = AppStats()
@@ -249,8 +283,7 @@ class CompanionApp:
                 frame = await self._slot.get()
                 taken_us = now_us()
                 self.stats.queue_ms.add((taken_us - frame.t_us) / 1000.0)
-                result = await loop.run_in_executor(self._executor, self.processor.process,
-                                                    frame)
+                result = await loop.run_in_executor(self._executor, self._process, frame)
                 self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
                 await self._handle(result)
                 self._after(frame, result)
@@ -259,6 +292,13 @@ class CompanionApp:
         except Exception as err:  # a bug in perception must stop the flight, loudly
             self._worker_failed(err)
 
+    def _process(self, frame: Frame) -> FrameResult:
+        """The worker thread's part: the processing, then the observers see the result."""
+        result = self.processor.process(frame)
+        for observer in self.observers:
+            observer.on_result(frame, result)
+        return result
+
     def _after(self, frame: Frame, result: FrameResult) -> None:
         """Hand the frame's after-work to the background lane (newest frame wins)."""
         preview = self.preview if self.preview is not None and self.reporter.preview_due() \
@@ -266,6 +306,8 @@ class CompanionApp:
 
         def work() -> bytes | None:
             self.processor.housekeeping(frame)
+            for observer in self.observers:
+                observer.on_after_work(frame)
             return None if preview is None else preview(frame, result)
 
         def done(jpeg: bytes | None) -> None:
@@ -308,7 +350,9 @@ class CompanionApp:
             if result.pose_json is not None:
                 own = self.sink.autopilot_position_ned()  # to plot the fix against it
                 extra = {} if own is None else {"autopilot_position_ned_m": own}
-                self.reporter.report("pose", result.capture_t_us, {**result.pose_json, **extra})
+                added = {k: v for o in self.observers for k, v in o.pose_fields(result).items()}
+                self.reporter.report("pose", result.capture_t_us,
+                                     {**result.pose_json, **added, **extra})
         else:  # refused by the bridge: visible with its reason (flight log, Zenoh)
             self.counters.fixes_refused += 1
             self.reporter.report("events", result.capture_t_us, {

@@ -17,8 +17,7 @@ import os
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
@@ -27,9 +26,8 @@ from companion.app import CompanionApp
 from companion.demo_autopilot import AutopilotProcess
 from companion.landmarks.geodesy import LocalFrame
 from companion.monitoring.config import local_meeting
-from companion.perception import Perception, PerceptionWrapper
-from companion.runtime import PracticalMap, bridge_for, detector_for, fly, perception_for
-from companion.sensors import SensorHistory
+from companion.observers import FixTruths
+from companion.runtime import CompanionFlight, PracticalMap, bridge_for, detector_for
 from companion.settings import Settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
@@ -46,42 +44,6 @@ log = logging.getLogger(__name__)
 #: The CPUs the fake autopilot's process may use (None: any this process may); a real
 #: autopilot runs on a board of its own (``benchmarks/latency_pinned.py`` sets it).
 AUTOPILOT_CORES: set[int] | None = None
-
-
-@dataclass
-class DemoResult:
-    """Everything the summary needs, gathered while the demo runs."""
-
-    fixes: list[tuple[PoseFix, tuple[float, float, float], float]]  # fix, truth, distance
-
-
-#: The true position (flight NED, m) of the vehicle when a frame was taken, or None.
-TruthOf = Callable[[Any], Sequence[float] | None]
-
-
-class TruthRecorder(PerceptionWrapper):
-    """Wraps the perception to remember, for every fix, where the vehicle truly was
-    (``truth_of(frame)``: the simulator's state, or a recording's ``truth_pose.csv``)."""
-
-    def __init__(self, perception: Perception, truth_of: TruthOf,
-                 landmarks: dict[str, MapLandmark]) -> None:
-        super().__init__(perception)
-        self.truth_of = truth_of
-        self.landmarks = landmarks
-        self.result = DemoResult([])
-
-    def process(self, frame: Any) -> Any:
-        result = self.perception.process(frame)
-        truth_seq = self.truth_of(frame) if isinstance(result.fix, PoseFix) else None
-        if isinstance(result.fix, PoseFix) and truth_seq is not None:
-            truth = (float(truth_seq[0]), float(truth_seq[1]), float(truth_seq[2]))
-            used = [self.landmarks[i] for i in result.fix.landmark_ids if i in self.landmarks]
-            dist = float(np.mean([math.dist(truth, lm.position_ned_m) for lm in used])) \
-                if used else float("nan")
-            self.result.fixes.append((result.fix, truth, dist))
-            if result.pose_json is not None:
-                result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
-        return result
 
 
 class AutopilotResults(Protocol):
@@ -108,14 +70,12 @@ def nees_3d(fix: PoseFix, truth: tuple[float, float, float]) -> float:
 
 def map_landmarks(sim: Simulator) -> tuple[list[MapLandmark], dict[str, np.ndarray]]:
     """The practical map (NED) and appearance references of the simulated world."""
-    landmarks, references = [], {}
+    landmarks = []
     for lm in sim.world.landmarks:
         c = lm.centre_ned
         landmarks.append(MapLandmark(lm.landmark_id, (float(c[0]), float(c[1]), float(c[2])),
                                      lm.width_m, lm.height_m, lm.facing_deg, lm.category))
-        if lm.quad.texture is not None:
-            references[lm.landmark_id] = lm.quad.texture
-    return landmarks, references
+    return landmarks, sim.reference_images()
 
 
 def with_fake_attitude_sigmas(settings: Settings, fake: AttitudeErrorConfig | None,
@@ -170,7 +130,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
                                                 endpoint="udpin:127.0.0.1:0",
                                                 attitude_error=drift),
                             sim.scenario, AUTOPILOT_CORES)
-    try:  # fly() closes the source; until then, whatever fails here closes it
+    try:  # the flight closes the source; until then, whatever fails here closes it
         fake.launch()
         await source.start()
         await fake.start()
@@ -182,21 +142,14 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
         source.close()
         fake.close()
         raise
-    recorders: list[TruthRecorder] = []
-
-    def processor(sensors: SensorHistory) -> TruthRecorder:
-        perception = perception_for(settings, sim.scenario.camera, pmap, sensors)
-        recorders.append(TruthRecorder(
-            perception, lambda f: source.sim.state_at(source.scenario_time_s(f)).position_ned_m,
-            {lm.landmark_id: lm for lm in landmarks}))
-        return recorders[0]
-
+    flight = CompanionFlight(settings, source, bridge, pmap, sim.scenario.camera, prefix="demo")
+    truths = FixTruths(source.truth_position, landmarks)
+    flight.observe(truths)
     tickers: list[asyncio.Task[None]] = []
     cpu0, wall0 = os.times(), time.monotonic()
     try:
-        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds + 5.0,
-                        prefix="demo", on_start=lambda a: tickers.append(asyncio.create_task(
-                            _progress(a, fake, seconds, progress))))
+        app = await flight.run(seconds + 5.0, on_start=lambda a: tickers.append(
+            asyncio.create_task(_progress(a, fake, seconds, progress))))
     finally:
         for t in tickers:
             t.cancel()
@@ -206,7 +159,7 @@ async def run_demo(settings: Settings, scenario: str, seconds: float,
     wall = max(wall1 - wall0, 1e-9)
     ours = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / wall
     autopilot = fake.cpu_s / wall
-    s = summary(app, fake, bridge, recorders[0].result, source,
+    s = summary(app, fake, bridge, truths, source,
                 ours - source.render_cpu_s / wall,
                 ours + source.render_cpu_elsewhere_s / wall + autopilot)
     s["cpu_cores_autopilot"] = round(autopilot, 3)
@@ -229,7 +182,7 @@ async def _progress(app: CompanionApp, fake: AutopilotProcess, seconds: float,
                  f"{'-' if lat is None else f'{lat:.1f}'} ms  dropped {s['dropped_frames']}")
 
 
-def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, result: DemoResult,
+def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, result: FixTruths,
             source: TimedSource, cpu_cores_busy: float,
             cpu_cores_busy_total: float) -> dict[str, Any]:
     """``cpu_cores_busy`` is the companion's share: the process's CPU time less what the
@@ -278,7 +231,7 @@ def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, res
     }
 
 
-def _rmse_by_solver(result: DemoResult) -> dict[str, float]:
+def _rmse_by_solver(result: FixTruths) -> dict[str, float]:
     """Position RMSE (m) of the fixes of each solver: one-landmark box fixes are weak (their
     covariance says so) and weigh on the all-fix RMSE out of proportion to their number."""
     errors: dict[str, list[float]] = {}

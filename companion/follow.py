@@ -31,6 +31,7 @@ from companion.errors import SourceError
 from companion.landmarks.geodesy import LocalFrame
 from companion.sim.scenario import OriginConfig, ScenarioConfig
 from companion.sim.simulator import Simulator
+from companion.sim.source import OfSimulatedWorld
 from companion.sim.trajectory import KinematicState
 from companion.sources.base import Frame, ImageU8, SourceStatus
 from companion.sources.config import FollowConfig
@@ -179,7 +180,7 @@ def missing_truth_message(profile: str, heard: dict[str, int], link_up: bool,
 
 
 # --------------------------------------------------------------------- the source
-class FollowCameraSource:
+class FollowCameraSource(OfSimulatedWorld):
     """Frames of ``simulator``'s world seen from the pose an autopilot simulator reports.
 
     ``bridge`` gives the telemetry (``subscribe``/``latest``/``link_up``); ``origin`` is the
@@ -287,6 +288,15 @@ class FollowCameraSource:
         """The interpolated vehicle state frame ``index`` was rendered from."""
         item = self._truth.get(index)
         return None if item is None else item[0]
+
+    def truth_position(self, frame: Frame) -> tuple[float, float, float] | None:
+        """The true position (flight NED, m) ``frame`` was rendered from, for recent frames
+        (:class:`companion.sources.base.KnowsTruth`)."""
+        state = self.rendered_state(frame.index)
+        if state is None:
+            return None
+        n, e, d = (float(v) for v in state.position_ned_m)
+        return (n, e, d)
 
     async def recv(self) -> Frame:
         """The next frame, due every ``1 / fps`` s, showing the world ``delay_ms`` ago."""

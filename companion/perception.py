@@ -527,23 +527,6 @@ class Perception(Acquisition):
                            pose_json=pose_json(fix), particles=particles)
 
 
-class PerceptionWrapper:
-    """Base of processors that add to what a :class:`Perception` returns (truth taggers
-    of the demo, follow mode and the tests): override :meth:`process`."""
-
-    def __init__(self, perception: Perception) -> None:
-        self.perception = perception
-
-    def process(self, frame: Frame) -> FrameResult:
-        return self.perception.process(frame)
-
-    def housekeeping(self, frame: Frame) -> None:
-        self.perception.housekeeping(frame)
-
-    def close(self) -> None:
-        self.perception.close()
-
-
 def pose_json(fix: PoseFix) -> dict[str, Any]:
     """The monitoring payload of a fix (docs/monitoring.md)."""
     return {

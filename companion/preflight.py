@@ -20,7 +20,6 @@ from companion.errors import CompanionError
 from companion.flightmap import load_practical_map
 from companion.runtime import bridge_for
 from companion.settings import BUILT_IN, Settings
-from companion.simulated import open_sim
 from companion.sources.base import EndOfStream
 from companion.sources.factory import open_source, resolve
 from mavlink_bridge.bridge import VisionBridge
@@ -104,7 +103,7 @@ async def sample_frames(settings: Settings, count: int = 30, timeout_s: float = 
                         ) -> FrameSample:
     """Open the configured source and read ``count`` frames (recordings unpaced)."""
     config = dataclasses.replace(resolve(settings.source), realtime=False)
-    source = await open_source(config, open_sim)
+    source = await open_source(config)
     times: list[int] = []
     size = None
     deadline = time.monotonic() + timeout_s

@@ -34,14 +34,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from companion.app import Frame as PipelineFrame
+from companion.app import FrameResult, ResultObserver
 from companion.core.stream_format import TruthPose
 from companion.core.stream_io import read_telemetry
 from companion.errors import InputError
 from companion.flightmap import load_practical_map
 from companion.recorded import OnCompanionClock, RecordedTruth, TruthAttitude
 from companion.replay_score import ReplayScorer, replay_summary, visible_counts
-from companion.runtime import bridge_for, detector_for, fly, perception_for
-from companion.sensors import SensorHistory
+from companion.runtime import CompanionFlight, bridge_for, detector_for
 from companion.settings import Settings
 from companion.sources.base import Frame, monotonic_us
 from companion.sources.files import RecordedStreamSource
@@ -99,9 +100,11 @@ class ReplayClock:
         return (self.started_ns or time.monotonic_ns()) // 1000 + recorded_us
 
 
-class ReplaySource(OnCompanionClock):
-    """A recorded stream delivered on a :class:`ReplayClock` (module doc); ``done()`` is
-    called by the processing when it finished a frame (``--fast`` waits for it)."""
+class ReplaySource(OnCompanionClock, ResultObserver):
+    """A recorded stream delivered on a :class:`ReplayClock` (module doc).  It also
+    observes the flight's results: ``--fast`` delivers the next frame only once the last
+    one's ``on_result`` and ``on_after_work`` reached it -- observed last, so the
+    observers before it (the scoring) are done with that frame too."""
 
     def __init__(self, stream: RecordedStreamSource, clock: ReplayClock) -> None:
         super().__init__(stream)
@@ -136,15 +139,15 @@ class ReplaySource(OnCompanionClock):
             if self.step is not None:
                 self.step()
 
-    def done(self) -> None:
-        """Called from the worker thread as it finished a frame."""
+    def on_result(self, frame: PipelineFrame, result: FrameResult) -> None:
+        """The worker thread finished a frame (and the observers before this one)."""
         self.finished += 1
         self._wake()
 
-    def housekept(self) -> None:
-        """Called from the background lane's thread as it finished a frame's after-work
-        (acquisition: ``--fast`` waits for it too, so that a replay's result depends on
-        the stream and the settings alone, not on how the threads happened to run)."""
+    def on_after_work(self, frame: PipelineFrame) -> None:
+        """The background lane's thread finished a frame's after-work (acquisition:
+        ``--fast`` waits for it too, so that a replay's result depends on the stream and
+        the settings alone, not on how the threads happened to run)."""
         self.settled += 1
         self._wake()
 
@@ -293,14 +296,7 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
     settings, attitude, said = _attitude(settings, truth, telemetry)
     detector_for(settings)  # loaded before the clock starts
     fake = _fake(settings, clock, source, truth, telemetry)
-    scorers: list[ReplayScorer] = []
     camera = stream.meta.camera
-
-    def processor(sensors: SensorHistory) -> ReplayScorer:
-        scorers.append(ReplayScorer(perception_for(settings, camera, pmap, sensors), truth,
-                                    pmap.landmarks, sensors, source.done, source.housekept))
-        return scorers[0]
-
     await fake.start()
     beats = asyncio.create_task(_heartbeats(fake) if fast else asyncio.sleep(0))
     cpu0, wall0 = os.times(), time.monotonic()
@@ -309,8 +305,11 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
         bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
                             origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
                             origin_alt_m=o.alt_m, set_origin=True)
-        app = await fly(settings, source, bridge, processor, pmap, prefix="replay",
-                        attitude=attitude)
+        flight = CompanionFlight(settings, source, bridge, pmap, camera, attitude=attitude,
+                                 prefix="replay")
+        scorer = ReplayScorer(truth, camera, pmap.landmarks, flight.sensors)
+        flight.observe(scorer, source)  # the source last: the scoring is done when it hears
+        app = await flight.run()
     finally:
         cpu1, wall1 = os.times(), time.monotonic()
         beats.cancel()
@@ -318,6 +317,6 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
         await fake.stop()
     busy = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / max(wall1 - wall0, 1e-9)
     visible = visible_counts(truth, camera, pmap.landmarks)
-    return replay_summary(app, fake, bridge, scorers[0], source, busy, visible,
+    return replay_summary(app, fake, bridge, scorer, source, busy, visible,
                           {"attitude": said, "mode": "fast" if fast else "real time",
                            "stream": str(folder)})

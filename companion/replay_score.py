@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -31,8 +31,8 @@ import numpy as np
 from companion.app import CompanionApp, Frame, FrameResult
 from companion.autopilot import outcome_lines
 from companion.core.stream_format import TruthPose
-from companion.demo import DemoResult, TruthRecorder, print_summary, summary
-from companion.perception import Perception
+from companion.demo import print_summary, summary
+from companion.observers import FixTruths
 from companion.recorded import RecordedTruth
 from companion.sensors import SensorHistory
 from mavlink_bridge.bridge import VisionBridge
@@ -48,20 +48,19 @@ WRONG_IOU = 0.2
 LIGHT_STEP = 1.25
 
 
-class ReplayScorer(TruthRecorder):
-    """The demo's truth recorder on a recording, plus which frames got a fix and the
-    attitude the solver was given; ``done()`` is called as a frame is finished (scored
-    too) and ``housekept()`` as its after-work is (``--fast`` waits for both)."""
+class ReplayScorer(FixTruths):
+    """The demo's truth observer on a recording, plus which frames got a fix, the tracks
+    on a wrong place, the light steps and the attitude the solver was given (``sensors``:
+    the flight's side sensors).  Observes the flight's results; its scoring of a frame is
+    done when ``on_result`` returns (``--fast`` lets the next frame in only after that:
+    :class:`companion.replay.ReplaySource`, observing after it)."""
 
-    def __init__(self, perception: Perception, truth: RecordedTruth,
-                 landmarks: Sequence[MapLandmark], sensors: SensorHistory,
-                 done: Callable[[], None], housekept: Callable[[], None]) -> None:
-        super().__init__(perception, lambda f: truth.position(f.t_us),
-                         {lm.landmark_id: lm for lm in landmarks})
+    def __init__(self, truth: RecordedTruth, camera: CameraModel,
+                 landmarks: Sequence[MapLandmark], sensors: SensorHistory) -> None:
+        super().__init__(lambda f: truth.position(f.t_us), landmarks)
         self.truth = truth
+        self.camera = camera
         self.sensors = sensors
-        self.done = done
-        self.housekept = housekept
         self.fixed: set[int] = set()
         self.attitude_errors: list[tuple[float, float, float]] = []
         self.wrong_run: dict[str, int] = {}
@@ -69,25 +68,13 @@ class ReplayScorer(TruthRecorder):
         self._level: float | None = None
         self.light_steps: list[dict[str, float | None]] = []
 
-    def process(self, frame: Frame) -> FrameResult:
-        try:
-            return self._scored(frame)
-        finally:
-            self.done()
-
-    def housekeeping(self, frame: Frame) -> None:
-        try:
-            super().housekeeping(frame)
-        finally:
-            self.housekept()
-
-    def _scored(self, frame: Frame) -> FrameResult:
-        result: FrameResult = super().process(frame)
+    def on_result(self, frame: Frame, result: FrameResult) -> None:
+        super().on_result(frame, result)
         if result.fix is not None:
             self.fixed.add(frame.index)
         found = self.truth.pose_at(frame.t_us)
         if found is not None:
-            self._score_tracks(found[1])
+            self._score_tracks(found[1], result)
             self._score_light(frame, found[0] / 1e6, result.fix is not None)
         given = self.sensors.attitude_at(frame.t_us)
         if found is not None and given is not None:
@@ -96,20 +83,21 @@ class ReplayScorer(TruthRecorder):
                 math.degrees(math.remainder(g - t, math.tau)) for g, t in
                 ((given.roll_rad, p.roll_rad), (given.pitch_rad, p.pitch_rad),
                  (given.yaw_rad, p.yaw_rad))))
-        return result
 
-    def _score_tracks(self, pose: TruthPose) -> None:
-        """Advance each track's run of frames on a wrong place (module notes)."""
-        tracks = self.perception.tracks
-        camera = self.perception.camera
+    def _score_tracks(self, pose: TruthPose, result: FrameResult) -> None:
+        """Advance each live track's run of frames on a wrong place (module notes); a bad
+        frame (no tracks reported) leaves the runs as they are."""
+        if result.bad_frame:
+            return
+        boxes = track_boxes(result)
         position = self.truth.to_flight((pose.north_m, pose.east_m, pose.down_m))
         rpy = (pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
-        for lid in [i for i in self.wrong_run if i not in tracks]:
+        for lid in [i for i in self.wrong_run if i not in boxes]:
             del self.wrong_run[lid]
-        for lid, track in tracks.items():
+        for lid, box in boxes.items():
             lm = self.landmarks.get(lid)
-            true = None if lm is None else true_box(camera, position, rpy, lm)
-            on = on_its_landmark(track.box, true, camera)
+            true = None if lm is None else true_box(self.camera, position, rpy, lm)
+            on = on_its_landmark(box, true, self.camera)
             self.wrong_run[lid] = 0 if on else self.wrong_run.get(lid, 0) + 1
             self.longest_wrong = max(self.longest_wrong, self.wrong_run[lid])
 
@@ -122,6 +110,20 @@ class ReplayScorer(TruthRecorder):
         for step in self.light_steps:
             if fixed and step["fix_after_s"] is None:
                 step["fix_after_s"] = round(r_s - float(step["at_s"] or 0.0), 3)
+
+
+def track_boxes(result: FrameResult) -> dict[str, tuple[float, float, float, float]]:
+    """Landmark id -> box (x, y, w, h) of each track still live after the frame: those the
+    result reports less those it reports lost (a track dropped after its fix is reported
+    with its box and its ``lost`` event in the same frame; its landmark's next track is
+    another track, whose run starts afresh)."""
+    lost = {e.get("landmark") for e in result.events if e.get("event") == "lost"}
+    out = {}
+    for t in result.tracks:
+        if t["landmark_id"] not in lost:
+            x, y, w, h = (float(v) for v in t["box"])
+            out[str(t["landmark_id"])] = (x, y, w, h)
+    return out
 
 
 def true_box(camera: CameraModel, position_ned: Sequence[float],
@@ -195,8 +197,7 @@ def replay_summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge,
                    scorer: ReplayScorer, source: Any, cpu_cores_busy: float,
                    visible: dict[int, int], facts: dict[str, Any]) -> dict[str, Any]:
     """The demo's summary keys plus the recording's (module doc)."""
-    result: DemoResult = scorer.result
-    s = summary(app, fake, bridge, result, source, cpu_cores_busy, cpu_cores_busy)
+    s = summary(app, fake, bridge, scorer, source, cpu_cores_busy, cpu_cores_busy)
     two = [i for i, n in visible.items() if n >= 2]
     outcomes = dict(getattr(app.sink, "results", {}))
     refused = {k: v for k, v in sorted(outcomes.items()) if k != "sent"}
@@ -207,7 +208,7 @@ def replay_summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge,
         "fix_share_2plus_visible": round(sum(i in scorer.fixed for i in two) / len(two), 3)
         if two else None,
         "nees_inside_95_share": s["nees_inside_95"],
-        "fixes_solved": len(result.fixes),
+        "fixes_solved": len(scorer.fixes),
         "fixes_refused": refused,
         "attitude_error_deg": _attitude_error(scorer.attitude_errors),
         "telemetry_replayed": dict(fake.replay.sent) if fake.replay is not None else {},

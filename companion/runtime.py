@@ -1,8 +1,10 @@
-"""Assembling a flight: the parts ``companion run`` and ``companion demo`` share.
+"""Assembling a flight: the one place ``companion run``, ``demo``, ``replay`` and the SITL
+harness build one.
 
-The flight's landmark map comes from :mod:`companion.flightmap`; :func:`fly` wires a
-source, a perception and a bridge into a :class:`CompanionApp`, runs it until the source
-ends, a signal or a time limit, and tears everything down in order.
+The flight's landmark map comes from :mod:`companion.flightmap`; :class:`CompanionFlight`
+wires a source, a perception, a bridge and the observers of the results into a
+:class:`CompanionApp`, runs it until the source ends, a signal or a time limit, and tears
+everything down in order.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from typing import Any
 
 import cv2
 
-from companion.app import CompanionApp, Frame, FrameResult, FrameSource
+from companion.app import CompanionApp, Frame, FrameResult, FrameSource, ResultObserver
 from companion.autopilot import BridgeSink
 from companion.core.validate import to_plain
 from companion.errors import ConfigError, InputError, note_stop_signal
@@ -28,7 +30,7 @@ from companion.flightmap import PracticalMap, acquisition_report, log_report, st
 from companion.monitoring.config import MonitorConfig
 from companion.monitoring.publisher import MonitorPublisher
 from companion.nofix import AttitudeSource, NoFixWatch
-from companion.perception import DetectFn, Perception, PerceptionWrapper
+from companion.perception import DetectFn, Perception
 from companion.preview import render_preview
 from companion.reporting import Reporter
 from companion.sensors import SensorHistory
@@ -40,7 +42,8 @@ from tracker.camera import CameraModel
 from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
 
-__all__ = ["PracticalMap", "bridge_for", "detector_for", "fly", "noise_status", "perception_for"]
+__all__ = ["CompanionFlight", "PracticalMap", "bridge_for", "detector_for", "noise_status",
+           "perception_for"]
 
 
 log = logging.getLogger(__name__)
@@ -94,61 +97,89 @@ def perception_for(settings: Settings, camera: CameraModel, pmap: PracticalMap,
                       gate_config=settings.fixgate)
 
 
-async def fly(settings: Settings, source: FrameSource, bridge: VisionBridge,
-              make_processor: Callable[[SensorHistory], Perception | PerceptionWrapper],
-              pmap: PracticalMap, *, seconds: float | None = None, prefix: str = "flight",
-              on_start: Callable[[CompanionApp], None] | None = None,
-              attitude: AttitudeSource | None = None) -> CompanionApp:
-    """Run one flight to its end; SIGINT/SIGTERM stop it cleanly.  Returns the app.
+class CompanionFlight:
+    """One flight, assembled here and nowhere else (docs/architecture.md, "Who assembles a
+    flight").
 
-    ``attitude``: where frames' attitude comes from (default: the autopilot's ATTITUDE
-    through the bridge).  Everything that can fail on bad input (the processor: a
-    detector model, references) is built before anything is started, so such a failure
-    leaves nothing running.  The map's acquisition report is logged, published (an
-    ``map`` event and the status' ``map``) and, with the bridge and the attitude, feeds
-    the diagnosis of why no fix can come (:class:`companion.nofix.NoFixWatch`).
-    OpenCV runs single-threaded: the pipeline's own threads use the cores
-    (``companion.launch`` says why).
+    The caller chooses what differs between ``companion run``, ``demo``, ``replay`` and the
+    SITL harness: the frame ``source``, the ``bridge``, the map, the ``camera`` that took the
+    frames, where the frames' attitude comes from (``attitude``; None: the autopilot's
+    ATTITUDE through the bridge) and who observes the results (:meth:`observe`).  The
+    flight builds the rest -- the side sensors (:attr:`sensors`, there from the start for
+    an observer that scores what the solver was given), the perception, the reporter
+    (flight log named ``prefix``-..., Zenoh), the bridge's sink, the no-fix diagnosis and
+    the :class:`CompanionApp` -- and :meth:`run` flies it to its end.
     """
-    cv2.setNumThreads(1)
-    sensors = SensorHistory(bridge, settings.pose, attitude=attitude)
-    processor = make_processor(sensors)
-    try:
-        report, watch = _diagnosis(settings, pmap, processor, bridge, sensors)
-    except BaseException:
-        processor.close()
-        raise
-    mon = settings.monitor
-    loop = asyncio.get_running_loop()
-    reporter: Reporter | None = None
-    try:
-        await bridge.start()  # first: a link that cannot open leaves no empty flight log
-        reporter = reporter_for(settings, pmap.landmarks, prefix)
-        sensors.start()
-        app = CompanionApp(source, processor, BridgeSink(bridge), reporter,
-                           settings.vehicle.id, 1.0 / mon.status_rate_hz,
-                           preview=preview_for(mon), diagnose=watch,
-                           facts={"map": _map_summary(report), "noise": noise_status(settings)})
-        app.report_event("map", report)
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            with contextlib.suppress(NotImplementedError, RuntimeError):
-                loop.add_signal_handler(sig, _stop_by_signal, app, sig)
-        if on_start is not None:
-            on_start(app)
-        await app.run(seconds)
-    finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            with contextlib.suppress(NotImplementedError, RuntimeError):
-                loop.remove_signal_handler(sig)
-        close = getattr(source, "close", None)
-        if callable(close):
-            close()
-        await sensors.stop()
-        await bridge.stop()
-        if reporter is not None:
-            reporter.close()
-        processor.close()
-    return app
+
+    def __init__(self, settings: Settings, source: FrameSource, bridge: VisionBridge,
+                 pmap: PracticalMap, camera: CameraModel, *,
+                 attitude: AttitudeSource | None = None, prefix: str = "flight") -> None:
+        self.settings = settings
+        self.source = source
+        self.bridge = bridge
+        self.pmap = pmap
+        self.camera = camera
+        self.prefix = prefix
+        self.sensors = SensorHistory(bridge, settings.pose, attitude=attitude)
+        self.observers: list[ResultObserver] = []
+        self.app: CompanionApp | None = None
+
+    def observe(self, *observers: ResultObserver) -> None:
+        """Subscribe ``observers`` to the results; they are called in the order added."""
+        self.observers.extend(observers)
+
+    async def run(self, seconds: float | None = None,
+                  on_start: Callable[[CompanionApp], None] | None = None) -> CompanionApp:
+        """Run the flight to its end; SIGINT/SIGTERM stop it cleanly.  Returns the app.
+
+        Everything that can fail on bad input (the perception: a detector model,
+        references) is built before anything is started, so such a failure leaves nothing
+        running.  The map's acquisition report is logged, published (an ``map`` event and
+        the status' ``map``) and, with the bridge and the attitude, feeds the diagnosis of
+        why no fix can come (:class:`companion.nofix.NoFixWatch`).  OpenCV runs
+        single-threaded: the pipeline's own threads use the cores (``companion.launch``
+        says why).  The source is closed at the end.
+        """
+        cv2.setNumThreads(1)
+        settings, bridge, sensors = self.settings, self.bridge, self.sensors
+        perception = perception_for(settings, self.camera, self.pmap, sensors)
+        try:
+            report, watch = _diagnosis(settings, self.pmap, perception, bridge, sensors)
+        except BaseException:
+            perception.close()
+            raise
+        mon = settings.monitor
+        loop = asyncio.get_running_loop()
+        reporter: Reporter | None = None
+        try:
+            await bridge.start()  # first: a link that cannot open leaves no empty flight log
+            reporter = reporter_for(settings, self.pmap.landmarks, self.prefix)
+            sensors.start()
+            self.app = app = CompanionApp(
+                self.source, perception, BridgeSink(bridge), reporter, settings.vehicle.id,
+                1.0 / mon.status_rate_hz, preview=preview_for(mon), diagnose=watch,
+                facts={"map": _map_summary(report), "noise": noise_status(settings)},
+                observers=self.observers)
+            app.report_event("map", report)
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                with contextlib.suppress(NotImplementedError, RuntimeError):
+                    loop.add_signal_handler(sig, _stop_by_signal, app, sig)
+            if on_start is not None:
+                on_start(app)
+            await app.run(seconds)
+        finally:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                with contextlib.suppress(NotImplementedError, RuntimeError):
+                    loop.remove_signal_handler(sig)
+            close = getattr(self.source, "close", None)
+            if callable(close):
+                close()
+            await sensors.stop()
+            await bridge.stop()
+            if reporter is not None:
+                reporter.close()
+            perception.close()
+        return app
 
 
 def stream_rates(settings: Settings) -> tuple[tuple[str, float], ...]:
@@ -176,12 +207,10 @@ def preview_for(mon: MonitorConfig) -> Callable[[Frame, FrameResult], bytes]:
     return preview
 
 
-def _diagnosis(settings: Settings, pmap: PracticalMap,
-               processor: Perception | PerceptionWrapper, bridge: VisionBridge,
-               attitude: AttitudeSource) -> tuple[dict[str, Any], NoFixWatch]:
+def _diagnosis(settings: Settings, pmap: PracticalMap, perception: Perception,
+               bridge: VisionBridge, attitude: AttitudeSource
+               ) -> tuple[dict[str, Any], NoFixWatch]:
     """The map's acquisition report (logged) and the watch that names why no fix comes."""
-    perception = processor.perception if isinstance(processor, PerceptionWrapper) \
-        else processor
     report = acquisition_report(pmap, perception)
     log_report(report)
     static = static_blocker(pmap, report, settings.landmarks.max_origin_distance_m)

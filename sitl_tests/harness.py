@@ -2,9 +2,10 @@
 
 A :class:`Flight` assembles what ``companion demo`` assembles -- the simulator, the
 real-time simulated camera, the scripted :class:`~mavlink_bridge.fake_autopilot.FakeAutopilot`
-on UDP loopback flying the camera's trajectory, the configured bridge and perception, and
-:func:`companion.runtime.fly` (which builds the real :class:`~companion.app.CompanionApp`) --
-and runs a scenario *script* beside it.  Everything the test asserts on is recorded:
+on UDP loopback flying the camera's trajectory, the configured bridge, and
+:class:`companion.runtime.CompanionFlight` (which builds the real
+:class:`~companion.app.CompanionApp`, observed by a :class:`FrameRecorder`) -- and runs a
+scenario *script* beside it.  Everything the test asserts on is recorded:
 
 * :attr:`SitlAutopilot.arrivals` -- every vision message the autopilot received, with its
   arrival on the flight clock, its age (arrival minus time stamp) and the autopilot's verdict;
@@ -35,13 +36,11 @@ from typing import Any
 
 import numpy as np
 
-from companion.app import CompanionApp, FrameResult
+from companion.app import CompanionApp, FrameResult, ResultObserver
 from companion.demo import map_landmarks, nees_3d, with_fake_attitude_sigmas
 from companion.flightlog import FlightLog, read_flight_log
 from companion.landmarks.geodesy import LocalFrame
-from companion.perception import Perception, PerceptionWrapper
-from companion.runtime import PracticalMap, bridge_for, fly, perception_for
-from companion.sensors import SensorHistory
+from companion.runtime import CompanionFlight, PracticalMap, bridge_for
 from companion.settings import SIM_LAYERS, Settings, load_settings
 from companion.sim.effects import EffectSpec
 from companion.sim.scenario import ScenarioConfig, load_scenario
@@ -190,21 +189,14 @@ class FrameRecord:
     brightness: float = 0.0  # mean grey level of the image
 
 
-class RecordingPerception(PerceptionWrapper):
-    """Wraps the real :class:`Perception`; records every frame against the truth."""
+class FrameRecorder(ResultObserver):
+    """Observes the flight's results; records every frame against the truth."""
 
-    def __init__(self, perception: Perception, camera: FaultyCamera,
-                 out: list[FrameRecord]) -> None:
-        super().__init__(perception)
+    def __init__(self, camera: FaultyCamera, out: list[FrameRecord]) -> None:
         self.camera = camera
         self.out = out
 
-    def __getattr__(self, name: str) -> Any:
-        """Everything else (``housekeeping``, what the preview asks for) is the perception's."""
-        return getattr(self.perception, name)
-
-    def process(self, frame: Any) -> FrameResult:
-        result = self.perception.process(frame)
+    def on_result(self, frame: Frame, result: FrameResult) -> None:
         t_s = self.camera.scenario_time_s(frame)
         truth = self.camera.truth(frame.index)
         visible = {} if truth is None else {
@@ -222,7 +214,6 @@ class RecordingPerception(PerceptionWrapper):
                                       fix_nees=nees_3d(result.fix, rec.truth_ned_m),
                                       fix_solver=result.fix.solver)
         self.out.append(rec)
-        return result
 
 
 # ------------------------------------------------------------------ the flight
@@ -295,10 +286,9 @@ class Flight:
                                  origin_lat_deg=o.lat, origin_lon_deg=o.lon,
                                  origin_alt_m=o.alt_m, set_origin=True, **self.bridge_overrides)
 
-        def processor(sensors: SensorHistory) -> RecordingPerception:
-            perception = perception_for(self.settings, self.sim.scenario.camera, pmap, sensors)
-            return RecordingPerception(perception, self.camera, self.frames)
-
+        flight = CompanionFlight(self.settings, self.camera, self.bridge, pmap,
+                                 self.sim.scenario.camera, prefix="sitl")
+        flight.observe(FrameRecorder(self.camera, self.frames))
         tasks: list[asyncio.Task[None]] = []
 
         def on_start(app: CompanionApp) -> None:
@@ -307,8 +297,7 @@ class Flight:
                 tasks.append(asyncio.create_task(self._script(script, app), name="sitl-script"))
 
         try:
-            await fly(self.settings, self.camera, self.bridge, processor, pmap,
-                      seconds=self.seconds + 5.0, prefix="sitl", on_start=on_start)
+            await flight.run(self.seconds + 5.0, on_start=on_start)
         finally:
             for t in tasks:
                 t.cancel()

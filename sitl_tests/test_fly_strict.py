@@ -33,7 +33,7 @@ from mavlink_bridge.fake_vehicle import ARDUCOPTER_LAND
 from tests.run_helpers import fake_and_loop
 
 ROOT = Path(__file__).resolve().parents[1]
-HOVER_M = 4.0  # the square's altitude (companion.sim.square.SquarePlan)
+HOVER_M = 4.0  # the square's altitude (companion.square.SquarePlan)
 
 
 def guided(seed: int = 0, **kw: object) -> FakeAutopilotConfig:

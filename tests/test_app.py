@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from companion.app import CompanionApp, FrameResult, now_us
+from companion.app import CompanionApp, FrameResult, ResultObserver, now_us
 from companion.pipeline.health import Blocker, HealthInputs, health_state
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
@@ -104,6 +104,50 @@ class Recorder:
 #: Events a processed frame may cause (companion/app.py): after the source ended, the frames
 #: in hand are still processed.
 FRAME_EVENTS = {"health", "no-fix", "no-fix-cleared"}
+
+
+class Observer(ResultObserver):
+    """Notes every call with its thread and what the processor had done by then."""
+
+    def __init__(self, name: str, calls: list[tuple[str, str, int]], proc: Processor) -> None:
+        self.name, self.calls, self.proc = name, calls, proc
+        self.threads: dict[str, set[str]] = {"result": set(), "after": set()}
+
+    def on_result(self, frame: Any, result: FrameResult) -> None:
+        assert result.frame_index == frame.index and self.proc.seen[-1] == frame.index
+        self.threads["result"].add(threading.current_thread().name)
+        self.calls.append((self.name, "result", frame.index))
+
+    def on_after_work(self, frame: Any) -> None:
+        assert self.proc.housekept[-1] == frame.index  # after the frame's housekeeping
+        self.threads["after"].add(threading.current_thread().name)
+        self.calls.append((self.name, "after", frame.index))
+
+    def pose_fields(self, result: FrameResult) -> dict[str, Any]:
+        return {f"{self.name}_frame": result.frame_index}
+
+
+async def test_observers_see_each_result_and_after_work_in_order() -> None:
+    """The observer contract (docs/architecture.md): on_result in the worker thread after
+    process, in the order given; on_after_work on the lane after housekeeping; pose_fields
+    go into the pose report (after the fix's own fields, before the autopilot's position),
+    the frozen result is left as it is."""
+    proc, sink, rec = Processor(track_from=3), Sink(), Recorder()
+    calls: list[tuple[str, str, int]] = []
+    first, second = Observer("a", calls, proc), Observer("b", calls, proc)
+    app = CompanionApp(ListSource(6, period_s=0.01), proc, sink, rec, "v1",
+                       status_period_s=0.05, observers=(first, second))
+    await asyncio.wait_for(app.run(), timeout=10)
+    results = [(n, i) for n, what, i in calls if what == "result"]
+    assert results == [(n, i) for i in range(1, 7) for n in ("a", "b")]
+    after = [(n, i) for n, what, i in calls if what == "after"]
+    assert after == [(n, i) for i in proc.housekept for n in ("a", "b")]
+    assert first.threads == {"result": {"companion-worker_0"},
+                             "after": {"companion-background_0"}}
+    poses = rec.topic("pose")
+    assert [list(p) for p in poses] == [["position_ned_m", "a_frame", "b_frame",
+                                         "autopilot_position_ned_m"]] * 4
+    assert [p["b_frame"] for p in poses] == [3, 4, 5, 6]
 
 
 async def test_every_frame_processed_when_the_worker_keeps_up() -> None:

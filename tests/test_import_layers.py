@@ -73,6 +73,62 @@ def test_the_simulator_is_not_imported_by_the_production_parts(folder: str) -> N
     assert forbidden(folder, ("companion.sim",)) == []
 
 
+#: The simulator and what exists only to fly it (the scripted demo and its fake autopilot).
+SIMULATOR = ("companion.sim", "companion.simulated", "companion.follow", "companion.demo",
+             "companion.demo_autopilot")
+
+
+def module_file(name: str) -> Path | None:
+    """The file of an application module (a package's ``__init__.py``), None for others."""
+    path = ROOT / Path(*name.split("."))
+    for candidate in (path / "__init__.py", path.with_suffix(".py")):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def import_chains(start: str, banned: tuple[str, ...]) -> list[str]:
+    """``start <- ... <- banned module`` for each ``banned`` module that ``start`` imports,
+    directly or through any module of the application it imports (at any level)."""
+    importer: dict[str, str | None] = {start: None}
+    todo = [start]
+    while todo:
+        path = module_file(todo.pop())
+        if path is None:
+            continue
+        here = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+        for _, name in imported_modules(path):
+            if name.startswith("companion") and name not in importer:
+                importer[name] = here
+                todo.append(name)
+    chains = []
+    for name in sorted(n for n in importer if _inside(n, banned)):
+        chain, at = [name], importer[name]
+        while at is not None:
+            chain.append(at)
+            at = importer[at]
+        chains.append(" <- ".join(chain))
+    return chains
+
+
+def test_run_does_not_import_the_simulator() -> None:
+    """``companion run`` (its command module and every module of the application it
+    imports) never imports the simulator: the simulated cameras are plugged into the source
+    factory (companion.simulated.register, called by the command line), and what run needs
+    of them -- their truth, their textures, their camera -- comes through the protocols of
+    companion.sources.base.  On the parent commit run_cmd imported companion.follow,
+    companion.simulated and companion.sim.{scenario,simulator,square}."""
+    assert import_chains("companion.cli.run_cmd", SIMULATOR) == []
+
+
+def test_the_import_chains_are_found() -> None:
+    """The check above sees an import directly and through modules in between (the demo
+    imports the simulator, whose simulator module imports its world)."""
+    assert import_chains("companion.demo", ("companion.sim.world",)) == [
+        "companion.sim.world <- companion.sim.simulator <- companion.demo"]
+    assert import_chains("companion.sources.factory", SIMULATOR) == []
+
+
 def test_core_imports_only_errors() -> None:
     """The shared records import nothing else of the application."""
     assert forbidden("companion/core", ("companion",), SIM_ALLOWED) == []

@@ -19,7 +19,6 @@ from companion.noise import measure_noise, noise_toml
 from companion.perception import Perception
 from companion.runtime import detector_for
 from companion.settings import Settings
-from companion.simulated import open_sim
 from companion.sources.base import EndOfStream
 from companion.sources.config import SourceConfig
 from companion.sources.factory import open_source
@@ -46,7 +45,7 @@ def source_frames(config: SourceConfig, count: int) -> Iterator[Frame]:
     loop = asyncio.new_event_loop()
     try:
         source = loop.run_until_complete(open_source(
-            dataclasses.replace(config, realtime=False), open_sim))
+            dataclasses.replace(config, realtime=False)))
         try:
             for _ in range(count):
                 try:

@@ -16,7 +16,6 @@ from companion.core.stream_io import IMAGE_FORMATS, StreamWriter
 from companion.errors import ConfigError
 from companion.settings import Settings
 from companion.sim.source import SimCameraSource
-from companion.simulated import open_sim
 from companion.sources.base import EndOfStream, FrameSource, monotonic_us
 from companion.sources.config import SourceConfig
 from companion.sources.factory import open_source, resolve
@@ -120,7 +119,7 @@ async def record(config: SourceConfig, out: Path, camera: CameraModel, *, second
         if not await bridge.wait_link(True, 5.0):
             log.warning("record: no heartbeat from the autopilot at %s yet: recording the "
                         "frames, telemetry from when it comes", bridge.config.endpoint)
-    source = await open_source(config, open_sim)
+    source = await open_source(config)
     writer: StreamWriter | None = None
     count, first_t, offset_us = 0, None, 0
     try:

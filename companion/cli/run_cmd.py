@@ -6,20 +6,17 @@ import argparse
 import asyncio
 import dataclasses
 import logging
-import math
 import sys
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from companion.app import CompanionApp, Frame, FrameResult, FrameSource
+from companion.app import CompanionApp, FrameSource
 from companion.autopilot import outcome_lines
 from companion.cli import positive_seconds
 from companion.config_checks import preflight
 from companion.errors import EXIT_FAILURE, EXIT_OK, ConfigError, SourceError
 from companion.flightmap import PracticalMap, load_practical_map
-from companion.follow import FollowCameraSource, command_sender, follow_simulator
 from companion.nofix import AttitudeSource
-from companion.perception import Perception, PerceptionWrapper
+from companion.observers import TruthOf, TruthTags
 from companion.recorded import (
     RECORDED_KINDS,
     OnCompanionClock,
@@ -27,15 +24,12 @@ from companion.recorded import (
     TruthAttitude,
     recording_camera,
 )
-from companion.runtime import bridge_for, fly, perception_for
-from companion.sensors import SensorHistory
+from companion.runtime import CompanionFlight, bridge_for
 from companion.settings import Settings
-from companion.sim.scenario import load_scenario
-from companion.sim.simulator import Simulator
-from companion.sim.square import FlightAbortedError, SquareFlight
-from companion.simulated import open_sim
-from companion.sources.factory import open_source, resolve
+from companion.sources.base import KnowsCamera, KnowsReferences, KnowsTruth
+from companion.sources.factory import OpenContext, open_source, resolve
 from companion.sources.files import RecordedStreamSource
+from companion.square import FlightAbortedError, SquareFlight
 from mavlink_bridge.bridge import VisionBridge
 from tracker.camera import CameraModel
 
@@ -63,60 +57,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def simulator_of(source: object) -> Simulator | None:
-    """The simulator behind a simulated camera (scripted or following SITL), else None."""
-    sim = getattr(source, "sim", None)
-    return sim if isinstance(sim, Simulator) else None
-
-
-def with_sim_references(pmap: PracticalMap, source: object) -> PracticalMap:
-    """A simulated camera shows generated textures: use them where the map has no image."""
-    sim = simulator_of(source)
-    if sim is None:
+def with_source_references(pmap: PracticalMap, source: object) -> PracticalMap:
+    """A source that knows its landmarks' appearance (a simulated camera shows generated
+    textures: :class:`KnowsReferences`) fills in where the map has no image."""
+    if not isinstance(source, KnowsReferences):
         return pmap
-    textures = {lm.landmark_id: lm.quad.texture for lm in sim.world.landmarks
-                if lm.quad.texture is not None}
-    refs = {**{k: v for k, v in textures.items() if k not in pmap.references},
+    refs = {**{k: v for k, v in source.reference_images().items() if k not in pmap.references},
             **pmap.references}
     unusable = {k: v for k, v in pmap.unusable.items() if k not in refs}
     return dataclasses.replace(pmap, references=refs, unusable=unusable)
-
-
-#: The true position (flight NED, m) of the vehicle when a frame was taken, or None.
-TruthOf = Callable[[Frame], Sequence[float] | None]
-
-
-class TruthTagger(PerceptionWrapper):
-    """Follow mode and recordings with truth: each pose message also carries the true
-    position the frame showed (``truth_position_ned_m``) and the fix's distance from it
-    (``truth_error_m``)."""
-
-    def __init__(self, perception: Perception, truth_of: TruthOf) -> None:
-        super().__init__(perception)
-        self.truth_of = truth_of
-
-    def process(self, frame: Frame) -> FrameResult:
-        result = self.perception.process(frame)
-        truth = self.truth_of(frame) if result.fix is not None else None
-        if result.fix is not None and result.pose_json is not None and truth is not None:
-            result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
-            result.pose_json["truth_error_m"] = round(
-                math.dist(result.fix.position_ned_m, truth), 4)
-        return result
-
-
-def open_follow(settings: Settings, bridge: VisionBridge, pmap: PracticalMap
-                ) -> FollowCameraSource:
-    """``source.kind = "follow"``: the scenario's world with the flight's landmark map about
-    the EKF origin, seen from the pose the autopilot simulator reports (docs/sitl.md)."""
-    c = resolve(settings.source)
-    if not settings.landmarks.map_path:
-        raise ConfigError("source.kind = \"follow\": the simulated camera renders the landmarks "
-                          "of landmarks.map_path: set it to the map the autopilot simulator's "
-                          "world uses (docs/sitl.md)")
-    sim = follow_simulator(load_scenario(c.spec), settings.landmarks.map_path, pmap.origin)
-    return FollowCameraSource(sim, bridge, pmap.origin, settings.vehicle.profile, c.follow,
-                              request=command_sender(bridge))
 
 
 @dataclass(frozen=True)
@@ -133,21 +82,20 @@ class RunSource:
 async def open_run_source(settings: Settings, bridge: VisionBridge, pmap: PracticalMap,
                           truth_attitude: bool = False) -> RunSource:
     """The configured source; a recording is put on the companion's clock, solved with its
-    own camera and, with truth, scored against it (:mod:`companion.recorded`)."""
+    own camera and, with truth, scored against it (:mod:`companion.recorded`).  A source
+    that says which camera took it or knows its truth (a simulated camera, through the
+    protocols of :mod:`companion.sources.base`) is taken at its word."""
     c = resolve(settings.source)
     log.info("source %s:%s", c.kind, c.spec)
     if truth_attitude and c.kind != "stream":
         raise ConfigError(f"--truth-attitude: source {c.spec!r} is a {c.kind}, not a recorded "
                           "stream with truth_pose.csv")
-    if c.kind == "follow":
-        follow = open_follow(settings, bridge, pmap)
-        state = follow.rendered_state
-        return RunSource(follow, follow.sim.scenario.camera,
-                         truth_of=lambda f: getattr(state(f.index), "position_ned_m", None))
-    source = await open_source(settings.source, open_sim)
-    sim = simulator_of(source)
+    source = await open_source(settings.source, OpenContext(
+        bridge, pmap.origin, settings.landmarks.map_path, settings.vehicle.profile))
     if c.kind not in RECORDED_KINDS:
-        return RunSource(source, sim.scenario.camera if sim is not None else settings.camera)
+        camera = source.camera_model() if isinstance(source, KnowsCamera) else settings.camera
+        truth_of = source.truth_position if isinstance(source, KnowsTruth) else None
+        return RunSource(source, camera, truth_of=truth_of)
     clocked = OnCompanionClock(source)
     camera = recording_camera(settings.camera, source, c.spec)
     if not isinstance(source, RecordedStreamSource):
@@ -163,14 +111,10 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
     bridge = bridge_for(settings)
     run_source = await open_run_source(settings, bridge, pmap, truth_attitude)
     source = run_source.source
-    pmap = with_sim_references(pmap, source)
-
-    def processor(sensors: SensorHistory) -> Perception | PerceptionWrapper:
-        perception = perception_for(settings, run_source.camera, pmap, sensors)
-        if run_source.truth_of is not None:
-            return TruthTagger(perception, run_source.truth_of)
-        return perception
-
+    flight = CompanionFlight(settings, source, bridge, with_source_references(pmap, source),
+                             run_source.camera, attitude=run_source.attitude, prefix="run")
+    if run_source.truth_of is not None:
+        flight.observe(TruthTags(run_source.truth_of))
     flights: list[asyncio.Task[None]] = []
 
     def start_flying(app: CompanionApp) -> None:
@@ -183,9 +127,7 @@ async def _run(settings: Settings, seconds: float | None, fly_square: bool = Fal
         flights[0].add_done_callback(lambda task: _flight_ended(task, app))
 
     try:
-        app = await fly(settings, source, bridge, processor, pmap, seconds=seconds,
-                        prefix="run", on_start=start_flying if fly_square else None,
-                        attitude=run_source.attitude)
+        app = await flight.run(seconds, on_start=start_flying if fly_square else None)
     finally:
         for task in flights:
             task.cancel()

@@ -47,6 +47,11 @@ class Simulator:
         """Frames per second of the simulated camera."""
         return self.scenario.fps
 
+    def reference_images(self) -> dict[str, ImageU8]:
+        """The appearance reference (texture) of each landmark that has one."""
+        return {lm.landmark_id: lm.quad.texture for lm in self.world.landmarks
+                if lm.quad.texture is not None}
+
     def state_at(self, t_s: float) -> KinematicState:
         """The vehicle state at ``t_s`` scenario seconds (shared with the fake autopilot)."""
         return self.trajectory.state_at(t_s)

@@ -12,6 +12,7 @@ from companion.core.frames import EndOfStream, Frame, ImageU8, SourceStatus, mon
 from companion.core.stream_format import FrameTruth
 from companion.sim.scenario import ScenarioConfig
 from companion.sim.simulator import Simulator
+from tracker.camera import CameraModel
 
 TRUTH_KEPT = 256
 #: The next frame is rendered ahead, starting its expected render time plus this margin
@@ -23,7 +24,22 @@ RENDER_MARGIN_S = 0.004
 RENDER_TIME_DECAY = 0.95
 
 
-class SimCameraSource:
+class OfSimulatedWorld:
+    """What a camera of a simulated world (``self.sim``) says it knows beyond its frames
+    (the protocols of :mod:`companion.sources.base`)."""
+
+    sim: Simulator
+
+    def reference_images(self) -> dict[str, ImageU8]:
+        """The world's landmark textures (:class:`companion.sources.base.KnowsReferences`)."""
+        return self.sim.reference_images()
+
+    def camera_model(self) -> CameraModel:
+        """The scenario's camera (:class:`companion.sources.base.KnowsCamera`)."""
+        return self.sim.scenario.camera
+
+
+class SimCameraSource(OfSimulatedWorld):
     """Frames from a :class:`Simulator`, rendered off the event loop.
 
     ``realtime``: frame k is due at ``t0 + k / fps`` on the monotonic clock and carries
@@ -95,6 +111,14 @@ class SimCameraSource:
     def scenario_time_s(self, frame: Frame) -> float:
         """The scenario time of a frame of this source."""
         return (frame.t_us - (self.t0_us or 0)) / 1e6
+
+    def truth_position(self, frame: Frame) -> tuple[float, float, float] | None:
+        """Where the vehicle truly was when ``frame`` was taken (flight NED, m):
+        :class:`companion.sources.base.KnowsTruth`."""
+        state = self.sim.state_at(self.scenario_time_s(frame))
+        n, e, d = (float(v) for v in state.position_ned_m)
+        return (n, e, d)
+
 
     async def recv(self) -> Frame:
         """Render and return the next frame (EndOfStream after ``seconds`` unless looping).

@@ -3,17 +3,25 @@
 The records themselves (:class:`Frame`, :data:`ImageU8`, :class:`SourceStatus`,
 :class:`EndOfStream`, :func:`monotonic_us`) live in :mod:`companion.core.frames`, which the
 simulator imports too; they are imported here so that a source needs one module.
+
+A source that knows more than its frames says so through a protocol, so that a flight
+picks it up without knowing what kind of source it is (``companion run`` never imports
+the simulator): :class:`KnowsTruth` (where the vehicle truly was), :class:`KnowsReferences`
+(its landmarks' appearance images) and :class:`KnowsCamera` (the camera that took it).
 """
 
 from __future__ import annotations
 
 import asyncio
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from companion.core.frames import EndOfStream, Frame, ImageU8, SourceStatus, monotonic_us
 
-__all__ = ["EndOfStream", "Frame", "FrameSource", "ImageU8", "Pacer", "SourceStatus",
-           "monotonic_us"]
+if TYPE_CHECKING:
+    from tracker.camera import CameraModel
+
+__all__ = ["EndOfStream", "Frame", "FrameSource", "ImageU8", "KnowsCamera", "KnowsReferences",
+           "KnowsTruth", "Pacer", "SourceStatus", "monotonic_us"]
 
 
 @runtime_checkable
@@ -28,6 +36,34 @@ class FrameSource(Protocol):
 
     def close(self) -> None:
         """Release files, devices and threads (idempotent)."""
+        ...
+
+
+@runtime_checkable
+class KnowsTruth(Protocol):
+    """A source that knows where the vehicle truly was (a simulated camera)."""
+
+    def truth_position(self, frame: Frame) -> tuple[float, float, float] | None:
+        """The vehicle's true position (flight NED, m) when ``frame`` was taken; None when
+        unknown (e.g. a frame too old to be remembered)."""
+        ...
+
+
+@runtime_checkable
+class KnowsReferences(Protocol):
+    """A source whose landmarks' appearance it knows (a simulated world's textures)."""
+
+    def reference_images(self) -> dict[str, ImageU8]:
+        """Landmark id -> its appearance reference image."""
+        ...
+
+
+@runtime_checkable
+class KnowsCamera(Protocol):
+    """A source that says which camera took its frames (a simulated scenario's)."""
+
+    def camera_model(self) -> CameraModel:
+        """The camera model (intrinsics, mount) of the frames."""
         ...
 
 

@@ -1,10 +1,19 @@
-"""Open any frame source from a :class:`SourceConfig` or a command-line spec."""
+"""Open any frame source from a :class:`SourceConfig` or a command-line spec.
+
+The kinds of the frame sources here (stream, otb, video, camera) are built in.  The
+simulator's kinds (``sim``, ``follow``) are *plugged in*: :func:`companion.simulated.register`
+puts their openers in this module's registry (the command line does at start,
+``companion.cli.PLUGIN_MODULES``), so neither the sources nor ``companion run`` import the
+simulator (docs/architecture.md, "Packages and the direction of imports").
+"""
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from companion.core.resources import scenario_path
 from companion.errors import InputError
@@ -13,12 +22,34 @@ from companion.sources.config import SourceConfig, SourceKind
 from companion.sources.files import OtbSource, RecordedStreamSource
 from companion.sources.live import VIDEO_SUFFIXES, CameraSource, VideoFileSource
 
+if TYPE_CHECKING:
+    from companion.landmarks.geodesy import LocalFrame
+
 KINDS = ("sim", "stream", "otb", "video", "camera", "follow")
 
-#: Opens the simulated camera (kind ``sim``) for a resolved config. The frame sources do not
-#: import the simulator (docs/architecture.md): a command that offers simulated sources
-#: passes :func:`companion.simulated.open_sim` to :func:`open_source`.
-SimOpener = Callable[[SourceConfig], FrameSource]
+
+
+@dataclass(frozen=True)
+class OpenContext:
+    """What a plugged-in source may need of the flight beyond its configuration: follow
+    mode renders the world of the flight's map (``map_path``) about its EKF ``origin``,
+    from the true pose the autopilot simulator reports over ``link`` (the MAVLink bridge)
+    in its ``profile``'s messages.  A command without a link passes none."""
+
+    link: object | None = None
+    origin: LocalFrame | None = None
+    map_path: str = ""
+    profile: str = "ardupilot"
+
+
+#: Opens a plugged-in source kind: (resolved config, context) -> the source.
+Opener = Callable[[SourceConfig, OpenContext], FrameSource]
+_PLUGGED: dict[str, Opener] = {}
+
+
+def plug_in(kind: SourceKind, opener: Opener) -> None:
+    """Open source ``kind`` with ``opener`` from now on (idempotent)."""
+    _PLUGGED[kind] = opener
 
 
 def split_spec(spec: str) -> tuple[SourceKind, str]:
@@ -63,16 +94,14 @@ def resolve(config: SourceConfig) -> SourceConfig:
     return dataclasses.replace(config, kind=kind, spec=spec)
 
 
-async def open_source(config: SourceConfig, simulated: SimOpener | None = None) -> FrameSource:
+async def open_source(config: SourceConfig, context: OpenContext | None = None
+                      ) -> FrameSource:
     """Open the source a config names; one-line :class:`InputError`/``SourceError`` if not.
 
-    ``simulated`` opens a scenario (kind ``sim``); without it a scenario is refused.
+    A plugged-in kind (:func:`plug_in`) is opened with ``context``; one nobody plugged in
+    is refused.
     """
     c = resolve(config)
-    if c.kind == "follow":
-        raise InputError("source.kind = \"follow\": the camera follows an autopilot "
-                         "simulator's truth, so it needs the MAVLink link: use `companion run` "
-                         "(docs/sitl.md)")
     if c.kind == "stream":
         return RecordedStreamSource(Path(c.spec), realtime=c.realtime, loop=c.loop,
                                     speed=c.speed)
@@ -87,7 +116,8 @@ async def open_source(config: SourceConfig, simulated: SimOpener | None = None) 
         return await CameraSource.open(c.spec, open_timeout_s=c.open_timeout_s,
                                        camera_id=c.camera_id, stall_timeout_s=c.stall_timeout_s,
                                        size=size)
-    if simulated is None:
-        raise InputError(f"{c.spec}: a simulated camera (source kind sim) is not available "
-                         "here; use a stream, OTB folder, video or camera")
-    return simulated(c)
+    opener = _PLUGGED.get(c.kind)
+    if opener is None:
+        raise InputError(f"{c.spec}: a simulated camera (source kind {c.kind}) is not "
+                         "available here; use a stream, OTB folder, video or camera")
+    return opener(c, context or OpenContext())

@@ -19,7 +19,8 @@ from companion.landmarks.geodesy import LocalFrame
 from companion.settings import load_settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
-from companion.sim.square import (
+from companion.sources.factory import resolve
+from companion.square import (
     MAV_CMD_COMPONENT_ARM_DISARM,
     MAV_CMD_DO_SET_MODE,
     MAV_CMD_NAV_TAKEOFF,
@@ -28,7 +29,6 @@ from companion.sim.square import (
     SquarePlan,
     square_corners,
 )
-from companion.sources.factory import resolve
 from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig

@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 import pytest
 
+from companion import simulated
 from companion.errors import InputError, SourceError
-from companion.simulated import open_sim
 from companion.sources.base import EndOfStream
 from companion.sources.config import SourceConfig
 from companion.sources.factory import guess_kind, open_source, resolve, split_spec
@@ -164,5 +164,8 @@ async def test_open_source_sim_and_otb(tmp_path: Path) -> None:
     cv2.imwrite(str(tmp_path / "o" / "img" / "0001.jpg"), np.zeros((8, 8, 3), np.uint8))
     otb = await open_source(SourceConfig(spec=str(tmp_path / "o"), realtime=False))
     assert (await otb.recv()).image.shape == (8, 8, 3)
-    sim = await open_source(SourceConfig(spec="sim:hover", realtime=False), open_sim)
+    simulated.register()  # as the command line does at start
+    sim = await open_source(SourceConfig(spec="sim:hover", realtime=False))
     assert (await sim.recv()).image.shape == (480, 640, 3)
+    with pytest.raises(InputError, match="needs the MAVLink link"):  # no link in the context
+        await open_source(SourceConfig(spec="follow:survey", realtime=False))
