@@ -79,8 +79,7 @@ class TruthRecorder(PerceptionWrapper):
             dist = float(np.mean([math.dist(truth, lm.position_ned_m) for lm in used])) \
                 if used else float("nan")
             self.result.fixes.append((result.fix, truth, dist))
-            if result.pose_json is not None:
-                result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
+            result.pose_extra["truth_position_ned_m"] = [round(v, 4) for v in truth]
         return result
 
 

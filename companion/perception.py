@@ -44,6 +44,7 @@ from companion.perception_types import (
     SideSensors,
     Start,
     Track,
+    TrackView,
 )
 from tracker import TrackerConfig
 from tracker.acquire import (
@@ -480,12 +481,7 @@ class Perception(Acquisition):
         return events
 
     def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
-        tracks = tuple(
-            {"landmark_id": t.landmark_id, "box": [round(v, 1) for v in t.box],
-             "confidence": round(t.confidence, 3), "features": list(t.features),
-             "corners": None if t.corners is None else np.round(t.corners, 2).tolist()}
-            for t in self.tracks.values()
-        )
+        tracks = tuple(TrackView.of(t) for t in self.tracks.values())
         if not self.tracks:
             return FrameResult(frame.index, frame.t_us, tracks, None, "nothing tracked",
                                tuple(events))
@@ -524,7 +520,7 @@ class Perception(Acquisition):
             for old in [i for i in self._fixes if i <= frame.index - RECENT_FIXES]:
                 del self._fixes[old]
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
-                           pose_json=pose_json(fix), particles=particles)
+                           particles=particles)
 
 
 class PerceptionWrapper:
@@ -542,16 +538,3 @@ class PerceptionWrapper:
 
     def close(self) -> None:
         self.perception.close()
-
-
-def pose_json(fix: PoseFix) -> dict[str, Any]:
-    """The monitoring payload of a fix (docs/monitoring.md)."""
-    return {
-        "position_ned_m": [round(v, 4) for v in fix.position_ned_m],
-        "attitude_rpy_rad": [round(v, 5) for v in fix.attitude_rpy_rad],
-        "covariance_diag": [float(f"{v:.6g}") for v in np.diag(fix.covariance)],
-        "quality": fix.quality,
-        "landmark_ids": list(fix.landmark_ids),
-        "solver": fix.solver,
-        "attitude_prior": fix.attitude_prior,
-    }

@@ -160,6 +160,31 @@ class Track:
     verify_failures: int = 0
 
 
+@dataclass(frozen=True, eq=False)
+class TrackView:
+    """What a frame's result says of one track (``FrameResult.tracks``): a frozen copy, made
+    on the worker thread as the frame's update ends, so whoever reads it later (the reporter,
+    the preview on the background lane, an observer) sees that frame's track and nothing
+    the next frame changes.  Its monitoring JSON is :func:`companion.reporting.track_json`."""
+
+    landmark_id: str
+    box: Box
+    confidence: float
+    features: tuple[int, ...]
+    #: the four aligned corners (px, (4, 2), read-only, the alignment's own dtype), None
+    #: when the alignment does not hold this frame
+    corners: FloatArray | None
+
+    @classmethod
+    def of(cls, track: Track) -> TrackView:
+        corners = None
+        if track.corners is not None:
+            corners = track.corners.copy()
+            corners.flags.writeable = False
+        return cls(track.landmark_id, track.box, track.confidence, tuple(track.features),
+                   corners)
+
+
 @dataclass(frozen=True)
 class Start:
     """A tracker started by housekeeping, waiting for ``process`` to adopt it."""

@@ -128,7 +128,7 @@ def test_acquisition_never_invents_a_landmark(scenario: str) -> None:
     _, _, out = flight(scenario, range(0, 30))  # the start: the first wall barely in view
     for result, truth, _ in out:
         in_view = {b.landmark_id for b in truth.boxes if b.in_view_frac > 0.5}
-        assert {t["landmark_id"] for t in result.tracks} <= in_view
+        assert {t.landmark_id for t in result.tracks} <= in_view
 
 
 def test_small_plates_corners_carry_a_larger_sigma() -> None:
@@ -214,7 +214,7 @@ def test_an_over_exposed_plates_corners_are_not_used() -> None:
     before = [r for r, _, _ in out[:40]]
     after = [r for r, _, _ in out[45:]]  # from frame 365
     assert sum(isinstance(r.fix, PoseFix) for r in before) >= 20
-    assert all(t["corners"] is not None for r in after for t in r.tracks), \
+    assert all(t.corners is not None for r in after for t in r.tracks), \
         "the alignment lost the plate: the test would not show the saturation rule"
     assert after and all(r.fix is None or r.fix.solver == "size_bearing" for r in after)
     assert all(r.fix is not None or "unobservable" in (r.no_fix_reason or "") for r in after)

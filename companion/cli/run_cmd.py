@@ -98,9 +98,9 @@ class TruthTagger(PerceptionWrapper):
     def process(self, frame: Frame) -> FrameResult:
         result = self.perception.process(frame)
         truth = self.truth_of(frame) if result.fix is not None else None
-        if result.fix is not None and result.pose_json is not None and truth is not None:
-            result.pose_json["truth_position_ned_m"] = [round(v, 4) for v in truth]
-            result.pose_json["truth_error_m"] = round(
+        if result.fix is not None and truth is not None:
+            result.pose_extra["truth_position_ned_m"] = [round(v, 4) for v in truth]
+            result.pose_extra["truth_error_m"] = round(
                 math.dist(result.fix.position_ned_m, truth), 4)
         return result
 
