@@ -16,7 +16,6 @@ import numpy.typing as npt
 from tracker import AdaptiveTracker
 from tracker.acquire import Weights
 from tracker.features import colour_weights
-from tracker.pose.types import AltitudeSample, AttitudeSample, RangeSample
 from tracker.types import Box
 
 FloatArray = npt.NDArray[np.float64]
@@ -123,15 +122,6 @@ class DetectionLike(Protocol):
 DetectFn = Callable[[npt.NDArray[np.uint8]], Sequence[DetectionLike]]
 
 
-@dataclass(frozen=True)
-class SideSensors:
-    """The autopilot's latest attitude, altitude and laser range (any may be missing)."""
-
-    attitude: AttitudeSample | None = None
-    altitude: AltitudeSample | None = None
-    laser: RangeSample | None = None
-
-
 @dataclass
 class Track:
     """One landmark being followed."""
@@ -191,6 +181,26 @@ class Start:
 
     track: Track
     event: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Occupancy:
+    """What housekeeping knows of the tracks: a snapshot the track set takes under its lock
+    (:meth:`companion.tracks.TrackSet.snapshot`), never the live tracks themselves."""
+
+    #: landmarks with a live track
+    tracked: frozenset[str] = frozenset()
+    #: landmarks started by housekeeping, not yet adopted by ``process`` (in order)
+    waiting: tuple[str, ...] = ()
+
+    def busy(self, starts: Sequence[Start] = ()) -> int:
+        """Tracks running, waiting to be adopted and just started."""
+        return len(self.tracked) + len(self.waiting) + len(starts)
+
+    def taken(self, lid: str, starts: Sequence[Start] = ()) -> bool:
+        """Tracked, waiting to be adopted, or just started."""
+        return lid in self.tracked or lid in self.waiting or any(
+            s.track.landmark_id == lid for s in starts)
 
 
 #: ECC correlation a running track's alignment must reach (a new sighting: verify_correlation).
