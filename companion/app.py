@@ -78,7 +78,7 @@ class FrameResult:
     #: follow mode or a recording knows): whoever adds them owns their meaning.
     pose_extra: dict[str, Any] = field(default_factory=dict)
     #: Drawn on the preview, never logged: landmark id -> (N, 2) particle positions.
-    particles: dict[str, Any] = field(default_factory=dict)
+    particles: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict)
 
 
 class FrameProcessor(Protocol):

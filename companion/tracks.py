@@ -179,7 +179,7 @@ class TrackSet:
         """Frozen copies of the live tracks, for the frame's result."""
         return tuple(TrackView.of(t) for t in self._tracks.values())
 
-    def particles(self) -> dict[str, Any]:
+    def particles(self) -> dict[str, npt.NDArray[np.float64]]:
         """Landmark id -> its tracker's particle centres (the preview draws them)."""
         return {t.landmark_id: t.tracker.particle_centres for t in self._tracks.values()}
 
