@@ -46,7 +46,9 @@ HERE = Path(__file__).resolve()
 ROOT = HERE.parents[1]
 BASELINE = HERE.with_name("latency_baseline.json")
 STAGES = ("capture_to_worker", "process", "capture_to_wire")
-HOUSEKEEPING_STEPS = ("_acquire", "_predict_acquire", "_detect_acquire", "_search")
+#: housekeeping's steps: the acquirers (companion/acquirers.py), by their class
+HOUSEKEEPING_STEPS = {"features": "FeatureAcquirer", "prediction": "PredictionAcquirer",
+                      "detector": "DetectorAcquirer", "search": "SearchAcquirer"}
 PROBED = ("gc", "threads_cpu_s", "process", "housekeeping", *HOUSEKEEPING_STEPS,
           "slowest_process")
 BUSY_CODE = "import os, sys\nos.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True:\n    pass\n"
@@ -166,14 +168,19 @@ class Probe:
         outer = getattr(demo, "TruthRecorder", perception.Perception)
         for name in ("process", "housekeeping"):
             self._wrap(outer, name)
-        for name in HOUSEKEEPING_STEPS:  # the steps of housekeeping, where they exist
-            if hasattr(perception.Perception, name):
-                self.calls[name] = []
-                self._wrap(perception.Perception, name)
+        import importlib.util
 
-    def _wrap(self, cls: Any, name: str) -> None:
+        if importlib.util.find_spec("companion.acquirers") is None:
+            return  # an older checkout: no acquirer classes to time
+        from companion import acquirers
+
+        for name, cls in HOUSEKEEPING_STEPS.items():  # the steps of housekeeping
+            self.calls[name] = []
+            self._wrap(getattr(acquirers, cls), "find", name)
+
+    def _wrap(self, cls: Any, name: str, key: str | None = None) -> None:
         inner = getattr(cls, name)
-        calls = self.calls[name]
+        calls = self.calls[key or name]
 
         def timed(obj: Any, *args: Any) -> Any:
             t0, c0 = time.perf_counter(), time.thread_time()

@@ -37,8 +37,9 @@ limit_library_threads()
 
 import numpy as np  # noqa: E402
 
-STAGES = ("process", "housekeeping", "tracker.update", "_align", "_recover_corners",
-          "_check_track", "_verify_tracks", "_solve")
+#: the perception's, then the parts' (class.method: companion/corners.py, tracks.py)
+STAGES = ("process", "housekeeping", "tracker.update", "Corners.align", "Corners.recover",
+          "Corners.check", "TrackSet.verify", "Perception._solve")
 
 
 class Meter:
@@ -120,11 +121,13 @@ def main() -> int:
 
     import cv2
 
+    from companion.corners import Corners
     from companion.demo import map_landmarks
     from companion.perception import Perception, SideSensors
     from companion.sim.scenario import load_scenario
     from companion.sim.simulator import Simulator
     from companion.sources.base import Frame
+    from companion.tracks import TrackSet
     from tracker.pose.types import AttitudeSample, PoseFix
 
     cv2.setNumThreads(1)  # as the companion runs it (companion.runtime.CompanionFlight)
@@ -147,9 +150,10 @@ def main() -> int:
     meter = Meter()
     meter.wrap(Perception, "process", "process", time.process_time)
     meter.wrap(Perception, "housekeeping", "housekeeping", time.process_time)
-    for attr in STAGES[3:]:
-        if hasattr(Perception, attr):
-            meter.wrap(Perception, attr, attr, time.thread_time)
+    parts = {"Corners": Corners, "TrackSet": TrackSet, "Perception": Perception}
+    for name in STAGES[3:]:
+        owner, attr = name.split(".")
+        meter.wrap(parts[owner], attr, name, time.thread_time)
     first_update = True
     # CPU time of the main thread (wall time would count the machine's load)
     profiler = cProfile.Profile(time.thread_time) if args.profile else None

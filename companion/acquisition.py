@@ -1,241 +1,97 @@
-"""Perception's acquisition: finding map landmarks that are not tracked, and starting a
-verified track on each (:class:`Acquisition`, a part of :class:`companion.perception.Perception`).
+"""When to look for untracked landmarks, and how: the housekeeping half of the perception.
 
-Four strategies, each ending in :meth:`Acquisition._start` (the warped appearance must match
-before a track starts, so a wall is never taken for a sign):
+:class:`Acquisition` runs on the pipeline's background lane, once per frame it is given
+(``Perception.housekeeping``), and decides which acquirers (:mod:`companion.acquirers`)
+run on that frame:
 
-* feature matching against the appearance references (``_acquire``), now and then and at
-  once whenever nothing is tracked;
-* prediction from the frame's fix (``_predict_acquire``): the fix says where an untracked
-  landmark is, alignment (ECC) confirms it;
-* the detector's hits (``_detect_acquire``) and a colour template search over the frame
-  (``_search``) while no fix comes (``_find_while_lost``; with tracks running they take
-  turns, one heavy step per housekeeping call: docs/benchmarks.md, "Latency tail").
+* feature matching now and then (``acquire_every_frames``; ``_with_fix`` while fixes come)
+  and at once whenever nothing is tracked or the light stepped (:meth:`Acquisition.run`'s
+  ``now``);
+* prediction from the frame's fix, whenever there is one;
+* without a fix for ``search_after_s``: the detector's hits, and the template search when
+  they start nothing.  With tracks running these take turns with feature matching, one
+  heavy step per call (docs/benchmarks.md, "Latency tail").
 
-These run on the pipeline's housekeeping thread; what they start is handed to ``process``
-under the perception's lock (``_pending``).
+It sees the tracks only as the snapshot it is given and returns what it started; the
+caller hands that over to the worker thread (:meth:`companion.tracks.TrackSet.hand_over`).
+Its own state (the schedule's turns and clocks) is the background lane's alone.
 """
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Sequence
+from companion.acquirers import Acquirer, Sighting, Starter
+from companion.perception_types import PerceptionConfig, Start
 
-import numpy as np
-import numpy.typing as npt
-
-from companion.app import Frame
-from companion.perception_types import (
-    TRACK_MIN_CORRELATION,
-    DetectFn,
-    PerceptionConfig,
-    Start,
-    Track,
-    feature_weights_bgr,
-)
-from tracker import AdaptiveTracker, TrackerConfig
-from tracker.acquire import (
-    Reference,
-    ReferenceMatcher,
-    Weights,
-    homography_to,
-    project_corners,
-    refine_ecc,
-    search_template,
-)
-from tracker.boxes import box_corners, clip_box, inside
-from tracker.camera import CameraModel
-from tracker.pose.landmarks import landmark_corners_ned
-from tracker.pose.types import MapLandmark, PoseFix
-from tracker.types import Box
-from tracker.verify import detail_ncc
-
-FloatArray = npt.NDArray[np.float64]
-
-#: Trackers started n-th re-rank their features n x this many frames apart (a re-rank costs
-#: a few ms: several on one frame showed in the latency's tail).
-RANK_PHASE_STEP = 3
+#: "Never": a frame index or time that makes every interval due.
+LONG_AGO = -(2**62)
 
 
 class Acquisition:
-    """The acquisition half of :class:`~companion.perception.Perception` (which sets these
-    attributes in its ``__init__``)."""
+    """The acquirers and their schedule."""
 
-    camera: CameraModel
-    landmarks: list[MapLandmark]
-    config: PerceptionConfig
-    tracker_config: TrackerConfig | None
-    matcher: ReferenceMatcher
-    detect: DetectFn | None
-    tracks: dict[str, Track]
-    _lock: threading.Lock
-    _pending: list[Start]
-    _seed: int
-    _last_fix_us: int
-    _acquired_frame: int
-    _search_turn: int
-    _search_next: bool
+    def __init__(self, config: PerceptionConfig, starter: Starter, features: Acquirer,
+                 prediction: Acquirer, search: Acquirer, detector: Acquirer | None) -> None:
+        self.config = config
+        self.starter = starter
+        self.features = features
+        self.prediction = prediction
+        self.search = search
+        self.detector = detector
+        self.last_fix_us = LONG_AGO
+        self.acquired_frame = LONG_AGO
+        self._lost_turn = False  # features (first) and the lost search take turns
+        self._search_next = False  # the template search's turn after a fruitless detector
 
-    def _find_while_lost(self, image: npt.NDArray[np.uint8], spread: bool) -> list[Start]:
-        """Without a fix: the detector's hits, and the template search when they start
-        nothing -- with ``spread``, on the next call (each costs 20-45 ms of CPU)."""
-        if self.detect is not None and not self._search_next:
-            found = self._detect_acquire(image)
-            if found or not spread:
-                return found or self._search(image)
-            self._search_next = True
-            return found
-        self._search_next = False
-        return self._search(image)
+    def due_now(self) -> None:
+        """Feature matching is due on the next frame (a light step)."""
+        self.acquired_frame = LONG_AGO
 
-    def _ecc(self, ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
-             verify: bool = True, weights: Weights | None = None) -> FloatArray | None:
-        """ECC alignment with this perception's settings; ``verify``: a new sighting,
-        held to ``verify_correlation`` (a running track to ``TRACK_MIN_CORRELATION``)."""
-        cfg = self.config
-        least = cfg.verify_correlation if verify else TRACK_MIN_CORRELATION
-        return refine_ecc(ref, frame, hom, cfg.ecc_iterations, least, cfg.ecc_fine_iterations,
-                          weights)
-
-    def _busy(self, starts: Sequence[Start] = ()) -> int:
-        """Tracks running, waiting to be adopted and just started."""
-        with self._lock:
-            waiting = len(self._pending)
-        return len(self.tracks) + waiting + len(starts)
-
-    def _taken(self, lid: str, starts: Sequence[Start] = ()) -> bool:
-        """Tracked, waiting to be adopted, or just started."""
-        with self._lock:
-            waiting = [s.track.landmark_id for s in self._pending]
-        return lid in self.tracks or lid in waiting or any(
-            s.track.landmark_id == lid for s in starts)
-
-    def _should_acquire(self, frame: Frame) -> bool:
+    def should_acquire(self, index: int, t_us: int, sight: Sighting) -> bool:
         """Feature matching is due: nothing tracked, or ``acquire_every_frames`` since the
         last (``acquire_every_frames_with_fix`` while fixes come: prediction then finds the
         plates in view, at a fraction of SIFT's cost)."""
         cfg = self.config
-        if self._busy() >= cfg.max_tracks:
+        if sight.seen.busy() >= cfg.max_tracks:
             return False
-        recent_fix = frame.t_us - self._last_fix_us <= cfg.search_after_s * 1e6
+        recent_fix = t_us - self.last_fix_us <= cfg.search_after_s * 1e6
         every = cfg.acquire_every_frames_with_fix if recent_fix else cfg.acquire_every_frames
-        return not self.tracks or frame.index - self._acquired_frame >= every
+        return not sight.seen.tracked or index - self.acquired_frame >= every
 
-    def _acquire(self, image: npt.NDArray[np.uint8]) -> list[Start]:
-        wanted = [lid for lid, ref in self.matcher.references.items()
-                  if ref.matchable and not self._taken(lid)]
+    def run(self, index: int, t_us: int, sight: Sighting) -> list[Start]:
+        """What this frame's housekeeping starts (frame ``index`` captured at ``t_us``)."""
         starts: list[Start] = []
-        height, width = image.shape[:2]
-        for match in self.matcher.find(image, wanted):
-            box = clip_box(match.box, width, height)
-            if box is None or self._busy(starts) >= self.config.max_tracks:
-                continue
-            starts += self._start(match.landmark_id, image, box, match.homography,
-                                  match.corners_px, "features", starts)
+        if sight.fix is not None:
+            self.last_fix_us = sight.fix.time_us
+        acquire = self.should_acquire(index, t_us, sight)
+        lost = sight.fix is None and t_us - self.last_fix_us > self.config.search_after_s * 1e6
+        # While tracks run, one heavy step per call (they take turns, issue 23): a call that
+        # runs several holds a one-core board's next frame up by their sum.  With no track
+        # the frames carry no fix to delay: then all at once, for the quickest start (taking
+        # turns there too lost sitl_tests/test_one_landmark.py's box track for 1/3 of its
+        # frames: re-acquired by the template search alone, it failed its checks).
+        spread = bool(sight.seen.tracked)
+        if acquire and lost and spread:
+            self._lost_turn = not self._lost_turn
+            acquire, lost = self._lost_turn, not self._lost_turn
+        if acquire:
+            self.acquired_frame = index
+            starts += self.features.find(sight)
+        if sight.fix is not None:
+            starts += self.prediction.find(sight, starts)
+        elif lost:
+            starts += self._find_while_lost(sight, spread)
         return starts
 
-    def _start(self, lid: str, image: npt.NDArray[np.uint8], box: Box, hom: FloatArray,
-               corners: FloatArray, by: str, starts: Sequence[Start]) -> list[Start]:
-        """A tracker for landmark ``lid`` in ``box`` with a homography, verified first by
-        the appearance it warps onto the frame (none when that does not match)."""
-        ncc = detail_ncc(self.matcher.references[lid], image, hom)
-        if ncc < self.config.min_appearance_ncc:
-            return []
-        busy = self._busy(starts)
-        tracker = AdaptiveTracker(self.tracker_config, seed=self._seed + busy)
-        tracker.init(image, box, rank_phase=RANK_PHASE_STEP * busy)
-        track = Track(lid, tracker, box, hom, corners=corners,
-                      align_weights=feature_weights_bgr(tracker.features))
-        return [Start(track, {"event": "acquired", "landmark": lid, "by": by,
-                              "box": [round(v, 1) for v in box],
-                              "appearance_correlation": round(ncc, 3)})]
-
-    def _detect_acquire(self, image: npt.NDArray[np.uint8]) -> list[Start]:
-        """Restart tracks from detector hits: each hit is tried against the untracked map
-        landmarks of its category, and kept only when the reference aligns there."""
-        assert self.detect is not None
-        starts: list[Start] = []
-        category = {lm.landmark_id: lm.category for lm in self.landmarks}
-        for det in self.detect(image):
-            for lid, ref in self.matcher.references.items():
-                if self._taken(lid, starts) or category.get(lid) not in (det.category, ""):
-                    continue
-                start = homography_to(ref, box_corners(det.box))
-                aligned = self._ecc(ref, image, start)
-                if aligned is None:
-                    continue
-                quad = project_corners(ref, aligned)
-                box = clip_box(det.box, image.shape[1], image.shape[0])
-                if box is not None and inside(quad, image.shape[1], image.shape[0], 2.0):
-                    started = self._start(lid, image, box, aligned, quad, "detector", starts)
-                    starts += started
-                    if started:
-                        break
-        return starts
-
-    def _search(self, image: npt.NDArray[np.uint8]) -> list[Start]:
-        """Look for one untracked landmark (round robin) by colour template search over the
-        whole frame, verified by alignment: finds distant or plain landmarks that feature
-        matching misses, while nothing gives a fix to predict from."""
-        untracked = [lid for lid in self.matcher.references if not self._taken(lid)]
-        if not untracked or self._busy() >= self.config.max_tracks:
-            return []
-        lid = untracked[self._search_turn % len(untracked)]
-        self._search_turn += 1
-        ref = self.matcher.references[lid]
-        found = search_template(ref, image, self.config.search_widths_px)
-        if found is None or found[0] < self.config.search_min_score:
-            return []
-        aligned = self._ecc(ref, image, found[1])
-        if aligned is None:
-            return []
-        quad = project_corners(ref, aligned)
-        x0, y0 = quad.min(axis=0)
-        x1, y1 = quad.max(axis=0)
-        box = clip_box((x0, y0, x1 - x0, y1 - y0), image.shape[1], image.shape[0])
-        if box is None or not inside(quad, image.shape[1], image.shape[0], margin=2.0):
-            return []
-        return self._start(lid, image, box, aligned, quad, "search", [])
-
-    def _predict_acquire(self, image: npt.NDArray[np.uint8], fix: PoseFix,
-                         earlier: Sequence[Start]) -> list[Start]:
-        """Start tracks on map landmarks the fix says are in view, verified by alignment.
-
-        The fix predicts where each untracked landmark's corners are; aligning its
-        reference there (ECC) confirms it and gives exact corners.  This finds plain
-        plates that have too few keypoints for feature matching.
-        """
-        starts: list[Start] = list(earlier)
-        height, width = image.shape[:2]
-        for lm in self.landmarks:
-            lid = lm.landmark_id
-            if self._taken(lid, starts) or lid not in self.matcher.references:
-                continue
-            if self._busy(starts) >= self.config.max_tracks:
-                break
-            corners = self._project(lm, fix)
-            if corners is None or not inside(corners, width, height, margin=4.0):
-                continue
-            ref = self.matcher.references[lid]
-            aligned = self._ecc(ref, image, homography_to(ref, corners))
-            if aligned is None:
-                continue
-            quad = project_corners(ref, aligned)
-            if np.abs(quad - corners).max() > self.config.max_prediction_error_px:
-                continue
-            x0, y0 = quad.min(axis=0)
-            x1, y1 = quad.max(axis=0)
-            box = clip_box((x0, y0, x1 - x0, y1 - y0), width, height)
-            if box is None:
-                continue
-            starts += self._start(lid, image, box, aligned, quad, "prediction", starts)
-        return starts[len(earlier):]
-
-    def _project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
-        """The landmark's corners in the image for the vehicle pose of ``fix``."""
-        corners_ned = landmark_corners_ned(lm)
-        cam = self.camera.world_to_camera(corners_ned, np.asarray(fix.position_ned_m),
-                                          fix.attitude_rpy_rad)
-        if np.any(cam[:, 2] <= 0.1):
-            return None
-        return self.camera.project_camera_points(cam)
+    def _find_while_lost(self, sight: Sighting, spread: bool) -> list[Start]:
+        """Without a fix: the detector's hits, and the template search when they start
+        nothing -- with ``spread``, on the next call (each costs 20-45 ms of CPU).  Neither
+        counts what feature matching started on this call (as before the split: their
+        seeds depend on it)."""
+        if self.detector is not None and not self._search_next:
+            found = self.detector.find(sight)
+            if found or not spread:
+                return found or self.search.find(sight)
+            self._search_next = True
+            return found
+        self._search_next = False
+        return self.search.find(sight)

@@ -34,10 +34,13 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from companion.perception_types import TrackView
 from companion.pipeline.background import BackgroundLane
 from companion.pipeline.health import Blocker, HealthInputs, HealthPolicy, State, health_state
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
+from companion.reporting import pose_json, tracks_json
+from tracker.pose.types import PoseFix
 
 log = logging.getLogger(__name__)
 
@@ -66,18 +69,19 @@ class FrameSource(Protocol):
 
 @dataclass(frozen=True)
 class FrameResult:
-    """What perception made of one frame (JSON-ready fields for monitoring)."""
+    """What perception made of one frame: typed values; their monitoring and flight-log JSON
+    is built by :mod:`companion.reporting` (``pose_json``, ``track_json``)."""
 
     frame_index: int
     capture_t_us: int
-    tracks: tuple[dict[str, Any], ...] = ()
-    fix: Any | None = None
+    #: the live tracks at the frame's end, frozen copies
+    tracks: tuple[TrackView, ...] = ()
+    fix: PoseFix | None = None
     no_fix_reason: str | None = None
     events: tuple[dict[str, Any], ...] = ()
     bad_frame: bool = False
-    pose_json: dict[str, Any] | None = None
     #: Drawn on the preview, never logged: landmark id -> (N, 2) particle positions.
-    particles: dict[str, Any] = field(default_factory=dict)
+    particles: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict)
 
 
 class FrameProcessor(Protocol):
@@ -338,7 +342,7 @@ class CompanionApp:
         for event in result.events:
             self.reporter.report("events", result.capture_t_us, event)
         self.reporter.report("tracks", result.capture_t_us,
-                             {"frame": result.frame_index, "tracks": list(result.tracks),
+                             {"frame": result.frame_index, "tracks": tracks_json(result.tracks),
                               "no_fix_reason": result.no_fix_reason})
         if result.tracks:
             self._ever_tracked = True
@@ -347,12 +351,11 @@ class CompanionApp:
         elif sent:
             self.counters.fixes_sent += 1
             self._last_fix_s = now_s
-            if result.pose_json is not None:
-                own = self.sink.autopilot_position_ned()  # to plot the fix against it
-                extra = {} if own is None else {"autopilot_position_ned_m": own}
-                added = {k: v for o in self.observers for k, v in o.pose_fields(result).items()}
-                self.reporter.report("pose", result.capture_t_us,
-                                     {**result.pose_json, **added, **extra})
+            own = self.sink.autopilot_position_ned()  # to plot the fix against it
+            extra = {} if own is None else {"autopilot_position_ned_m": own}
+            added = {k: v for o in self.observers for k, v in o.pose_fields(result).items()}
+            self.reporter.report("pose", result.capture_t_us,
+                                 {**pose_json(result.fix), **added, **extra})
         else:  # refused by the bridge: visible with its reason (flight log, Zenoh)
             self.counters.fixes_refused += 1
             self.reporter.report("events", result.capture_t_us, {

@@ -16,7 +16,6 @@ import numpy.typing as npt
 from tracker import AdaptiveTracker
 from tracker.acquire import Weights
 from tracker.features import colour_weights
-from tracker.pose.types import AltitudeSample, AttitudeSample, RangeSample
 from tracker.types import Box
 
 FloatArray = npt.NDArray[np.float64]
@@ -123,15 +122,6 @@ class DetectionLike(Protocol):
 DetectFn = Callable[[npt.NDArray[np.uint8]], Sequence[DetectionLike]]
 
 
-@dataclass(frozen=True)
-class SideSensors:
-    """The autopilot's latest attitude, altitude and laser range (any may be missing)."""
-
-    attitude: AttitudeSample | None = None
-    altitude: AltitudeSample | None = None
-    laser: RangeSample | None = None
-
-
 @dataclass
 class Track:
     """One landmark being followed."""
@@ -160,12 +150,57 @@ class Track:
     verify_failures: int = 0
 
 
+@dataclass(frozen=True, eq=False)
+class TrackView:
+    """What a frame's result says of one track (``FrameResult.tracks``): a frozen copy, made
+    on the worker thread as the frame's update ends, so whoever reads it later (the reporter,
+    the preview on the background lane, an observer) sees that frame's track and nothing
+    the next frame changes.  Its monitoring JSON is :func:`companion.reporting.track_json`."""
+
+    landmark_id: str
+    box: Box
+    confidence: float
+    features: tuple[int, ...]
+    #: the four aligned corners (px, (4, 2), read-only, the alignment's own dtype), None
+    #: when the alignment does not hold this frame
+    corners: FloatArray | None
+
+    @classmethod
+    def of(cls, track: Track) -> TrackView:
+        corners = None
+        if track.corners is not None:
+            corners = track.corners.copy()
+            corners.flags.writeable = False
+        return cls(track.landmark_id, track.box, track.confidence, tuple(track.features),
+                   corners)
+
+
 @dataclass(frozen=True)
 class Start:
     """A tracker started by housekeeping, waiting for ``process`` to adopt it."""
 
     track: Track
     event: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Occupancy:
+    """What housekeeping knows of the tracks: a snapshot the track set takes under its lock
+    (:meth:`companion.tracks.TrackSet.snapshot`), never the live tracks themselves."""
+
+    #: landmarks with a live track
+    tracked: frozenset[str] = frozenset()
+    #: landmarks started by housekeeping, not yet adopted by ``process`` (in order)
+    waiting: tuple[str, ...] = ()
+
+    def busy(self, starts: Sequence[Start] = ()) -> int:
+        """Tracks running, waiting to be adopted and just started."""
+        return len(self.tracked) + len(self.waiting) + len(starts)
+
+    def taken(self, lid: str, starts: Sequence[Start] = ()) -> bool:
+        """Tracked, waiting to be adopted, or just started."""
+        return lid in self.tracked or lid in self.waiting or any(
+            s.track.landmark_id == lid for s in starts)
 
 
 #: ECC correlation a running track's alignment must reach (a new sighting: verify_correlation).

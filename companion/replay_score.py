@@ -120,9 +120,9 @@ def track_boxes(result: FrameResult) -> dict[str, tuple[float, float, float, flo
     lost = {e.get("landmark") for e in result.events if e.get("event") == "lost"}
     out = {}
     for t in result.tracks:
-        if t["landmark_id"] not in lost:
-            x, y, w, h = (float(v) for v in t["box"])
-            out[str(t["landmark_id"])] = (x, y, w, h)
+        if t.landmark_id not in lost:
+            x, y, w, h = (float(v) for v in t.box)
+            out[t.landmark_id] = (x, y, w, h)
     return out
 
 

@@ -1,12 +1,21 @@
-"""Fan-out of everything the pipeline reports: the flight log and Zenoh monitoring."""
+"""Fan-out of everything the pipeline reports: the flight log and Zenoh monitoring, and the
+JSON of a frame's typed result (:func:`pose_json`, :func:`track_json`: docs/monitoring.md,
+docs/flightlog.md).  The payload formats are a contract; they are built here only."""
 
 from __future__ import annotations
 
 import logging
-from typing import Any
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
 
-from companion.flightlog import FlightLogWriter
-from companion.monitoring.publisher import MonitorPublisher
+import numpy as np
+
+from companion.perception_types import TrackView
+from tracker.pose.types import PoseFix
+
+if TYPE_CHECKING:  # the pipeline imports this module for the JSON: no zenoh for that
+    from companion.flightlog import FlightLogWriter
+    from companion.monitoring.publisher import MonitorPublisher
 
 log = logging.getLogger(__name__)
 
@@ -74,3 +83,28 @@ class Reporter:
             self.flightlog.close()
         if self.monitor is not None:
             self.monitor.close()
+
+
+def pose_json(fix: PoseFix) -> dict[str, Any]:
+    """The monitoring payload of a fix (docs/monitoring.md, topic ``pose``)."""
+    return {
+        "position_ned_m": [round(v, 4) for v in fix.position_ned_m],
+        "attitude_rpy_rad": [round(v, 5) for v in fix.attitude_rpy_rad],
+        "covariance_diag": [float(f"{v:.6g}") for v in np.diag(fix.covariance)],
+        "quality": fix.quality,
+        "landmark_ids": list(fix.landmark_ids),
+        "solver": fix.solver,
+        "attitude_prior": fix.attitude_prior,
+    }
+
+
+def track_json(track: TrackView) -> dict[str, Any]:
+    """One track of the ``tracks`` payload (docs/monitoring.md)."""
+    return {"landmark_id": track.landmark_id, "box": [round(v, 1) for v in track.box],
+            "confidence": round(track.confidence, 3), "features": list(track.features),
+            "corners": None if track.corners is None else np.round(track.corners, 2).tolist()}
+
+
+def tracks_json(tracks: Iterable[TrackView]) -> list[dict[str, Any]]:
+    """The ``tracks`` payload's list of tracks."""
+    return [track_json(t) for t in tracks]

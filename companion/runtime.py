@@ -32,7 +32,7 @@ from companion.monitoring.publisher import MonitorPublisher
 from companion.nofix import AttitudeSource, NoFixWatch
 from companion.perception import DetectFn, Perception
 from companion.preview import render_preview
-from companion.reporting import Reporter
+from companion.reporting import Reporter, track_json
 from companion.sensors import SensorHistory
 from companion.settings import Settings
 from mavlink_bridge.bridge import VisionBridge, create_bridge
@@ -200,7 +200,7 @@ def preview_for(mon: MonitorConfig) -> Callable[[Frame, FrameResult], bytes]:
     """Draws a frame's preview (boxes, particles, the fix or why there is none)."""
     def preview(frame: Frame, result: FrameResult) -> bytes:
         caption = "fix" if result.fix is not None else (result.no_fix_reason or "")[:60]
-        tracks = [{**t, "particles": result.particles.get(t["landmark_id"], ())}
+        tracks = [{**track_json(t), "particles": result.particles.get(t.landmark_id, ())}
                   for t in result.tracks]
         return render_preview(frame.image, tracks, mon.preview_width_px,
                               mon.preview_jpeg_quality, caption)

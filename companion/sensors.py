@@ -1,7 +1,7 @@
 """The autopilot's side sensors, looked up at a frame's capture time for the pose solver.
 
 :class:`SensorHistory` follows three of the bridge's telemetry streams and answers, for a
-frame's capture time, the :class:`~companion.perception_types.SideSensors` the solver uses:
+frame's capture time, the :class:`~companion.side_sensors.SideSensors` the solver uses:
 
 * ``ATTITUDE``: the autopilot's attitude, interpolated between the two nearest samples (yaw
   the short way round), with the configured 1-sigma (``pose.attitude_*_sigma_deg``).
@@ -30,7 +30,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from companion.nofix import AttitudeSource
-from companion.perception_types import SideSensors
+from companion.side_sensors import SideSensors
 from mavlink_bridge.bridge import VisionBridge
 from tracker.pose.config import PoseConfig
 from tracker.pose.types import (

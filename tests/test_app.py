@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 from companion.app import CompanionApp, FrameResult, ResultObserver, now_us
+from companion.perception_types import TrackView
 from companion.pipeline.health import Blocker, HealthInputs, health_state
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
+from tracker.pose.types import PoseFix
 
 
 @dataclass(frozen=True)
@@ -56,9 +58,9 @@ class Processor:
         tracking = frame.index >= self.track_from
         return FrameResult(
             frame.index, frame.t_us,
-            tracks=({"landmark_id": "a", "confidence": 0.9},) if tracking else (),
-            fix={"n": frame.index} if tracking else None,
-            pose_json={"position_ned_m": [0, 0, 0]} if tracking else None,
+            tracks=(TrackView("a", (1.0, 2.0, 3.0, 4.0), 0.9, (), None),) if tracking else (),
+            fix=PoseFix(frame.t_us, (0.0, 0.0, float(frame.index)), (0.0, 0.0, 0.0),
+                        np.eye(6), 90, ("a",), "pnp") if tracking else None,
         )
 
 
@@ -159,7 +161,7 @@ async def test_every_frame_processed_when_the_worker_keeps_up() -> None:
     assert proc.housekept == proc.seen  # after every frame, once its fix is out
     assert app.counters.frames == 10
     assert app.counters.fixes_sent == 8
-    assert [f["n"] for f in sink.fixes] == list(range(3, 11))
+    assert [int(f.position_ned_m[2]) for f in sink.fixes] == list(range(3, 11))
     assert proc.thread_names == {"companion-worker_0"}  # heavy work off the event loop
     assert app.stats.capture_to_wire_ms.count == 8
     assert "tracking" in sink.health

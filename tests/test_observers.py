@@ -15,6 +15,7 @@ from companion.core.frames import Frame
 from companion.flightmap import PracticalMap
 from companion.landmarks.geodesy import LocalFrame
 from companion.observers import FixTruths, TruthTags
+from companion.perception_types import TrackView
 from companion.replay_score import track_boxes
 from companion.settings import SIM_LAYERS, load_settings
 from companion.simulated import register
@@ -32,18 +33,18 @@ def _frame(index: int) -> Frame:
 def _result(index: int, north_m: float | None) -> FrameResult:
     fix = None if north_m is None else PoseFix(
         0, (north_m, 0.0, 0.0), (0.0, 0.0, 0.0), np.eye(6), 90, ("a", "b"), "pnp")
-    return FrameResult(index, 1000 * index, fix=fix,
-                       pose_json=None if fix is None else {"position_ned_m": [north_m, 0, 0]})
+    return FrameResult(index, 1000 * index, fix=fix)
 
 
 def test_truth_goes_into_the_pose_report_not_into_the_result() -> None:
     truths = {1: (3.0, 4.0, 0.0), 2: None}
     tags = TruthTags(lambda f: truths.get(f.index))
     fixed = _result(1, 0.0)
+    before = repr(fixed)
     tags.on_result(_frame(1), fixed)
     assert tags.pose_fields(fixed) == {"truth_position_ned_m": [3.0, 4.0, 0.0],
                                        "truth_error_m": 5.0}
-    assert fixed.pose_json == {"position_ned_m": [0.0, 0, 0]}  # the frozen result untouched
+    assert repr(fixed) == before  # the frozen result untouched
     unknown = _result(2, 1.0)  # a fix whose frame's truth is unknown: nothing added
     tags.on_result(_frame(2), unknown)
     assert tags.pose_fields(unknown) == {}
@@ -61,8 +62,8 @@ def test_fix_truths_keep_each_fix_with_its_truth_and_landmark_distance() -> None
 def test_a_track_lost_in_its_frame_is_not_scored_live() -> None:
     """The replay scores tracks still live after the frame: one dropped after the fix is
     reported with its box and its lost event (its landmark's next track starts afresh)."""
-    result = FrameResult(5, 0, tracks=({"landmark_id": "a", "box": [1, 2, 3, 4]},
-                                       {"landmark_id": "b", "box": [5, 6, 7, 8]}),
+    result = FrameResult(5, 0, tracks=(TrackView("a", (1, 2, 3, 4), 0.9, (0,), None),
+                                       TrackView("b", (5, 6, 7, 8), 0.9, (0,), None)),
                          events=({"event": "lost", "landmark": "b", "why": "rejected"},
                                  {"event": "lost", "landmark": "c"}))
     assert track_boxes(result) == {"a": (1.0, 2.0, 3.0, 4.0)}

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pytest
 
+from companion.acquirers import Sighting
 from companion.demo import map_landmarks
 from companion.perception import Perception, PerceptionConfig, SideSensors
+from companion.perception_types import Start
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
@@ -128,7 +131,7 @@ def test_acquisition_never_invents_a_landmark(scenario: str) -> None:
     _, _, out = flight(scenario, range(0, 30))  # the start: the first wall barely in view
     for result, truth, _ in out:
         in_view = {b.landmark_id for b in truth.boxes if b.in_view_frac > 0.5}
-        assert {t["landmark_id"] for t in result.tracks} <= in_view
+        assert {t.landmark_id for t in result.tracks} <= in_view
 
 
 def test_small_plates_corners_carry_a_larger_sigma() -> None:
@@ -214,12 +217,29 @@ def test_an_over_exposed_plates_corners_are_not_used() -> None:
     before = [r for r, _, _ in out[:40]]
     after = [r for r, _, _ in out[45:]]  # from frame 365
     assert sum(isinstance(r.fix, PoseFix) for r in before) >= 20
-    assert all(t["corners"] is not None for r in after for t in r.tracks), \
+    assert all(t.corners is not None for r in after for t in r.tracks), \
         "the alignment lost the plate: the test would not show the saturation rule"
     assert after and all(r.fix is None or r.fix.solver == "size_bearing" for r in after)
     assert all(r.fix is not None or "unobservable" in (r.no_fix_reason or "") for r in after)
     assert all(r.fix.solver.startswith("ippe") for r in before if r.fix is not None)
     perception.close()
+
+
+class Calls:
+    """Stands in for acquirers: notes which was asked, on which image; starts nothing."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, np.ndarray]] = []
+        self.name = "features"
+
+    def named(self, name: str) -> Calls:
+        other = Calls()
+        other.calls, other.name = self.calls, name
+        return other
+
+    def find(self, sight: Sighting, earlier: Sequence[Start] = ()) -> list[Start]:
+        self.calls.append((self.name, sight.image))
+        return []
 
 
 def test_housekeeping_sees_rectified_frames_even_ones_process_let_go() -> None:
@@ -229,18 +249,13 @@ def test_housekeeping_sees_rectified_frames_even_ones_process_let_go() -> None:
     sim = Simulator(load_scenario("survey_distorted"))
     landmarks, references = map_landmarks(sim)
     perception = Perception(sim.scenario.camera, landmarks, references)
-    seen: list[np.ndarray] = []
-
-    def acquire(image: np.ndarray) -> list[Any]:
-        seen.append(image)
-        return []
-
-    perception._acquire = acquire  # type: ignore[method-assign]
+    perception.acquisition.features = features = Calls()
     raw = sim.render(3)[0]
     perception.housekeeping(Frame(3, 100_000, raw))  # a frame process never saw
     assert perception._rectify is not None
     rectified = perception._rectify(raw)
-    assert len(seen) == 1 and np.array_equal(seen[0], rectified)
+    assert [c for c, _ in features.calls] == ["features"]
+    assert np.array_equal(features.calls[0][1], rectified)
     assert not np.array_equal(rectified, raw)
     perception.close()
 
@@ -256,16 +271,15 @@ def test_with_tracks_running_housekeeping_takes_one_heavy_step_per_call() -> Non
     def run(tracks: dict[str, Any], calls_n: int) -> list[list[str]]:
         perception = Perception(sim.scenario.camera, landmarks, references,
                                 detect=lambda _img: [])
-        calls: list[str] = []
-        for step, name in (("_acquire", "features"), ("_detect_acquire", "detector"),
-                           ("_search", "search")):
-            setattr(perception, step, lambda _img, name=name: calls.append(name) or [])
-        perception.tracks = tracks  # type: ignore[assignment]
+        acq, calls = perception.acquisition, Calls()
+        acq.features, acq.detector, acq.search = calls.named("features"), \
+            calls.named("detector"), calls.named("search")
+        perception.trackset.live.update(tracks)
         per_call = []
         for i in range(calls_n):
-            before = len(calls)
+            before = len(calls.calls)
             perception.housekeeping(Frame(i, 1_000_000 + i * 33_333, image))
-            per_call.append(calls[before:])
+            per_call.append([c for c, _ in calls.calls[before:]])
         perception.close()
         return per_call
 

@@ -5,12 +5,14 @@ fix and is dropped, a light step is noticed, the corner sigma follows the fit.""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
 
-from companion.perception import Perception
-from companion.perception_types import Track
+from companion.acquirers import Sighting
+from companion.perception import Perception, PerceptionConfig
+from companion.perception_types import Occupancy, Start, Track
 from companion.sources.base import Frame
 from tests.acquire.test_verify import scene
 from tracker.acquire import homography_to, project_corners
@@ -18,9 +20,21 @@ from tracker.camera import CameraModel
 from tracker.pose.types import MapLandmark
 
 
-def perception(plate: np.ndarray) -> Perception:
+def perception(plate: np.ndarray, config: PerceptionConfig | None = None) -> Perception:
     lm = MapLandmark("p", (10.0, 0.0, 0.0), 1.2, 0.8, None, "other")
-    return Perception(CameraModel(320, 240, 300.0, 300.0, 159.5, 119.5), [lm], {"p": plate})
+    return Perception(CameraModel(320, 240, 300.0, 300.0, 159.5, 119.5), [lm], {"p": plate},
+                      config=config)
+
+
+class Calls:
+    """An acquirer that only notes the frames it was asked about."""
+
+    def __init__(self) -> None:
+        self.sights: list[Sighting] = []
+
+    def find(self, sight: Sighting, earlier: Sequence[Start] = ()) -> list[Start]:
+        self.sights.append(sight)
+        return []
 
 
 def track_at(p: Perception, corners: np.ndarray, box: tuple[float, float, float, float]
@@ -35,10 +49,11 @@ def test_an_acquisition_whose_appearance_is_not_there_is_refused() -> None:
     p = perception(plate)
     ref = p.matcher.references["p"]
     wrong = corners + np.array([-110.0, 60.0])
-    assert p._start("p", frame, (20.0, 120.0, 90.0, 90.0), homography_to(ref, wrong), wrong,
-                    "search", []) == []
-    right = p._start("p", frame, (115.0, 75.0, 90.0, 90.0), homography_to(ref, corners),
-                     corners, "features", [])
+    start, sight = p.acquisition.starter.start, Sighting(frame, Occupancy())
+    assert start("p", sight, (20.0, 120.0, 90.0, 90.0), homography_to(ref, wrong), wrong,
+                 "search", []) == []
+    right = start("p", sight, (115.0, 75.0, 90.0, 90.0), homography_to(ref, corners),
+                  corners, "features", [])
     assert len(right) == 1 and right[0].event["appearance_correlation"] > 0.8
 
 
@@ -50,7 +65,7 @@ def test_a_rotated_plate_keeps_its_corners() -> None:
     p = perception(plate)
     box = (160.0 - 45.0, 120.0 - 30.0, 90.0, 60.0)  # centred, unrotated size
     track = track_at(p, corners + np.array([1.5, -1.0]), box)  # last frame's outline, a bit off
-    aligned = p._align(track, frame, track.homography)  # type: ignore[arg-type]
+    aligned = p.trackset.corners.align(track, frame, track.homography)  # type: ignore[arg-type]
     assert aligned is not None
     found = project_corners(p.matcher.references["p"], aligned)
     assert np.abs(found - corners).max() < 0.5
@@ -60,11 +75,11 @@ def test_a_track_that_lost_its_landmark_leaves_the_fix_and_is_dropped() -> None:
     frame, plate, corners = scene()
     p = perception(plate)
     wrong = corners + np.array([-110.0, 60.0])
-    p.tracks["p"] = track_at(p, wrong, (20.0, 120.0, 90.0, 90.0))
-    assert p._verify_tracks(frame) == []
+    p.trackset.live["p"] = track_at(p, wrong, (20.0, 120.0, 90.0, 90.0))
+    assert p.trackset.verify(frame) == []
     assert p.tracks["p"].verify_failures == 1
     assert p.observations(0) == []  # unverified: not in the fix
-    events = p._verify_tracks(frame)
+    events = p.trackset.verify(frame)
     assert "p" not in p.tracks
     assert events[0]["event"] == "lost" and "appearance" in events[0]["why"]
 
@@ -73,8 +88,8 @@ def test_a_track_on_its_landmark_passes_the_check_and_states_the_fit_sigma() -> 
     frame, plate, corners = scene(noise=6.0)
     p = perception(plate)
     track = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
-    p.tracks["p"] = track
-    assert p._verify_tracks(frame) == [] and track.verify_failures == 0
+    p.trackset.live["p"] = track
+    assert p.trackset.verify(frame) == [] and track.verify_failures == 0
     track.fit_sigma = 1e-4
     (obs,) = p.observations(0)
     model = p.noise.sigma(obs.corners_px)
@@ -91,13 +106,17 @@ def test_a_track_on_its_landmark_passes_the_check_and_states_the_fit_sigma() -> 
 def test_a_light_step_is_noticed_and_makes_acquisition_due() -> None:
     frame, plate, corners = scene()
     p = perception(plate)
-    p.tracks["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
-    p._acquired_frame, p._last_fix_us = 100, 3_333_333  # acquired, and a fix, last frame
+    p.trackset.live["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
+    p.acquisition.features = features = Calls()
+    p.acquisition.acquired_frame = 100  # acquired, and a fix, last frame
+    p.acquisition.last_fix_us = 3_333_333
     assert not p._light_step(frame)
     assert not p._light_step((frame * 0.9).astype(np.uint8))
-    assert not p._should_acquire(Frame(101, 3_366_666, frame))
+    p.housekeeping(Frame(101, 3_366_666, frame))
+    assert features.sights == []  # feature matching not due
     assert p._light_step(np.clip(frame * 1.6, 0, 255).astype(np.uint8))
-    assert p._should_acquire(Frame(101, 3_366_666, frame))
+    p.housekeeping(Frame(102, 3_399_999, frame))  # the light step's frame: due at once
+    assert len(features.sights) == 1 and features.sights[0].seen.tracked == {"p"}
 
 
 def test_a_track_without_corners_is_checked_where_its_box_is() -> None:
@@ -109,15 +128,15 @@ def test_a_track_without_corners_is_checked_where_its_box_is() -> None:
     before = corners + np.array([40.0, -25.0])  # where the corners were last found
     on_plate = track_at(p, before, (115.0, 75.0, 90.0, 90.0))  # the box is on the plate now
     on_plate.corners = None
-    p.tracks["p"] = on_plate
+    p.trackset.live["p"] = on_plate
     for _ in range(3):
-        assert p._verify_tracks(frame) == []
+        assert p.trackset.verify(frame) == []
     assert on_plate.verify_failures == 0
     off_plate = track_at(p, before, (20.0, 120.0, 90.0, 90.0))  # the box left the plate
     off_plate.corners = None
-    p.tracks["p"] = off_plate
-    assert p._verify_tracks(frame) == []
-    events = p._verify_tracks(frame)
+    p.trackset.live["p"] = off_plate
+    assert p.trackset.verify(frame) == []
+    events = p.trackset.verify(frame)
     assert "p" not in p.tracks and events[0]["event"] == "lost"
 
 
@@ -143,7 +162,7 @@ def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
     for lm in lms:
         true = cam.project_camera_points(cam.world_to_camera(
             landmark_corners_ned(lm), np.asarray(pos), rpy)) + off[lm.landmark_id]
-        p.tracks[lm.landmark_id] = Track(lm.landmark_id, None,  # type: ignore[arg-type]
+        p.trackset.live[lm.landmark_id] = Track(lm.landmark_id, None,  # type: ignore[arg-type]
                                          (0.0, 0.0, 10.0, 10.0), None, corners=true)
         obs.append(Observation(centre_px=(0.0, 0.0), box_wh_px=(10.0, 10.0),
                                landmark_id=lm.landmark_id, corner_sigma_px=0.2,
@@ -169,17 +188,17 @@ def test_a_track_whose_corners_the_pose_keeps_leaving_out_is_dropped() -> None:
     from tracker.pose.types import Observation, PoseFix
 
     _frame, plate, corners = scene()
-    p = perception(plate)
-    p.config = dataclasses.replace(p.config, max_pose_rejections=3)
-    p.tracks["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
+    p = perception(plate, PerceptionConfig(max_pose_rejections=3))
+    p.trackset.live["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
     obs = [Observation(centre_px=(0.0, 0.0), box_wh_px=(1.0, 1.0), landmark_id="p",
                        corners_px=tuple((float(u), float(v)) for u, v in corners))]
     without = PoseFix(0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), np.eye(6), 90, ("q",), "ippe")
     with_p = dataclasses.replace(without, landmark_ids=("p",))
-    assert p._drop_rejected(obs, without) == [] and p._drop_rejected(obs, without) == []
-    assert p._drop_rejected(obs, with_p) == [] and p.tracks["p"].pose_rejections == 0
-    assert p._drop_rejected(obs, without) == [] and p._drop_rejected(obs, without) == []
-    (event,) = p._drop_rejected(obs, without)
+    drop = p.trackset.drop_rejected
+    assert drop(obs, without) == [] and drop(obs, without) == []
+    assert drop(obs, with_p) == [] and p.tracks["p"].pose_rejections == 0
+    assert drop(obs, without) == [] and drop(obs, without) == []
+    (event,) = drop(obs, without)
     assert "p" not in p.tracks and event["event"] == "lost" and "3 fixes" in event["why"]
 
 
@@ -190,11 +209,11 @@ def test_a_plate_cut_by_the_edge_gives_only_its_corners_inside_the_image() -> No
     _frame, plate, corners = scene()
     p = perception(plate)
     whole = track_at(p, corners, (0.0, 0.0, 1.0, 1.0))
-    p.tracks["p"] = whole
+    p.trackset.live["p"] = whole
     [full] = p.observations(0)
     assert full.corners_measured is None and full.corners_px is not None
     cut_corners = corners + (np.array([320.0, 240.0]) - corners[0]) - 40.0  # TL 40 px inside
-    p.tracks["p"] = track_at(p, cut_corners, (0.0, 0.0, 1.0, 1.0))
+    p.trackset.live["p"] = track_at(p, cut_corners, (0.0, 0.0, 1.0, 1.0))
     [cut] = p.observations(0)
     assert cut.corners_measured == (True, False, False, False)
     assert cut.corners_px is not None and np.allclose(cut.corners_px, cut_corners)

@@ -7,24 +7,25 @@ from __future__ import annotations
 import threading
 from typing import Any
 
+from companion.corners import Corners
 from companion.perception import Perception, PerceptionConfig
 from tests.test_perception import flight
 
 
 def test_appearance_checks_run_on_the_thread_that_updated_the_track() -> None:
     threads: dict[str, set[str]] = {}
-    original = Perception._check_track
+    original = Corners.check
 
-    def check(self: Perception, track: Any, image: Any) -> None:
+    def check(self: Corners, track: Any, image: Any) -> float:
         threads.setdefault(track.landmark_id, set()).add(threading.current_thread().name)
-        original(self, track, image)
+        return original(self, track, image)
 
-    Perception._check_track = check  # type: ignore[method-assign]
+    Corners.check = check  # type: ignore[method-assign]
     try:
         _, perception, out = flight("street", range(300, 320),
                                     config=PerceptionConfig(parallel_tracks=True))
     finally:
-        Perception._check_track = original  # type: ignore[method-assign]
+        Corners.check = original  # type: ignore[method-assign]
     assert len(perception.tracks) >= 2, "fewer than two tracks: nothing runs in parallel"
     names = set().union(*threads.values())
     assert any(n.startswith("companion-tracks") for n in names), names  # the second thread
@@ -36,12 +37,12 @@ def test_the_tracks_appearance_checks_are_spread_over_the_frames() -> None:
     """Each track is still checked every ``verify_every_frames`` frames, but not all tracks
     on the same frame (a frame that checked 3-4 plates cost 5-7 ms more of CPU)."""
     per_frame: dict[int, list[str]] = {}
-    original = Perception._check_track
+    original = Corners.check
     frame_of: list[int] = [0]
 
-    def check(self: Perception, track: Any, image: Any) -> None:
+    def check(self: Corners, track: Any, image: Any) -> float:
         per_frame.setdefault(frame_of[0], []).append(track.landmark_id)
-        original(self, track, image)
+        return original(self, track, image)
 
     original_process = Perception.process
 
@@ -49,12 +50,12 @@ def test_the_tracks_appearance_checks_are_spread_over_the_frames() -> None:
         frame_of[0] = frame.index
         return original_process(self, frame)
 
-    Perception._check_track = check  # type: ignore[method-assign]
+    Corners.check = check  # type: ignore[method-assign]
     Perception.process = process  # type: ignore[method-assign]
     try:
         _, perception, out = flight("street", range(300, 330))
     finally:
-        Perception._check_track = original  # type: ignore[method-assign]
+        Corners.check = original  # type: ignore[method-assign]
         Perception.process = original_process  # type: ignore[method-assign]
     counts = [len(r.tracks) for r, _, _ in out]
     assert min(counts[5:]) >= 3, counts  # three tracks or more: there is something to spread

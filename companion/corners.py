@@ -1,0 +1,172 @@
+"""A running track's corners: where exactly its landmark's outline is in this frame.
+
+The tracker says *where* (a box); :class:`Corners` says *exactly where the corners are*, by
+aligning the landmark's appearance reference onto the frame (ECC), started from the last
+homography: a whole plate by :meth:`Corners.align`, a plate cut by the image's edge by the
+affine alignment of its part in view (:meth:`Corners.align_cut`), and, when the alignment
+is lost, by :meth:`Corners.recover` (the reference aligned on the box, else its features
+re-matched around it).  :meth:`Corners.check` is the periodic appearance check.
+
+Each call touches only the track it is given; the track set calls these for different
+tracks on two threads at once (:class:`companion.tracks.TrackSet`).  The one object they
+share, the feature matcher of :meth:`Corners.recover`, is behind its own lock; the
+references are read-only.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from companion.perception_types import TRACK_MIN_CORRELATION, PerceptionConfig, Track
+from tracker.acquire import (
+    Reference,
+    ReferenceMatcher,
+    Weights,
+    homography_to,
+    project_corners,
+    refine_ecc,
+)
+from tracker.boxes import box_corners, in_view_share, saturated_share
+from tracker.camera import CameraModel
+from tracker.edge_align import align_cut, box_shift, shifted
+from tracker.types import Box
+from tracker.verify import check_appearance, quad_iou
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
+        hom: FloatArray, verify: bool = True, weights: Weights | None = None
+        ) -> FloatArray | None:
+    """ECC alignment with the perception's settings; ``verify``: a new sighting, held to
+    ``verify_correlation`` (a running track to ``TRACK_MIN_CORRELATION``)."""
+    least = config.verify_correlation if verify else TRACK_MIN_CORRELATION
+    return refine_ecc(ref, frame, hom, config.ecc_iterations, least,
+                      config.ecc_fine_iterations, weights)
+
+
+def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
+    """``hom`` moved so that the outline it projects is centred on the tracker's ``box``
+    (a track without corners this frame: its last homography, where the tracker is)."""
+    x, y, w, h = box
+    dx, dy = np.array([x + w / 2, y + h / 2]) - project_corners(ref, hom).mean(axis=0)
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ hom
+
+
+class Corners:
+    """Corner alignment, recovery and the appearance check of the tracks of one camera."""
+
+    def __init__(self, camera: CameraModel, config: PerceptionConfig,
+                 references: Mapping[str, Reference], recover_matcher: ReferenceMatcher
+                 ) -> None:
+        self.camera = camera
+        self.config = config
+        self.references = references
+        self._recover_matcher = recover_matcher
+        self._recover_lock = threading.Lock()  # tracks may recover corners on two threads
+
+    def follow(self, track: Track, image: npt.NDArray[np.uint8], last_box: Box) -> None:
+        """The track's corners in ``image``, its tracker's box already updated (from
+        ``last_box``): aligned from its last homography, recovered after misses."""
+        track.corners = None
+        if not self.config.refine_corners:
+            return
+        if track.homography is not None:
+            predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
+            aligned = self.align_cut(track, image, predicted, last_box) if self.is_cut(
+                track.landmark_id, predicted) else self.align(track, image, predicted)
+            track.homography = predicted if aligned is None else aligned
+            track.misses = 0 if aligned is not None else track.misses + 1
+            if aligned is not None:
+                track.corners = project_corners(self.references[track.landmark_id], aligned)
+        if track.homography is None or track.misses >= self.config.max_corner_misses:
+            self.recover(track, image)
+        track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
+
+    def align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
+              verify: bool = False) -> FloatArray | None:
+        """ECC alignment of the reference on the tracker's best colour feature (grey levels
+        for a grey target), kept only if it agrees with the tracker's box."""
+        ref = self.references[track.landmark_id]
+        aligned = ecc(self.config, ref, image, hom, verify, track.align_weights)
+        box = track.box
+        if aligned is None:
+            return None
+        corners = project_corners(ref, aligned)
+        x, y, w, h = box
+        if verify:  # from the box itself: its centre must lie on the plate found
+            outline = corners.astype(np.float32).reshape(-1, 1, 2)
+            on = cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) >= 0
+            return aligned if on else None
+        # the outline predicted (the last one, moved with the tracker's box) against the
+        # outline found: a rotated plate's outline fills its axis-aligned box poorly, so
+        # outlines are compared, not boxes
+        predicted = project_corners(ref, hom)
+        predicted = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
+        if quad_iou(corners, predicted) < self.config.min_corner_agreement:
+            return None  # the alignment wandered off: keep the box, drop the corners
+        return aligned
+
+    def is_cut(self, landmark_id: str, hom: FloatArray) -> bool:
+        """Is the outline ``hom`` projects cut by the image's edge below
+        ``min_corner_in_view`` (its tracker's box then holds only the part in view)?"""
+        outline = project_corners(self.references[landmark_id], hom)
+        share = in_view_share(outline, self.camera.width, self.camera.height)
+        return share < self.config.min_corner_in_view
+
+    def align_cut(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
+                  last_box: Box) -> FloatArray | None:
+        """A cut plate's homography moved by the affine alignment of its part in view
+        (tracker/edge_align.py): a full alignment on a corner region bends the rest.  It
+        starts moved as the tracker's box moved since ``last_box`` (its edges inside the
+        image) when it does not align where it was: a plate sliding 10-20 px a frame is out
+        of the affine alignment's reach (and a still one's box jitters by a pixel)."""
+        ref = self.references[track.landmark_id]
+        dx, dy = box_shift(last_box, track.box, self.camera.width, self.camera.height)
+        for start in (hom, shifted(hom, dx, dy)) if max(abs(dx), abs(dy)) > 2.0 else (hom,):
+            aligned = align_cut(ref, image, start, self.config.ecc_iterations,
+                                TRACK_MIN_CORRELATION, track.align_weights)
+            if aligned is not None:
+                return aligned
+        return None
+
+    def recover(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
+        """Get the homography back: align the reference onto the tracked box (held to
+        ``verify_correlation``), else re-match its features around the box.  Alignment
+        first: it is cheaper, and finds plates too small or plain for feature matching."""
+        lid = track.landmark_id
+        ref = self.references[lid]
+        aligned = self.align(track, image, homography_to(ref, box_corners(track.box)),
+                             verify=True)
+        if aligned is not None:
+            track.homography, track.corners = aligned, project_corners(ref, aligned)
+            track.misses = 0
+            return
+        x, y, w, h = track.box
+        roi = (x - 0.5 * w, y - 0.5 * h, 2.0 * w, 2.0 * h)
+        with self._recover_lock:
+            found = self._recover_matcher.find(image, [lid], roi=roi)
+        if found:
+            track.homography, track.corners, track.misses = (found[0].homography,
+                                                             found[0].corners_px, 0)
+        else:
+            track.homography = None
+
+    def check(self, track: Track, image: npt.NDArray[np.uint8]) -> float:
+        """Check the track's landmark is still where its homography says, by its warped
+        appearance: the correlation found (the track's fit sigma and failed checks are
+        updated; the track's own state only)."""
+        ref = self.references[track.landmark_id]
+        hom = track.homography
+        if hom is not None and track.corners is None:
+            hom = moved_to_box(ref, hom, track.box)  # no corners this frame: at the box
+        ncc, fit = (0.0, None) if hom is None else check_appearance(ref, image, hom)
+        track.fit_sigma = fit if self.config.corner_sigma_from_fit else None
+        track.verify_failures = 0 if ncc >= self.config.track_appearance_ncc \
+            else track.verify_failures + 1
+        return ncc

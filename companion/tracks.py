@@ -1,0 +1,235 @@
+"""The perception's track set: the live tracks, their update each frame, their checks.
+
+Threads -- who may touch what:
+
+* The **worker thread** (``Perception.process``) owns the tracks: it alone changes the set
+  (adopts, drops) and the :class:`~companion.perception_types.Track` objects.  During
+  :meth:`TrackSet.update`, every other track is updated on the set's own second thread
+  ("companion-tracks"); each call there touches only its own track (and the corner
+  recovery's matcher, behind :class:`companion.corners.Corners`' lock), and ``update``
+  waits for them before it returns.
+* The **background lane** (``Perception.housekeeping``) never reads the tracks.  It takes
+  :meth:`TrackSet.snapshot` -- a frozen :class:`~companion.perception_types.Occupancy`
+  (which landmarks are tracked or waiting), made under the set's lock, under which the
+  worker also makes every change to the set -- and hands what it started over with
+  :meth:`TrackSet.hand_over`, under the same lock; the next :meth:`TrackSet.adopt` on the
+  worker thread takes them.
+* Everything else shared (references, map, configuration) is read-only.
+
+:attr:`TrackSet.live` is the worker thread's own view, for code running on that thread or
+between frames (tests, benchmarks, the replay's scorer); results carry frozen copies
+(:meth:`TrackSet.views`).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import threading
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from companion.corner_noise import CornerNoise
+from companion.corners import Corners
+from companion.perception_types import Occupancy, PerceptionConfig, Start, Track, TrackView
+from tracker.boxes import box_corners, inside
+from tracker.pose.types import Observation, PoseFix
+from tracker.types import TrackResult
+
+Events = list[dict[str, Any]]
+
+
+class TrackSet:
+    """The live tracks of one perception (see the module's notes on threads)."""
+
+    def __init__(self, config: PerceptionConfig, corners: Corners) -> None:
+        self.config = config
+        self.corners = corners
+        self._tracks: dict[str, Track] = {}
+        self._lock = threading.Lock()  # the set's changes, the snapshot and the hand-over
+        self._pending: list[Start] = []
+        self._pool = concurrent.futures.ThreadPoolExecutor(1, "companion-tracks") \
+            if config.parallel_tracks else None
+        self._checked: dict[str, float] = {}  # this frame's appearance checks (correlation)
+        self._frames = 0
+
+    @property
+    def live(self) -> dict[str, Track]:
+        """The tracks by landmark id (the worker thread's: see the module's notes)."""
+        return self._tracks
+
+    # -- the hand-over (background lane <-> worker) ------------------------------------
+
+    def snapshot(self) -> Occupancy:
+        """Which landmarks are tracked or waiting to be adopted, as of now (any thread)."""
+        with self._lock:
+            return Occupancy(frozenset(self._tracks), tuple(s.track.landmark_id
+                                                            for s in self._pending))
+
+    def hand_over(self, starts: Sequence[Start]) -> None:
+        """Tracks started off the worker thread, for the next :meth:`adopt`."""
+        with self._lock:
+            self._pending += starts
+
+    def adopt(self) -> Events:
+        """Take over the tracks handed over (worker thread), each with its event; a
+        landmark already tracked, or a full set, drops the newcomer."""
+        with self._lock:
+            pending, self._pending = self._pending, []
+            events: Events = []
+            for start in pending:
+                lid = start.track.landmark_id
+                if lid not in self._tracks and len(self._tracks) < self.config.max_tracks:
+                    self._tracks[lid] = start.track
+                    events.append(start.event)
+        return events
+
+    def _drop(self, lid: str) -> None:
+        with self._lock:
+            del self._tracks[lid]
+
+    # -- the frame's update (worker thread) --------------------------------------------
+
+    def update(self, image: npt.NDArray[np.uint8], check_all: bool = False) -> Events:
+        """Update every track on ``image``; a track its tracker lost is dropped (an event).
+
+        Each track's appearance check is due every ``verify_every_frames``, the tracks'
+        checks on different frames (issue 23: not every track's on one frame), and all at
+        once with ``check_all`` (a light step); a track is checked right after its update,
+        on its thread."""
+        events: Events = []
+        tracks = list(self._tracks.values())
+        every = self.config.verify_every_frames
+        checks = [check_all or (self._frames + i) % every == 0 for i in range(len(tracks))]
+        for track, alive in zip(tracks, self._update_all(tracks, image, checks), strict=True):
+            if not alive:
+                self._drop(track.landmark_id)
+                events.append({"event": "lost", "landmark": track.landmark_id})
+        if any(checks):
+            events += self.verify()
+        self._frames += 1
+        return events
+
+    def _update_all(self, tracks: list[Track], image: npt.NDArray[np.uint8],
+                    checks: Sequence[bool]) -> list[bool]:
+        """Update every track (and check those whose ``checks`` entry is true); with two
+        or more, every other one on the second thread.  Each touches only its own state."""
+        if self._pool is None or len(tracks) < 2:
+            return [self._update_one(t, image, c) for t, c in zip(tracks, checks, strict=True)]
+        there = [self._pool.submit(self._update_one, t, image, c)
+                 for t, c in zip(tracks[::2], checks[::2], strict=True)]
+        here = [self._update_one(t, image, c)
+                for t, c in zip(tracks[1::2], checks[1::2], strict=True)]
+        there_ok = [f.result() for f in there]
+        return [there_ok[i // 2] if i % 2 == 0 else here[i // 2] for i in range(len(tracks))]
+
+    def _update_one(self, track: Track, image: npt.NDArray[np.uint8], check: bool) -> bool:
+        """The tracker's update and the corners' alignment (and the appearance check when
+        ``check``); False when the track is lost."""
+        result: TrackResult = track.tracker.update(image)
+        if result.box is None or result.confidence < self.config.min_track_confidence:
+            return False
+        last_box, track.box = track.box, result.box
+        track.confidence, track.features = result.confidence, result.features
+        self.corners.follow(track, image, last_box)
+        if check:
+            # one key per track: no two threads share one
+            self._checked[track.landmark_id] = self.corners.check(track, image)
+        return True
+
+    def verify(self, image: npt.NDArray[np.uint8] | None = None) -> Events:
+        """Check every track on ``image`` (None: :meth:`update` has, with the tracks'
+        updates); a track that failed is left out of fixes, dropped after repeated
+        failures."""
+        if image is not None:
+            for track in list(self._tracks.values()):
+                self._checked[track.landmark_id] = self.corners.check(track, image)
+        events: Events = []
+        checked, self._checked = self._checked, {}
+        for track in list(self._tracks.values()):
+            if track.verify_failures >= self.config.max_verify_failures:
+                self._drop(track.landmark_id)
+                ncc = checked.get(track.landmark_id, 0.0)
+                events.append({"event": "lost", "landmark": track.landmark_id,
+                               "why": f"appearance no longer there (correlation {ncc:.2f})"})
+        return events
+
+    def drop_rejected(self, observations: Sequence[Observation], fix: PoseFix) -> Events:
+        """Count, per track, the fixes in a row that left its corners out; drop a track at
+        ``max_pose_rejections`` (housekeeping then acquires it afresh)."""
+        limit = self.config.max_pose_rejections
+        events: Events = []
+        for o in observations:
+            track = None if o.landmark_id is None else self._tracks.get(o.landmark_id)
+            if track is None or o.corners_px is None:
+                continue
+            used = o.landmark_id in fix.landmark_ids
+            track.pose_rejections = 0 if used else track.pose_rejections + 1
+            if limit and track.pose_rejections >= limit:
+                self._drop(track.landmark_id)
+                events.append({"event": "lost", "landmark": track.landmark_id,
+                               "why": f"its corners left out of {limit} fixes in a row"})
+        return events
+
+    # -- what a frame's result carries ---------------------------------------------------
+
+    def views(self) -> tuple[TrackView, ...]:
+        """Frozen copies of the live tracks, for the frame's result."""
+        return tuple(TrackView.of(t) for t in self._tracks.values())
+
+    def particles(self) -> dict[str, npt.NDArray[np.float64]]:
+        """Landmark id -> its tracker's particle centres (the preview draws them)."""
+        return {t.landmark_id: t.tracker.particle_centres for t in self._tracks.values()}
+
+    def close(self) -> None:
+        """Stop the track-update thread."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+
+
+def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: PerceptionConfig,
+                 frame_index: int) -> list[Observation]:
+    """One observation per live track (corners when the alignment holds).
+
+    A plate cut by the image's edge (less than ``min_corner_in_view`` of it in view)
+    gives the corners its outline puts inside the image by ``EDGE_MARGIN_PX``
+    (:mod:`companion.corner_noise`) as measured (``Observation.corners_measured``); the
+    ones outside are extrapolations, not observations.  Their sigma grows as the part in
+    view shrinks (:meth:`CornerNoise.cut`).  When some tracks have corners, box-only tracks
+    are left out: a box centre is not the landmark's centre under perspective, and mixing
+    it in costs more than it adds.  Without corners, a box that reaches out of the image is
+    left out too: its centre is off its plate's by up to half the part out of view.
+    """
+    out = []
+    size = (noise.camera.width, noise.camera.height)
+    live = [t for t in tracks.values() if t.verify_failures == 0]
+    usable = {t.landmark_id: noise.cut(t) for t in live
+              if t.corners is not None and t.saturated <= config.max_corner_saturated}
+    # a cut plate's fit sigma is its whole outline's (the extrapolated corners' too):
+    # not held against the size model, but stated (the larger of the two, CornerNoise.sigma)
+    usable = {lid: cut for lid, cut in usable.items() if cut is not None
+              and (cut[0] is not None or noise.fits(tracks[lid]))}
+    if usable:
+        live = [t for t in live if t.landmark_id in usable]
+    else:  # boxes only: a box reaching out of the image is not centred on its plate
+        live = [t for t in live if inside(box_corners(t.box), *size, margin=1.0)]
+    for t in live:
+        x, y, w, h = t.box
+        cut = usable.get(t.landmark_id)
+        corners = None if t.corners is None or cut is None else tuple(
+            (float(u), float(v)) for u, v in t.corners)
+        centre = ((x + w / 2, y + h / 2) if corners is None
+                  else tuple(float(c) for c in np.mean(corners, axis=0)))
+        stretch = 1.0 if corners is None else noise.stretch(corners)  # once a plate
+        scale = None if corners is None else config.corner_scale_sigma_px * stretch
+        sigma = noise.sigma(corners, stretch, t.fit_sigma)
+        measured, grow = (None, 1.0) if cut is None else cut
+        out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
+                               box_wh_px=(w, h), confidence=t.confidence,
+                               landmark_id=t.landmark_id, corners_px=corners,
+                               frame_index=frame_index,
+                               corner_sigma_px=None if sigma is None else sigma * grow,
+                               corner_scale_sigma_px=scale, corners_measured=measured))
+    return out
