@@ -147,7 +147,9 @@ async def test_observers_see_each_result_and_after_work_in_order() -> None:
     assert first.threads == {"result": {"companion-worker_0"},
                              "after": {"companion-background_0"}}
     poses = rec.topic("pose")
-    assert [list(p) for p in poses] == [["position_ned_m", "a_frame", "b_frame",
+    own = ["position_ned_m", "attitude_rpy_rad", "covariance_diag", "quality",
+           "landmark_ids", "solver", "attitude_prior"]  # companion.reporting.pose_json
+    assert [list(p) for p in poses] == [[*own, "a_frame", "b_frame",
                                          "autopilot_position_ned_m"]] * 4
     assert [p["b_frame"] for p in poses] == [3, 4, 5, 6]
 
