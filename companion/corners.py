@@ -35,7 +35,7 @@ from tracker.boxes import box_corners, in_view_share, saturated_share
 from tracker.camera import CameraModel
 from tracker.edge_align import align_cut, box_shift, shifted
 from tracker.types import Box
-from tracker.verify import check_appearance, quad_iou
+from tracker.verify import check_appearance, check_appearance_near, quad_iou
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -163,9 +163,14 @@ class Corners:
         updated; the track's own state only)."""
         ref = self.references[track.landmark_id]
         hom = track.homography
-        if hom is not None and track.corners is None:
-            hom = moved_to_box(ref, hom, track.box)  # no corners this frame: at the box
-        ncc, fit = (0.0, None) if hom is None else check_appearance(ref, image, hom)
+        if hom is None:
+            ncc, fit = 0.0, None
+        elif track.corners is None:  # no corners this frame: at the box, a few px off
+            reach = self.config.box_check_reach_rel * min(track.box[2], track.box[3])
+            ncc, fit = check_appearance_near(ref, image, moved_to_box(ref, hom, track.box),
+                                             max(3, round(reach)) if reach > 0 else 0)
+        else:
+            ncc, fit = check_appearance(ref, image, hom)
         track.fit_sigma = fit if self.config.corner_sigma_from_fit else None
         track.verify_failures = 0 if ncc >= self.config.track_appearance_ncc \
             else track.verify_failures + 1

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 
 from tracker.acquire import ReferenceMatcher, homography_to
-from tracker.verify import appearance_ncc, detail_ncc, fit_corner_sigma, quad_iou
+from tracker.verify import (
+    appearance_ncc,
+    best_shift,
+    check_appearance,
+    check_appearance_near,
+    detail_ncc,
+    fit_corner_sigma,
+    quad_iou,
+)
 
 
 def textured(rng: np.random.Generator, w: int, h: int, cell: int) -> np.ndarray:
@@ -87,3 +95,18 @@ def test_broad_shading_alone_is_not_the_plate() -> None:
     assert detail_ncc(ref, frame, hom) < 0.3
     frame[80:160, 100:220] = plate[..., None]
     assert detail_ncc(ref, frame, hom) > 0.9
+
+
+def test_a_box_placed_outline_a_few_pixels_off_is_found_within_its_reach() -> None:
+    """A track without corners is checked where its box puts the outline, a few pixels off
+    the plate: the search finds the shift back (check_appearance_near), the check at the
+    placed outline alone fails, and the background beside the plate still fails."""
+    frame, plate, corners = scene(noise=3.0, seed=2)
+    ref = ReferenceMatcher().add("p", plate)
+    off = homography_to(ref, corners + np.array([5.0, -4.0]))
+    assert best_shift(ref, frame, off, 8) == (-5, 4)
+    assert check_appearance(ref, frame, off)[0] < 0.5
+    assert check_appearance_near(ref, frame, off, 8)[0] > 0.8
+    assert best_shift(ref, frame, off, 0) == (0, 0)
+    away = homography_to(ref, corners + np.array([-110.0, 60.0]))
+    assert check_appearance_near(ref, frame, away, 8)[0] < 0.3
