@@ -89,11 +89,12 @@ class PerceptionConfig:
     verify_every_frames: int = field(default=5, metadata={"ge": 1})
     track_appearance_ncc: float = field(default=0.5, metadata={"gt": 0, "le": 1})
     max_verify_failures: int = field(default=2, metadata={"ge": 1})
-    #: A track without corners this frame is checked where its tracker box puts the
-    #: outline, and its box's centre is a few pixels off the plate's: the check takes the
-    #: best whole-pixel shift within this share of the box's short side (at least 3 px;
-    #: tracker/verify.py check_appearance_near).  0: where it is placed.  Geometry, not a
-    #: tuned value: the tracker's centre error (docs/tracker.md) is of that size.
+    #: Box-only tracking (``refine_corners`` off): a track is checked where its tracker box
+    #: puts the outline, and the box's centre is a few pixels off the plate's: the check
+    #: takes the best whole-pixel shift within this share of the box's short side (at
+    #: least 3 px; tracker/verify.py check_appearance_near).  0: where it is placed.
+    #: Geometry, not a tuned value: the tracker's centre error (docs/tracker.md) is of
+    #: that size.  With corners on, a track without corners this frame is checked in place.
     box_check_reach_rel: float = field(default=0.1, metadata={"ge": 0, "le": 0.5})
     #: The frame's mean grey level changing by more than this factor from one frame to the
     #: next is a light step: every track is checked at once and acquisition runs at once.
