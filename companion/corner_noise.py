@@ -1,8 +1,9 @@
 """The corners' noise model: the 1-sigma a perception states for a plate's corners.
 
-Pure (no frames, no threads): from the corners' size in the image, the rectification's
-stretch there, the alignment's own fit, saturation, the residuals the corners really
-showed in fixes from two or more plates (issue 25), and, for a plate cut by the image's
+No frames, no threads (it reads the tracks it is given; :meth:`CornerNoise.learn` writes
+each track's learnt residual, ``Track.residual_var``): from the corners' size in the
+image, the rectification's stretch there, the alignment's own fit, saturation, the
+residuals the corners really showed in fixes from two or more plates (issue 25), and, for a plate cut by the image's
 edge, which corners are measured (issue 19).  :class:`companion.perception.Perception`
 keeps the tracks and asks this model; docs/pose.md ("Corner noise") says where each term
 comes from.

@@ -3,9 +3,10 @@
 Neither the frame sources (:mod:`companion.sources`) nor ``companion run`` import the
 simulator.  :func:`register` plugs its two source kinds into
 :func:`companion.sources.factory.open_source` -- ``sim`` (a scripted scenario) and ``follow``
-(the scenario's world seen from the pose an autopilot simulator reports) -- and the command
-line calls it at start (``companion.cli.PLUGIN_MODULES``; docs/architecture.md, "Packages
-and the direction of imports").  What a flight needs of them beyond frames (their truth,
+(the scenario's world seen from the pose an autopilot simulator reports); the command line
+names this module as their provider (``companion.cli.PLUGINS``), and the factory imports it
+and calls :func:`register` when such a source is first opened (docs/architecture.md,
+"Packages and the direction of imports").  What a flight needs of them beyond frames (their truth,
 their landmarks' textures, their camera) they say through the protocols of
 :mod:`companion.sources.base`.
 """

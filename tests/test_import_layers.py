@@ -121,6 +121,48 @@ def test_run_does_not_import_the_simulator() -> None:
     assert import_chains("companion.cli.run_cmd", SIMULATOR) == []
 
 
+#: Run in a fresh interpreter: the command line built as ``companion run`` builds it, a
+#: ``run`` parsed and a recorded stream opened through the factory; prints what of the
+#: simulator got loaded.
+_RUN_PROCESS = """
+import asyncio, sys
+import numpy as np
+from companion.cli import build_parser
+from companion.core.frames import Frame
+from companion.core.stream_format import StreamMeta
+from companion.core.stream_io import StreamWriter
+from companion.sources.config import SourceConfig
+from companion.sources.factory import open_source
+from tracker.camera import CameraModel
+
+build_parser().parse_args(["run", "--config", "vehicle.toml"])
+import companion.cli.run_cmd
+writer = StreamWriter(sys.argv[1], StreamMeta(fps=30.0, camera=CameraModel()), "png")
+writer.write(Frame(0, 0, np.zeros((480, 640, 3), np.uint8)), None)
+writer.close()
+source = asyncio.run(open_source(SourceConfig(spec="stream:" + sys.argv[1])))
+source.close()
+print(sorted(m for m in sys.modules if m.startswith(tuple(sys.argv[2:]))))
+"""
+
+
+def test_the_run_process_does_not_load_the_simulator(tmp_path: Path) -> None:
+    """What the syntax tree cannot see: the command line builds every command's parser and
+    names the simulator's source kinds (companion.cli.PLUGINS, imported by name).  A run
+    process that opens a stream loads none of the simulator (at 635b027 it loaded 16 of its
+    modules as the parser was built: companion.simulated eagerly, and demo, synth and
+    record at their modules' top)."""
+    import subprocess
+    import sys
+
+    banned = ("companion.sim", "companion.simulated", "companion.follow", "companion.demo",
+              "companion.calibration_boards")
+    done = subprocess.run([sys.executable, "-c", _RUN_PROCESS, str(tmp_path / "s"), *banned],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "[]", done.stdout
+
+
 def test_the_import_chains_are_found() -> None:
     """The check above sees an import directly and through modules in between (the demo
     imports the simulator, whose simulator module imports its world)."""

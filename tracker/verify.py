@@ -115,6 +115,8 @@ def check_appearance_near(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom:
     to about 0 at 4-6 px off (sitl_tests/test_one_landmark.py, box-only tracks: 0.02-0.14
     where placed, 0.71-0.95 within 6 px), so without the search every box-only track
     failed its checks and was dropped about every half second."""
+    if reach_px <= 0:
+        return check_appearance(ref, frame_bgr, hom)
     dx, dy = best_shift(ref, frame_bgr, hom, reach_px)
     moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ hom
     return check_appearance(ref, frame_bgr, moved)
@@ -125,8 +127,8 @@ def best_shift(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
     """The whole-pixel shift (dx, dy), each within ``reach_px``, at which the warped
     appearance's detail (:func:`detail_ncc`'s) correlates best with the frame's, by one
     masked normalised template match; (0, 0) when nothing can be compared."""
-    ov = overlay(ref, frame_bgr, hom)
-    if ov is None or reach_px <= 0:
+    ov = None if reach_px <= 0 else overlay(ref, frame_bgr, hom)
+    if ov is None:
         return 0, 0
     ys, xs = np.nonzero(ov.mask)
     top, bottom, left, right = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1

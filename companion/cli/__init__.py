@@ -4,8 +4,8 @@ A subcommand is a module ``companion/cli/<name>_cmd.py`` with
 ``register(sub)`` (adds its parser and ``set_defaults(handler=run)``; a command that flies
 the simulator adds ``shipped=("sim",)``: the simulator's layer of defaults) and
 ``run(args, settings) -> int``.  It is listed in :data:`COMMAND_MODULES` only once it does
-its job: ``--help`` shows exactly what exists.  A plug-in (:data:`PLUGIN_MODULES`, e.g. the
-simulator's source kinds) has ``register()``, called before the commands are registered.
+its job: ``--help`` shows exactly what exists.  A plug-in (:data:`PLUGINS`, the simulator's
+source kinds) is named here and imported only when a source of its kind is opened.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from companion.errors import (
 )
 from companion.logs import setup_logging
 from companion.settings import load_settings
+from companion.sources.factory import plug_in_module
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -55,10 +56,11 @@ COMMAND_MODULES: tuple[str, ...] = (
     "eval_cmd",
 )
 
-#: Modules that plug into the production parts, each with ``register()``, called as the
-#: parser is built: the simulator's source kinds (``sim``, ``follow``) for every command
-#: that opens a source (docs/architecture.md, "Packages and the direction of imports").
-PLUGIN_MODULES: tuple[str, ...] = ("companion.simulated",)
+#: Source kinds plugged into the frame-source factory, and the module (with ``register()``)
+#: that provides each: imported only when such a source is opened, so a ``companion run``
+#: on a camera never loads the simulator (docs/architecture.md, "Packages and the direction
+#: of imports").
+PLUGINS: dict[str, str] = {"sim": "companion.simulated", "follow": "companion.simulated"}
 
 log = logging.getLogger("companion")
 
@@ -90,8 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     _add_common(parser, suppress=False)
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", dest="command")
-    for plugin in PLUGIN_MODULES:
-        importlib.import_module(plugin).register()
+    for kind, provider in PLUGINS.items():
+        plug_in_module(kind, provider)  # type: ignore[arg-type]
     for name in COMMAND_MODULES:
         module = importlib.import_module(f"companion.cli.{name}")
         before = set(sub.choices)

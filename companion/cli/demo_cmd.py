@@ -9,7 +9,6 @@ import sys
 
 from companion.cli import positive_seconds
 from companion.config_checks import check_flightlog_dir
-from companion.demo import print_summary, run_demo
 from companion.settings import SIM_LAYERS, Settings
 
 
@@ -43,6 +42,8 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     def progress(line: str) -> None:
         sys.stderr.write("\r" + line)
         sys.stderr.flush()
+
+    from companion.demo import print_summary, run_demo  # the simulator: only for the demo
 
     result = asyncio.run(run_demo(settings, args.scenario, args.seconds,
                                   progress if live else None, args.attitude_error,

@@ -15,8 +15,7 @@ from companion.core.stream_format import StreamMeta
 from companion.core.stream_io import IMAGE_FORMATS, StreamWriter
 from companion.errors import ConfigError
 from companion.settings import Settings
-from companion.sim.source import SimCameraSource
-from companion.sources.base import EndOfStream, FrameSource, monotonic_us
+from companion.sources.base import EndOfStream, FrameSource, KnowsTruthRows, monotonic_us
 from companion.sources.config import SourceConfig
 from companion.sources.factory import open_source, resolve
 from companion.sources.files import RecordedStreamSource
@@ -93,6 +92,8 @@ def _meta(source: FrameSource, size: tuple[int, int], fps: float, spec: str,
     if isinstance(source, RecordedStreamSource):
         meta = source.meta
         return dataclasses.replace(meta, provenance={**meta.provenance, "recorded_from": spec})
+    from companion.sim.source import SimCameraSource  # loaded by a simulated source already
+
     if isinstance(source, SimCameraSource):
         return source.sim.stream_meta()
     if (camera.width, camera.height) != size:  # scale the intrinsics to the real size
@@ -136,9 +137,7 @@ async def record(config: SourceConfig, out: Path, camera: CameraModel, *, second
                 meta = _meta(source, frame.size, config.fps, config.spec, camera,
                              config.camera_id)
                 writer = StreamWriter(out, meta, image_format, jpeg_quality, overwrite=overwrite)
-            truth = None
-            if isinstance(source, SimCameraSource | RecordedStreamSource):
-                truth = source.truth(frame.index)
+            truth = source.truth(frame.index) if isinstance(source, KnowsTruthRows) else None
             writer.write(frame, truth)
             count += 1
             for t_us, name, fields in [] if tap is None else tap.drain():

@@ -8,20 +8,17 @@ import logging
 from pathlib import Path
 
 from companion.cli import positive_seconds
+from companion.core.resources import scenario_dir
 from companion.core.stream_io import IMAGE_FORMATS
 from companion.errors import ConfigError
 from companion.settings import SIM_LAYERS, Settings
-from companion.sim.realworld import RealWorldSpec, synth_real
-from companion.sim.scenario import SCENARIO_DIR, load_scenario
-from companion.sim.simulator import Simulator
-from companion.sim.synth import synth_stream
 
 log = logging.getLogger(__name__)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``companion synth``."""
-    names = ", ".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
+    names = ", ".join(sorted(p.stem for p in scenario_dir().glob("*.toml")))
     parser = sub.add_parser(
         "synth", help="write a simulated flight as a recorded stream with truth",
         description="Render a scenario of the simulated world (camera frames, landmark boxes "
@@ -63,6 +60,10 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
         return _run_real(args)
     if args.scenario is None:
         raise ConfigError("synth: give --scenario NAME|FILE or --world real")
+    from companion.sim.scenario import load_scenario  # the simulator: only when it renders
+    from companion.sim.simulator import Simulator
+    from companion.sim.synth import synth_stream
+
     scenario = load_scenario(args.scenario)
     if args.fps is not None and not 0 < args.fps < float("inf"):
         raise ConfigError(f"--fps: expected a finite number > 0, got {args.fps:g}")
@@ -101,6 +102,8 @@ def _run_real(args: argparse.Namespace) -> int:
     """``--world real``: the real-imagery world of --seed."""
     if args.scenario is not None:
         raise ConfigError("synth: --world real and --scenario exclude each other")
+    from companion.sim.realworld import RealWorldSpec, synth_real
+
     seed = 0 if args.seed is None else args.seed
     crops = tuple(_crop(c) for c in args.crop)
     spec = RealWorldSpec(seed=seed, ground=args.ground, crops=crops,

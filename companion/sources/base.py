@@ -7,7 +7,8 @@ simulator imports too; they are imported here so that a source needs one module.
 A source that knows more than its frames says so through a protocol, so that a flight
 picks it up without knowing what kind of source it is (``companion run`` never imports
 the simulator): :class:`KnowsTruth` (where the vehicle truly was), :class:`KnowsReferences`
-(its landmarks' appearance images) and :class:`KnowsCamera` (the camera that took it).
+(its landmarks' appearance images), :class:`KnowsCamera` (the camera that took it) and
+:class:`KnowsTruthRows` (a frame's truth row, as a recorded stream stores it).
 """
 
 from __future__ import annotations
@@ -18,10 +19,11 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 from companion.core.frames import EndOfStream, Frame, ImageU8, SourceStatus, monotonic_us
 
 if TYPE_CHECKING:
+    from companion.core.stream_format import FrameTruth
     from tracker.camera import CameraModel
 
 __all__ = ["EndOfStream", "Frame", "FrameSource", "ImageU8", "KnowsCamera", "KnowsReferences",
-           "KnowsTruth", "Pacer", "SourceStatus", "monotonic_us"]
+           "KnowsTruth", "KnowsTruthRows", "Pacer", "SourceStatus", "monotonic_us"]
 
 
 @runtime_checkable
@@ -97,3 +99,13 @@ class Pacer:
         delay_s = (due - now) / 1e6
         if delay_s > 0:
             await asyncio.sleep(delay_s)
+
+
+@runtime_checkable
+class KnowsTruthRows(Protocol):
+    """A source that has each frame's truth row (a simulated camera, a recorded stream with
+    ``truth_pose.csv``): what ``companion record`` writes beside the frame."""
+
+    def truth(self, index: int) -> FrameTruth | None:
+        """Frame ``index``'s truth (pose, landmark boxes); None when it has none."""
+        ...

@@ -2,14 +2,17 @@
 
 The kinds of the frame sources here (stream, otb, video, camera) are built in.  The
 simulator's kinds (``sim``, ``follow``) are *plugged in*: :func:`companion.simulated.register`
-puts their openers in this module's registry (the command line does at start,
-``companion.cli.PLUGIN_MODULES``), so neither the sources nor ``companion run`` import the
-simulator (docs/architecture.md, "Packages and the direction of imports").
+puts their openers in this module's registry.  The command line names the module that
+provides each kind (``companion.cli.PLUGINS``, :func:`plug_in_module`), and the module is
+imported only when a source of that kind is opened: neither the sources nor a ``companion
+run`` on a camera or a stream import the simulator (docs/architecture.md, "Packages and the
+direction of imports"; ``tests/test_import_layers.py`` checks the running process).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,11 +48,25 @@ class OpenContext:
 #: Opens a plugged-in source kind: (resolved config, context) -> the source.
 Opener = Callable[[SourceConfig, OpenContext], FrameSource]
 _PLUGGED: dict[str, Opener] = {}
+#: kind -> the module whose ``register()`` plugs it in, imported when first opened
+_PROVIDERS: dict[str, str] = {}
 
 
 def plug_in(kind: SourceKind, opener: Opener) -> None:
     """Open source ``kind`` with ``opener`` from now on (idempotent)."""
     _PLUGGED[kind] = opener
+
+
+def plug_in_module(kind: SourceKind, module: str) -> None:
+    """Source ``kind`` is provided by ``module`` (its ``register()`` plugs the opener in),
+    imported only when a source of that kind is first opened."""
+    _PROVIDERS[kind] = module
+
+
+def _opener(kind: str) -> Opener | None:
+    if kind not in _PLUGGED and kind in _PROVIDERS:
+        importlib.import_module(_PROVIDERS[kind]).register()
+    return _PLUGGED.get(kind)
 
 
 def split_spec(spec: str) -> tuple[SourceKind, str]:
@@ -116,7 +133,7 @@ async def open_source(config: SourceConfig, context: OpenContext | None = None
         return await CameraSource.open(c.spec, open_timeout_s=c.open_timeout_s,
                                        camera_id=c.camera_id, stall_timeout_s=c.stall_timeout_s,
                                        size=size)
-    opener = _PLUGGED.get(c.kind)
+    opener = _opener(c.kind)
     if opener is None:
         raise InputError(f"{c.spec}: a simulated camera (source kind {c.kind}) is not "
                          "available here; use a stream, OTB folder, video or camera")
