@@ -3,10 +3,10 @@
 No frames, no threads (it reads the tracks it is given; :meth:`CornerNoise.learn` writes
 each track's learnt residual, ``Track.residual_var``): from the corners' size in the
 image, the rectification's stretch there, the alignment's own fit, saturation, the
-residuals the corners really showed in fixes from two or more plates (issue 25), and, for a plate cut by the image's
-edge, which corners are measured (issue 19).  :class:`companion.perception.Perception`
-keeps the tracks and asks this model; docs/pose.md ("Corner noise") says where each term
-comes from.
+residuals the corners really showed in fixes from two or more plates (issue 25), and,
+for a plate cut by the image's edge, which corners are measured (issue 19).
+:class:`companion.perception.Perception` keeps the tracks and asks this model;
+docs/pose.md ("Corner noise") says where each term comes from.
 """
 
 from __future__ import annotations
