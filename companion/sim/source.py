@@ -7,6 +7,9 @@ import concurrent.futures
 import multiprocessing
 import time
 from collections import OrderedDict
+from multiprocessing import shared_memory
+
+import numpy as np
 
 from companion.core.frames import EndOfStream, Frame, ImageU8, SourceStatus, monotonic_us
 from companion.core.stream_format import FrameTruth
@@ -88,17 +91,21 @@ class SimCameraSource(OfSimulatedWorld):
         self._render_wall_s = 1.0 / simulator.fps  # expected render time (decaying max)
         self.render_cpu_elsewhere_s = 0.0
         self._process: concurrent.futures.ProcessPoolExecutor | None = None
+        self._slots: shared_memory.SharedMemory | None = None
         if own_process:  # spawned, not forked: this process runs threads (Zenoh's too)
+            camera = simulator.scenario.camera
+            self._slots = shared_memory.SharedMemory(
+                create=True, size=FRAME_SLOTS * camera.height * camera.width * 3)
             self._process = concurrent.futures.ProcessPoolExecutor(
                 1, multiprocessing.get_context("spawn"), initializer=_start_renderer,
-                initargs=(simulator.scenario,))
+                initargs=(simulator.scenario, self._slots.name))
 
     async def start(self) -> None:
         """Wait until the rendering process renders (it imports and builds its world
         first): call before the camera's clock starts.  Nothing to do in this process."""
         if self._process is not None:
             loop = asyncio.get_running_loop()
-            await loop.run_in_executor(self._process, _render_elsewhere, 0, 0.0)
+            await loop.run_in_executor(self._process, _render_elsewhere, 0, 0.0, 0)
 
     def anchor(self, t0_us: int) -> None:
         """Scenario time 0 is ``t0_us`` on the monotonic clock (see ``t0_us`` above)."""
@@ -157,9 +164,11 @@ class SimCameraSource(OfSimulatedWorld):
 
     async def _render_there(self, loop: asyncio.AbstractEventLoop, index: int, t_s: float
                             ) -> tuple[ImageU8, FrameTruth]:
-        assert self._process is not None
-        image, truth, took, cpu_s = await loop.run_in_executor(
-            self._process, _render_elsewhere, index, t_s)
+        assert self._process is not None and self._slots is not None
+        slot = index % FRAME_SLOTS
+        shape, truth, took, cpu_s = await loop.run_in_executor(
+            self._process, _render_elsewhere, index, t_s, slot)
+        image = _from_slot(self._slots, slot, shape).copy()
         self.render_cpu_elsewhere_s += cpu_s
         self._render_wall_s = max(RENDER_TIME_DECAY * self._render_wall_s, took)
         return image, truth
@@ -220,17 +229,40 @@ class SimCameraSource(OfSimulatedWorld):
         self._closed = True
         if self._process is not None:
             self._process.shutdown(wait=False, cancel_futures=True)
+        if self._slots is not None:  # the renderer's mapping goes with its process
+            self._slots.close()
+            self._slots.unlink()
+            self._slots = None
 
 
-_RENDERER: list[Simulator] = []  # the rendering process's own simulator
+#: Frames come back from the rendering process through shared memory, in as many slots as
+#: can be in flight (the frame being read and the one rendered ahead), not pickled through a
+#: pipe: the pipe cost the companion's process 1.5 ms of CPU a frame (issue 23).
+FRAME_SLOTS = 2
+
+_RENDERER: list[tuple[Simulator, shared_memory.SharedMemory]] = []  # the renderer's own
 
 
-def _start_renderer(scenario: ScenarioConfig) -> None:
-    _RENDERER[:] = [Simulator(scenario)]
+def _from_slot(slots: shared_memory.SharedMemory, slot: int, shape: tuple[int, ...]) -> ImageU8:
+    """A view of frame slot ``slot`` as an image of ``shape``."""
+    size = int(np.prod(shape))
+    return np.ndarray(shape, np.uint8, buffer=slots.buf, offset=slot * size)
 
 
-def _render_elsewhere(index: int, t_s: float) -> tuple[ImageU8, FrameTruth, float, float]:
-    """In the rendering process: frame ``index``, the wall and CPU time it took."""
+def _start_renderer(scenario: ScenarioConfig, slots_name: str) -> None:
+    # the creator unlinks the block.  Mapping it registers it again with the resource
+    # tracker, which a spawned process shares with its parent (a set: no second entry),
+    # so it is not unregistered here: that would take the parent's entry away
+    slots = shared_memory.SharedMemory(slots_name)
+    _RENDERER[:] = [(Simulator(scenario), slots)]
+
+
+def _render_elsewhere(index: int, t_s: float, slot: int
+                      ) -> tuple[tuple[int, ...], FrameTruth, float, float]:
+    """In the rendering process: frame ``index`` into frame slot ``slot``; its shape, truth,
+    and the wall and CPU time it took."""
     wall, cpu = time.monotonic(), time.process_time()
-    image, truth = _RENDERER[0].render(index, t_s)
-    return image, truth, time.monotonic() - wall, time.process_time() - cpu
+    simulator, slots = _RENDERER[0]
+    image, truth = simulator.render(index, t_s)
+    _from_slot(slots, slot, image.shape)[...] = image
+    return image.shape, truth, time.monotonic() - wall, time.process_time() - cpu

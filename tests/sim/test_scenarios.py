@@ -199,3 +199,27 @@ async def test_sim_source_in_its_own_process_renders_the_same_frames() -> None:
         image, _ = sim.render(frame.index)
         assert np.array_equal(frame.image, image)
     assert source.render_cpu_s == 0.0 and source.render_cpu_elsewhere_s > 0.0
+
+
+async def test_frames_from_the_rendering_process_are_the_companions_own() -> None:
+    """In real time a frame is rendered ahead while the last one is in use; frames come back
+    through shared memory slots (issue 23): a frame delivered must not change when a later
+    one is rendered into its slot, and closing the source removes the block."""
+    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=2.0, fps=30.0))
+    shm = Path("/dev/shm")
+    def blocks() -> set[Path]:  # shared memory blocks (not the pool's semaphores)
+        return set(shm.glob("psm_*")) if shm.is_dir() else set()
+    before = blocks()
+    source = SimCameraSource(sim, realtime=True, own_process=True)
+    try:
+        await source.start()
+        assert len(blocks() - before) == 1
+        frames = [await source.recv() for _ in range(6)]
+    finally:
+        source.close()
+    indices = [f.index for f in frames]
+    assert indices == sorted(set(indices)) and len(set(i % 2 for i in indices)) == 2
+    for frame in frames:
+        image, _ = sim.render(frame.index)
+        assert np.array_equal(frame.image, image), frame.index
+    assert len(blocks()) == len(before)
