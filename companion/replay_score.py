@@ -14,6 +14,9 @@ latency ...) plus what a recording needs:
 * ``longest_wrong_track_frames``: the longest run of frames one track sat on a wrong place
   (its box's part in the image overlaps its landmark's true box, the projected corners'
   bounding box cut to the image, at IoU < ``WRONG_IOU``, or its landmark is not in view);
+* ``longest_fix_gap_s``: the longest time (recorded) between two frames with a fix, from
+  the first fix to the stream's last frame, and ``longest_fix_gap_at_s`` where it began
+  (issue 19's proof measures the same between fused fixes);
 * ``light_steps``: each frame whose mean grey level jumped by ``LIGHT_STEP`` or more from
   the frame before (recorded time ``at_s``) and ``fix_after_s``, the recorded time from it
   to the next fix (0: that frame had one; None: none came).
@@ -67,6 +70,7 @@ class ReplayScorer(FixTruths):
         self.longest_wrong = 0
         self._level: float | None = None
         self.light_steps: list[dict[str, float | None]] = []
+        self.gaps = GapMeter()
 
     def on_result(self, frame: Frame, result: FrameResult) -> None:
         super().on_result(frame, result)
@@ -76,6 +80,7 @@ class ReplayScorer(FixTruths):
         if found is not None:
             self._score_tracks(found[1], result)
             self._score_light(frame, found[0] / 1e6, result.fix is not None)
+            self.gaps.add(found[0] / 1e6, result.fix is not None)
         given = self.sensors.attitude_at(frame.t_us)
         if found is not None and given is not None:
             p = found[1]
@@ -110,6 +115,23 @@ class ReplayScorer(FixTruths):
         for step in self.light_steps:
             if fixed and step["fix_after_s"] is None:
                 step["fix_after_s"] = round(r_s - float(step["at_s"] or 0.0), 3)
+
+
+class GapMeter:
+    """The longest time without a fix: from each fix to the next frame with one, or to the
+    last frame seen; nothing before the first fix."""
+
+    def __init__(self) -> None:
+        self._last_fix_s: float | None = None
+        self.longest_s = 0.0
+        self.began_s: float | None = None  # where the longest began (the fix before it)
+
+    def add(self, t_s: float, fixed: bool) -> None:
+        """A frame at ``t_s`` (s), with a fix or not."""
+        if self._last_fix_s is not None and t_s - self._last_fix_s > self.longest_s:
+            self.longest_s, self.began_s = t_s - self._last_fix_s, self._last_fix_s
+        if fixed:
+            self._last_fix_s = t_s
 
 
 def track_boxes(result: FrameResult) -> dict[str, tuple[float, float, float, float]]:
@@ -213,6 +235,9 @@ def replay_summary(app: CompanionApp, fake: FakeAutopilot, bridge: VisionBridge,
         "attitude_error_deg": _attitude_error(scorer.attitude_errors),
         "telemetry_replayed": dict(fake.replay.sent) if fake.replay is not None else {},
         "longest_wrong_track_frames": scorer.longest_wrong,
+        "longest_fix_gap_s": round(scorer.gaps.longest_s, 3),
+        "longest_fix_gap_at_s": None if scorer.gaps.began_s is None
+        else round(scorer.gaps.began_s, 3),
         "light_steps": scorer.light_steps,
     }
 
@@ -230,6 +255,8 @@ def print_replay(s: dict[str, Any], out: Any = sys.stdout) -> None:
         f"fully visible     {s['frames_2plus_visible']} frames with >= 2 landmarks, "
         f"{f(s['fix_share_2plus_visible'])} of them with a fix",
         f"fixes solved      {s['fixes_solved']}: {line}",
+        f"longest gap       {s['longest_fix_gap_s']} s without a fix (from "
+        f"{f(s['longest_fix_gap_at_s'])} s)",
         *([f"WARNING           {none_sent}"] if none_sent else []),
         f"attitude given    {f(s['attitude_error_deg'])} deg against the truth",
     ]
