@@ -33,6 +33,7 @@ from companion.perception_types import (
     Track,
     feature_weights_bgr,
 )
+from companion.side_sensors import PoseGuess
 from tracker import AdaptiveTracker, TrackerConfig
 from tracker.acquire import (
     Reference,
@@ -41,8 +42,9 @@ from tracker.acquire import (
     project_corners,
     search_template,
 )
-from tracker.boxes import box_corners, clip_box, inside
+from tracker.boxes import box_corners, clip_box, in_view_share, inside
 from tracker.camera import CameraModel
+from tracker.edge_align import align_cut
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import MapLandmark, PoseFix
 from tracker.types import Box
@@ -59,11 +61,13 @@ RANK_PHASE_STEP = 3
 @dataclass(frozen=True)
 class Sighting:
     """One frame as acquisition sees it: the image (rectified), which landmarks are taken
-    when housekeeping began, and the frame's fix (None: no fix)."""
+    when housekeeping began, the frame's fix (None: no fix), and without a fix the
+    autopilot's own pose estimate (None: none, or a fix)."""
 
     image: Image
     seen: Occupancy
     fix: PoseFix | None = None
+    guess: PoseGuess | None = None
 
 
 class Acquirer(Protocol):
@@ -140,7 +144,10 @@ class FeatureAcquirer:
 
 class PredictionAcquirer:
     """Map landmarks the fix says are in view, confirmed by alignment: finds plain plates
-    with too few keypoints for feature matching.  Needs the sighting's fix."""
+    with too few keypoints for feature matching, and plates cut by the image's edge (their
+    part in view aligned: :func:`tracker.edge_align.align_cut`).  Needs the sighting's fix,
+    or without one the autopilot's pose estimate (``by`` "estimate": its error bound
+    ``max_guess_error_px``; what it finds is verified like any sighting)."""
 
     def __init__(self, camera: CameraModel, landmarks: Sequence[MapLandmark],
                  starter: Starter) -> None:
@@ -151,31 +158,45 @@ class PredictionAcquirer:
     def find(self, sight: Sighting, earlier: Sequence[Start] = ()) -> list[Start]:
         """The fix predicts where each untracked landmark's corners are; aligning its
         reference there (ECC) confirms it and gives exact corners."""
-        if sight.fix is None:
+        pose: PoseFix | PoseGuess | None = sight.fix if sight.fix is not None else sight.guess
+        if pose is None:
             return []
         cfg, refs = self.starter.config, self.starter.references
+        by, bound = (("prediction", cfg.max_prediction_error_px) if sight.fix is not None
+                     else ("estimate", cfg.max_guess_error_px))
         starts: list[Start] = list(earlier)
-        height, width = sight.image.shape[:2]
         for lm in self.landmarks:
             lid = lm.landmark_id
             if sight.seen.taken(lid, starts) or lid not in refs:
                 continue
             if sight.seen.busy(starts) >= cfg.max_tracks:
                 break
-            corners = self.project(lm, sight.fix)
-            if corners is None or not inside(corners, width, height, margin=4.0):
-                continue
+            corners = self.project(lm, pose)
             ref = refs[lid]
-            aligned = ecc(cfg, ref, sight.image, homography_to(ref, corners))
-            if aligned is None:
+            aligned = None if corners is None else self.align(ref, sight.image, corners)
+            if corners is None or aligned is None:
                 continue
             quad = project_corners(ref, aligned)
-            if np.abs(quad - corners).max() > cfg.max_prediction_error_px:
+            if np.abs(quad - corners).max() > bound:
                 continue
-            starts += self.starter.start_aligned(lid, sight, aligned, "prediction", starts)
+            starts += self.starter.start_aligned(lid, sight, aligned, by, starts)
         return starts[len(earlier):]
 
-    def project(self, lm: MapLandmark, fix: PoseFix) -> FloatArray | None:
+    def align(self, ref: Reference, image: Image, corners: FloatArray) -> FloatArray | None:
+        """The homography that aligns ``ref`` where the fix predicts its ``corners``: the
+        whole plate (ECC, held to ``verify_correlation``), or a plate cut by the image's
+        edge with ``predict_cut_in_view`` of it in view by its part in view; None when
+        neither holds."""
+        cfg = self.starter.config
+        height, width = image.shape[:2]
+        predicted = homography_to(ref, corners)
+        if inside(corners, width, height, margin=4.0):
+            return ecc(cfg, ref, image, predicted)
+        if in_view_share(corners, width, height) < cfg.predict_cut_in_view:
+            return None
+        return align_cut(ref, image, predicted, cfg.ecc_iterations, cfg.verify_correlation)
+
+    def project(self, lm: MapLandmark, fix: PoseFix | PoseGuess) -> FloatArray | None:
         """The landmark's corners in the image for the vehicle pose of ``fix``."""
         corners_ned = landmark_corners_ned(lm)
         cam = self.camera.world_to_camera(corners_ned, np.asarray(fix.position_ned_m),

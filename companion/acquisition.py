@@ -7,7 +7,9 @@ run on that frame:
 * feature matching now and then (``acquire_every_frames``; ``_with_fix`` while fixes come)
   and at once whenever nothing is tracked or the light stepped (:meth:`Acquisition.run`'s
   ``now``);
-* prediction from the frame's fix, whenever there is one;
+* prediction from the frame's fix, whenever there is one, else from the autopilot's own
+  pose estimate when it gives one (a plate entering the image while nothing else is in
+  view: issue 19);
 * without a fix for ``search_after_s``: the detector's hits, and the template search when
   they start nothing.  With tracks running these take turns with feature matching, one
   heavy step per call (docs/benchmarks.md, "Latency tail").
@@ -76,9 +78,10 @@ class Acquisition:
         if acquire:
             self.acquired_frame = index
             starts += self.features.find(sight)
-        if sight.fix is not None:
-            starts += self.prediction.find(sight, starts)
-        elif lost:
+        predicted = self.prediction.find(sight, starts) \
+            if sight.fix is not None or sight.guess is not None else []
+        starts += predicted
+        if sight.fix is None and lost and not predicted:  # (a guess's find: no search now)
             starts += self._find_while_lost(sight, spread)
         return starts
 

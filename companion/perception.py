@@ -52,7 +52,7 @@ from companion.corner_noise import CornerNoise
 from companion.corners import Corners
 from companion.fixgate import FixGate, FixGateConfig
 from companion.perception_types import DetectFn, PerceptionConfig, Track
-from companion.side_sensors import SensorReader, SideInputs, SideSensors, no_sensors
+from companion.side_sensors import SensorReader, SideInputs, SideSensors, guess_of, no_sensors
 from companion.tracks import TrackSet, observations
 from tracker import TrackerConfig
 from tracker.acquire import AcquireConfig, ReferenceMatcher
@@ -202,7 +202,8 @@ class Perception:
         if now:
             self.acquisition.due_now()
         image = self._rectified_image(frame) if rectified is None else rectified
-        sight = Sighting(image, self.trackset.snapshot(), fix)
+        guess = None if fix is not None else guess_of(self.side.read(frame.t_us))
+        sight = Sighting(image, self.trackset.snapshot(), fix, guess)
         starts = self.acquisition.run(frame.index, frame.t_us, sight)
         if starts:
             self.trackset.hand_over(starts)

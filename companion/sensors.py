@@ -11,8 +11,10 @@ frame's capture time, the :class:`~companion.side_sensors.SideSensors` the solve
 * ``LOCAL_POSITION_NED``: the EKF's height as NED down about the EKF origin, the frame the
   landmark map is placed in (GLOBAL_POSITION_INT's ``relative_alt`` is above *home*, which
   need not be the origin), interpolated, 1-sigma ``pose.altitude_sigma_m``; only with
-  ``pose.use_altitude``.  With ``EK3_SRC1_POSZ = 6`` (ExtNav) the EKF's height is itself fed
-  by our fixes: the sigma must then stay honest, as the attitude's does.
+  ``pose.use_altitude``.  With ``EK3_SRC1_POSZ = 6`` (ExtNav) the EKF's height is itself
+  fed by our fixes: the sigma must then stay honest, as the attitude's does.  Its whole
+  position, interpolated, serves acquisition alone (where to look while no fix comes:
+  ``SideSensors.position_ned_m``).
 * ``DISTANCE_SENSOR``: a range finder reading, the nearest sample (ranges jump between
   surfaces: never interpolated), along the beam its ``orientation`` names, 1-sigma
   ``pose.rangefinder_sigma_m``; only with ``pose.rangefinder``.  Readings outside the
@@ -114,7 +116,7 @@ class SensorHistory:
         if name == "ATTITUDE":
             values = (float(v.roll_rad), float(v.pitch_rad), float(v.yaw_rad))
         elif name == "LOCAL_POSITION_NED":
-            values = (float(v.down_m),)
+            values = (float(v.north_m), float(v.east_m), float(v.down_m))
         elif name == "DISTANCE_SENSOR":
             values = (float(v.distance_m), float(v.min_distance_m),
                       float(v.max_distance_m), float(v.orientation))
@@ -124,7 +126,8 @@ class SensorHistory:
         self.received[name] += 1
 
     def __call__(self, t_us: int) -> SideSensors:
-        return SideSensors(self.attitude_at(t_us), self.altitude_at(t_us), self.range_at(t_us))
+        return SideSensors(self.attitude_at(t_us), self.altitude_at(t_us), self.range_at(t_us),
+                           self.position_at(t_us))
 
     def _gap_us(self) -> int:
         return round(self.config.max_sample_age_s * 1e6)
@@ -161,7 +164,12 @@ class SensorHistory:
         if not self.config.use_altitude:
             return None
         v = interpolate(list(self.samples["LOCAL_POSITION_NED"]), t_us, self._gap_us())
-        return None if v is None else AltitudeSample(t_us, v[0], self.config.altitude_sigma_m)
+        return None if v is None else AltitudeSample(t_us, v[2], self.config.altitude_sigma_m)
+
+    def position_at(self, t_us: int) -> tuple[float, float, float] | None:
+        """The EKF's position (NED about its origin) at ``t_us``, or None."""
+        v = interpolate(list(self.samples["LOCAL_POSITION_NED"]), t_us, self._gap_us())
+        return None if v is None else (v[0], v[1], v[2])
 
     def range_at(self, t_us: int) -> RangeSample | None:
         """The range finder's reading nearest to ``t_us`` (``pose.rangefinder``), or None."""

@@ -21,11 +21,34 @@ from tracker.pose.types import AltitudeSample, AttitudeSample, NoFix, PoseFix, R
 
 @dataclass(frozen=True)
 class SideSensors:
-    """The autopilot's latest attitude, altitude and laser range (any may be missing)."""
+    """The autopilot's latest attitude, altitude and laser range (any may be missing), and
+    its own position estimate: ``position_ned_m`` (LOCAL_POSITION_NED, the map's frame) says
+    only where to look for landmarks while no fix comes (:class:`PoseGuess`), never where
+    the vehicle is -- it is itself made of our fixes."""
 
     attitude: AttitudeSample | None = None
     altitude: AltitudeSample | None = None
     laser: RangeSample | None = None
+    position_ned_m: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class PoseGuess:
+    """Where the autopilot believes the vehicle is, and its attitude: for acquisition to
+    predict where landmarks are when the frame has no fix (issue 19: a plate entering the
+    image while nothing else is in view).  Same attribute names as a
+    :class:`~tracker.pose.types.PoseFix`'s pose."""
+
+    position_ned_m: tuple[float, float, float]
+    attitude_rpy_rad: tuple[float, float, float]
+
+
+def guess_of(read: SideSensors) -> PoseGuess | None:
+    """The autopilot's pose from its side sensors; None without position or attitude."""
+    att = read.attitude
+    if read.position_ned_m is None or att is None:
+        return None
+    return PoseGuess(read.position_ned_m, (att.roll_rad, att.pitch_rad, att.yaw_rad))
 
 
 #: Reads the side sensors at a capture time (us).
