@@ -102,9 +102,10 @@ class PerceptionConfig:
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
-    #: A plate the fix predicts cut by the image's edge with at least this share of it in
-    #: view is looked for by aligning its part in view (issue 19: a plate entering from the
-    #: edge was acquired only once ~0.7 of it was in view); 1: only whole plates.
+    #: Without a fix, a plate the autopilot's estimate predicts cut by the image's edge with
+    #: at least this share of it in view is looked for by aligning its part in view (issue
+    #: 19: a plate entering from the edge was acquired only once ~0.7 of it was in view);
+    #: 1: only whole plates.
     predict_cut_in_view: float = field(default=0.25, metadata={"gt": 0, "le": 1})
     #: Without a fix, landmarks are predicted from the autopilot's own pose estimate; an
     #: alignment found further than this from that prediction is not taken.
