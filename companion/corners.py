@@ -40,8 +40,8 @@ from tracker.verify import check_appearance, check_appearance_near, quad_iou
 
 FloatArray = npt.NDArray[np.float64]
 
-#: A colour feature is aligned on only when the reference shows this share of its grey
-#: levels' contrast (standard deviation) in it, and at least one grey level: the tracker
+#: A colour feature is aligned on only when the reference shows at least this share of its
+#: grey levels' contrast (standard deviation, taken as at least 1) in it: the tracker
 #: picks its feature on the frame, where a grey reference photo's plate may carry a colour
 #: cast the photo has not (issue 25's warm light: the reference's R - B plane was 0
 #: everywhere and every alignment on it failed, "NaN encountered").
