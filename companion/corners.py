@@ -29,6 +29,7 @@ from tracker.acquire import (
     Weights,
     homography_to,
     project_corners,
+    reference_plane,
     refine_ecc,
 )
 from tracker.boxes import box_corners, in_view_share, saturated_share
@@ -38,6 +39,13 @@ from tracker.types import Box
 from tracker.verify import check_appearance, check_appearance_near, quad_iou
 
 FloatArray = npt.NDArray[np.float64]
+
+#: A colour feature is aligned on only when the reference shows at least this share of its
+#: grey levels' contrast (standard deviation, taken as at least 1) in it: the tracker
+#: picks its feature on the frame, where a grey reference photo's plate may carry a colour
+#: cast the photo has not (issue 25's warm light: the reference's R - B plane was 0
+#: everywhere and every alignment on it failed, "NaN encountered").
+MIN_PLANE_CONTRAST = 0.1
 
 
 def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
@@ -69,6 +77,24 @@ class Corners:
         self.references = references
         self._recover_matcher = recover_matcher
         self._recover_lock = threading.Lock()  # tracks may recover corners on two threads
+        #: (landmark, weights) -> does the reference hold contrast in that feature?
+        self._plane_ok: dict[tuple[str, Weights], bool] = {}
+
+    def weights(self, track: Track) -> Weights | None:
+        """The colour feature the track's corners are aligned on: its tracker's
+        (``Track.align_weights``), or grey levels (None) when the reference is flat in it
+        (``MIN_PLANE_CONTRAST``).  Two threads may both compute one entry: the same value."""
+        w = track.align_weights
+        if w is None:
+            return None
+        key = (track.landmark_id, w)
+        ok = self._plane_ok.get(key)
+        if ok is None:
+            ref = self.references[track.landmark_id]
+            grey = max(float(np.std(ref.gray)), 1.0)
+            ok = float(np.std(reference_plane(ref, w))) >= MIN_PLANE_CONTRAST * grey
+            self._plane_ok[key] = ok
+        return w if ok else None
 
     def follow(self, track: Track, image: npt.NDArray[np.uint8], last_box: Box) -> None:
         """The track's corners in ``image``, its tracker's box already updated (from
@@ -93,7 +119,7 @@ class Corners:
         """ECC alignment of the reference on the tracker's best colour feature (grey levels
         for a grey target), kept only if it agrees with the tracker's box."""
         ref = self.references[track.landmark_id]
-        aligned = ecc(self.config, ref, image, hom, verify, track.align_weights)
+        aligned = ecc(self.config, ref, image, hom, verify, self.weights(track))
         box = track.box
         if aligned is None:
             return None
@@ -130,7 +156,7 @@ class Corners:
         dx, dy = box_shift(last_box, track.box, self.camera.width, self.camera.height)
         for start in (hom, shifted(hom, dx, dy)) if max(abs(dx), abs(dy)) > 2.0 else (hom,):
             aligned = align_cut(ref, image, start, self.config.ecc_iterations,
-                                TRACK_MIN_CORRELATION, track.align_weights)
+                                TRACK_MIN_CORRELATION, self.weights(track))
             if aligned is not None:
                 return aligned
         return None

@@ -6,10 +6,11 @@ and replayed through the whole companion (``companion replay --fast --json``).  
 issue's targets are asserted on the replay's own scores where they are met in every run
 (``--fast`` is repeatable since its frames wait for their acquisition step): a fix on >= 90 %
 of the frames with two or more landmarks fully visible, no track on a wrong place for more
-than 10 frames, a fix within 1 s of each light step.  Two are not: position RMSE <= 0.5 % of
-the distance (not met), >= 90 % of fixes inside the 95 % NEES bounds (met, 0.913-0.920 in 7
-runs, too close to the bound for a run on another machine); they are held to floors under
-what is measured now, so that a regression fails.
+than 10 frames, a fix within 1 s of each light step, >= 90 % of fixes inside the 95 % NEES
+bounds (0.968-0.970 in 3 runs since the corners stopped aligning on a colour feature the grey
+reference lacks; 0.913-0.920 before).  One is not: position RMSE <= 0.5 % of the distance
+(0.639-0.644 %); it is held to a ceiling over what is measured now, so that a regression
+fails.
 
 The configuration is the simulator's layer with the real-imagery settings the worlds are
 scored with (docs/benchmarks.md): SIFT acquisition (as in deployment), 6 inliers, and the
@@ -42,9 +43,9 @@ def real_world(folder: Path, seed: int) -> Path:
 
 
 def assert_issue_25_targets(s: dict[str, Any]) -> None:
-    """The issue's targets that the perception meets in every run, and floors just under
-    what is measured for the three it does not meet in every run yet: there a regression
-    fails (module notes)."""
+    """The issue's targets that the perception meets in every run, and a ceiling just over
+    what is measured for the RMSE, which it does not meet yet: there a regression fails
+    (module notes)."""
     assert s["frames_2plus_visible"] >= 300, s  # the world shows what is scored
     assert s["longest_wrong_track_frames"] <= 10, s
     steps = s["light_steps"]
@@ -55,14 +56,14 @@ def assert_issue_25_targets(s: dict[str, Any]) -> None:
     assert s["nees_inside_95_share"] >= NEES_FLOOR, s
 
 
-#: The share is the issue's target (0.994 in 7 runs of seed 2 since f449dcc; 0.76-0.93
-#: before, when acquisition raced the next frame); floors for the two not met in every run
-#: (issue 25: <= 0.5 %, >= 0.9): seed 2, 7 runs (2026-11-27, docs/benchmarks.md): RMSE
-#: 0.93-0.96 % (the autopilot's ~2 deg attitude error in one-plate fixes), NEES inside
-#: 0.913-0.920 (0.65-0.72 on 5634007, where this test fails).
+#: The share and the NEES are the issue's targets (seed 2, 3 runs, 2026-11-27 evening,
+#: docs/benchmarks.md: share 0.993-0.996, NEES inside 0.968-0.970; 0.913-0.920 on dad199c,
+#: 0.65-0.72 on 5634007, where this test fails); the RMSE's ceiling is over what is measured
+#: (issue 25: <= 0.5 %; 0.639-0.644 %, 0.93-0.96 % on dad199c: the replayed autopilot's
+#: ~2 deg attitude error, docs/benchmarks.md).
 SHARE_FLOOR = 0.9
-RMSE_PCT_CEILING = 1.2
-NEES_FLOOR = 0.85
+RMSE_PCT_CEILING = 0.8
+NEES_FLOOR = 0.9
 
 
 @pytest.mark.slow
