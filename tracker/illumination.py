@@ -112,7 +112,7 @@ def rho_under_gains(
 ) -> FloatArray:
     """Bhattacharyya ``rho`` against the model of the box ``centre`` +- ``half`` (patch
     pixels) of the uncompensated window ``raw``, compensated with each gain of (G, 3)."""
-    channels = np.moveaxis(raw.patch, 2, 0).astype(np.intp)
+    channels = np.moveaxis(raw.patch, 2, 0)  # sampled as uint8: the values, not indices
     pixels = sample_bins(channels, centre, half, cfg.filter.sample_grid)[:, 0].T
     factors = np.stack([effective(g, cfg.illumination) for g in gains])
     lit = np.clip(pixels[None] * factors[:, None, :], 0, 255).astype(np.uint8)

@@ -81,7 +81,12 @@ def window_sums(
         np.maximum(corners, 0, out=corners), [wp1 - 1, hp1 - 1, wp1 - 1, hp1 - 1], out=corners
     )
     x0, y0, x1, y1 = corners.T
-    sums = tables[:, y1, x1] - tables[:, y0, x1] - tables[:, y1, x0] + tables[:, y0, x0]
+    flat = tables.reshape(len(tables), -1)  # np.take on the flat axis: [:, y, x], faster
+
+    def at(y: npt.NDArray[np.intp], x: npt.NDArray[np.intp]) -> FloatArray:
+        return np.take(flat, y * wp1 + x, axis=1)
+
+    sums = at(y1, x1) - at(y0, x1) - at(y1, x0) + at(y0, x0)
     return sums, ((x1 - x0) * (y1 - y0)).astype(np.float64)
 
 
