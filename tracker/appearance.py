@@ -9,11 +9,13 @@ and lets every particle (with its own scale) be evaluated in one vectorised ``np
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+IntT = TypeVar("IntT", bound=np.integer[Any])
 
 
 @lru_cache(maxsize=8)
@@ -28,8 +30,8 @@ def epanechnikov_grid(n: int) -> tuple[FloatArray, FloatArray]:
 
 
 def sample_bins(
-    bin_images: npt.NDArray[np.intp], centres: FloatArray, half_sizes: FloatArray, grid: int
-) -> npt.NDArray[np.intp]:
+    bin_images: npt.NDArray[IntT], centres: FloatArray, half_sizes: FloatArray, grid: int
+) -> npt.NDArray[IntT]:
     """Bin indices at each candidate's kernel sample points, shape (k, P, m).
 
     ``bin_images`` (k, H, W); ``centres`` (P, 2) and ``half_sizes`` (P, 2) in patch pixels

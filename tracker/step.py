@@ -47,7 +47,15 @@ from tracker.particles import (
     weighted_estimate,
 )
 from tracker.refine import Refiner
-from tracker.target_model import FirstFrame, TargetModel, kernel, likelihood, llr_factor, rank
+from tracker.target_model import (
+    Counted,
+    FirstFrame,
+    TargetModel,
+    kernel,
+    likelihood,
+    llr_factor,
+    rank,
+)
 from tracker.template import as_float
 from tracker.types import Box, TrackResult
 from tracker.window import Window, cut_window, work_factor
@@ -196,8 +204,8 @@ def _propagate(
 
 def _weigh(
     state: TrackState, window: Window, particles: FloatArray, cfg: TrackerConfig
-) -> tuple[npt.NDArray[np.intp], FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Steps 2-5 on the (compensated) window: the selected features' bin planes, the
+) -> tuple[Counted, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Steps 2-5 on the (compensated) window: the selected features' counted planes, the
     particles (the first set mean-shifted on the likelihood image), their weights above the
     threshold, the two candidate estimates (weighted mean, best particle), their histograms
     and the model's."""
