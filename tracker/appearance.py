@@ -106,7 +106,9 @@ def joint_planes(
     ``joint_bins**k`` bins and keeps the correlation between features that marginals lose.
     Works on whole planes (k, H, W) or on samples (k, P, m).
     """
-    out = np.zeros(bin_images.shape[1:], dtype=np.intp)
-    for plane in bin_images:
-        out = out * joint_bins + (plane * joint_bins) // bins
+    level = (np.arange(bins, dtype=np.intp) * joint_bins) // bins  # bin -> joint level
+    out = np.take(level, bin_images[0])
+    for plane in bin_images[1:]:
+        out *= joint_bins
+        out += np.take(level, plane)
     return out[None]

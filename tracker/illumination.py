@@ -141,10 +141,11 @@ def from_target(
     new = proposed(gain, box_mean(raw, xy, half, light), light)
     if light.gain_check and applies(light, cue):
         centre = raw.to_patch(xy[None])
-        if known is None:
-            now = rho_under_gains(raw, centre, half[None], gain.gain[None], model, cfg)
+        if known is None:  # both gains in one pass (each histogram as if alone)
+            rho = rho_under_gains(raw, centre, half[None], np.stack([new, gain.gain]), model, cfg)
         else:
             now = bhattacharyya(known[None], model.hist(cfg.features.anchor_weight))
-        if rho_under_gains(raw, centre, half[None], new[None], model, cfg)[0] < now[0]:
+            rho = np.append(rho_under_gains(raw, centre, half[None], new[None], model, cfg), now)
+        if rho[0] < rho[1]:
             return gain
     return Gain(new, gain.target_mean, gain.frame_mean)
