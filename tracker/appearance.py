@@ -29,6 +29,24 @@ def epanechnikov_grid(n: int) -> tuple[FloatArray, FloatArray]:
     return offsets, 1.0 - r2[inside]  # eq. 3: k(u) = 1 - ||u||^2 inside the unit circle
 
 
+def sample_index(
+    shape: tuple[int, ...], centres: FloatArray, half_sizes: FloatArray, grid: int
+) -> npt.NDArray[np.intp]:
+    """Flat pixel indices (P, m) of each candidate's kernel sample points on an image of
+    ``shape`` (H, W, ...); ``centres`` (P, 2) and ``half_sizes`` (P, 2) in pixels (x, y);
+    points outside take the nearest edge pixel."""
+    offsets, _ = epanechnikov_grid(grid)
+    h, w = shape[:2]
+    xs = centres[:, None, 0] + offsets[None, :, 0] * half_sizes[:, None, 0]
+    ys = centres[:, None, 1] + offsets[None, :, 1] * half_sizes[:, None, 1]
+    xi, index = xs.astype(np.intp), ys.astype(np.intp)
+    np.minimum(np.maximum(xi, 0, out=xi), w - 1, out=xi)
+    np.minimum(np.maximum(index, 0, out=index), h - 1, out=index)
+    index *= w
+    index += xi
+    return index
+
+
 def sample_bins(
     bin_images: npt.NDArray[IntT], centres: FloatArray, half_sizes: FloatArray, grid: int
 ) -> npt.NDArray[IntT]:
@@ -37,15 +55,8 @@ def sample_bins(
     ``bin_images`` (k, H, W); ``centres`` (P, 2) and ``half_sizes`` (P, 2) in patch pixels
     (x, y); points outside the patch take the nearest edge pixel.
     """
-    offsets, _ = epanechnikov_grid(grid)
-    k, h, w = bin_images.shape
-    xs = centres[:, None, 0] + offsets[None, :, 0] * half_sizes[:, None, 0]
-    ys = centres[:, None, 1] + offsets[None, :, 1] * half_sizes[:, None, 1]
-    xi, index = xs.astype(np.intp), ys.astype(np.intp)
-    np.minimum(np.maximum(xi, 0, out=xi), w - 1, out=xi)
-    np.minimum(np.maximum(index, 0, out=index), h - 1, out=index)
-    index *= w
-    index += xi
+    k = bin_images.shape[0]
+    index = sample_index(bin_images.shape[1:], centres, half_sizes, grid)
     # np.take along the flat axis: the same gather as ``[:, index]``, 5-6x faster in numpy
     return np.take(bin_images.reshape(k, -1), index, axis=1)
 

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.appearance import bhattacharyya, sample_bins
+from tracker.appearance import bhattacharyya, sample_index
 from tracker.config import IlluminationConfig, TrackerConfig
 from tracker.target_model import TargetModel, planes_of, sample_histograms
 from tracker.types import Cue
@@ -75,7 +75,8 @@ def compensate(window: Window, gain: Gain, cfg: IlluminationConfig, cue: Cue) ->
     factor = effective(gain.gain, cfg).astype(np.float32)
     if not applies(cfg, cue) or np.abs(factor - 1.0).max() < 0.01:
         return window
-    patch = np.clip(window.patch * factor, 0, 255).astype(np.uint8)
+    lit = window.patch * factor  # >= 0: only the top is clipped
+    patch = np.minimum(lit, 255, out=lit).astype(np.uint8)
     return Window(window.x0, window.y0, window.fx, window.fy, patch)
 
 
@@ -112,8 +113,8 @@ def rho_under_gains(
 ) -> FloatArray:
     """Bhattacharyya ``rho`` against the model of the box ``centre`` +- ``half`` (patch
     pixels) of the uncompensated window ``raw``, compensated with each gain of (G, 3)."""
-    channels = np.moveaxis(raw.patch, 2, 0)  # sampled as uint8: the values, not indices
-    pixels = sample_bins(channels, centre, half, cfg.filter.sample_grid)[:, 0].T
+    index = sample_index(raw.patch.shape, centre, half, cfg.filter.sample_grid)[0]
+    pixels = np.take(raw.patch.reshape(-1, 3), index, axis=0)  # (m, 3) B, G, R
     factors = np.stack([effective(g, cfg.illumination) for g in gains])
     lit = np.clip(pixels[None] * factors[:, None, :], 0, 255).astype(np.uint8)
     planes = planes_of(lit, model.features, cfg)
