@@ -57,8 +57,8 @@ def sample_bins(
     """
     k = bin_images.shape[0]
     index = sample_index(bin_images.shape[1:], centres, half_sizes, grid)
-    # np.take along the flat axis: the same gather as ``[:, index]``, 5-6x faster in numpy
-    return np.take(bin_images.reshape(k, -1), index, axis=1)
+    # take along the flat axis: the same gather as ``[:, index]``, 5-6x faster in numpy
+    return bin_images.reshape(k, -1).take(index, axis=1)
 
 
 def histograms_from_samples(samples: npt.NDArray[np.intp], grid: int, bins: int) -> FloatArray:
@@ -95,7 +95,8 @@ def kernel_histograms(
 
 def bhattacharyya(hists: FloatArray, model: FloatArray) -> FloatArray:
     """Eq. 4: coefficient ``rho = sum sqrt(p q)``, averaged over the k features -> (P,)."""
-    return np.sqrt(hists * model[None]).sum(axis=-1).mean(axis=-1)
+    per_feature = np.sqrt(hists * model[None]).sum(axis=-1)
+    return per_feature.sum(axis=-1) / per_feature.shape[-1]  # the mean, without its overhead
 
 
 def bhattacharyya_distance(rho: FloatArray) -> FloatArray:
@@ -118,8 +119,8 @@ def joint_planes(
     Works on whole planes (k, H, W) or on samples (k, P, m).
     """
     level = (np.arange(bins, dtype=np.intp) * joint_bins) // bins  # bin -> joint level
-    out = np.take(level, bin_images[0])
+    out = level.take(bin_images[0])
     for plane in bin_images[1:]:
         out *= joint_bins
-        out += np.take(level, plane)
+        out += level.take(plane)
     return out[None]

@@ -114,7 +114,7 @@ def rho_under_gains(
     """Bhattacharyya ``rho`` against the model of the box ``centre`` +- ``half`` (patch
     pixels) of the uncompensated window ``raw``, compensated with each gain of (G, 3)."""
     index = sample_index(raw.patch.shape, centre, half, cfg.filter.sample_grid)[0]
-    pixels = np.take(raw.patch.reshape(-1, 3), index, axis=0)  # (m, 3) B, G, R
+    pixels = raw.patch.reshape(-1, 3).take(index, axis=0)  # (m, 3) B, G, R
     factors = np.stack([effective(g, cfg.illumination) for g in gains])
     lit = np.clip(pixels[None] * factors[:, None, :], 0, 255).astype(np.uint8)
     planes = planes_of(lit, model.features, cfg)

@@ -87,7 +87,7 @@ def half_size(size: tuple[float, float], scale: FloatArray | float, window: Wind
     """Half box sizes in patch pixels for one or more scales -> (P, 2)."""
     w0, h0 = size
     half = np.array([w0 * window.fx / 2.0, h0 * window.fy / 2.0])
-    return np.multiply.outer(np.atleast_1d(np.asarray(scale, dtype=np.float64)), half)
+    return np.multiply.outer(np.asarray(scale, dtype=np.float64).reshape(-1), half)
 
 
 def _window(

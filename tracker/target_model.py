@@ -119,9 +119,9 @@ def likelihood(
     image."""
     planes = planes_of(patch, model.features, cfg)
     llr = model.llr
-    image = np.take(llr[0], planes[0])  # np.take: the same gather as llr[0][planes[0]], faster
+    image = llr[0].take(planes[0])  # take: the same gather as llr[0][planes[0]], faster
     for i in range(1, len(planes)):
-        image = image + np.take(llr[i], planes[i])
+        image = image + llr[i].take(planes[i])
     return counted(planes, cfg), (image / len(planes)).astype(np.float32)
 
 
