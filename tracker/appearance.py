@@ -68,10 +68,18 @@ def histograms_from_samples(samples: npt.NDArray[np.intp], grid: int, bins: int)
     """
     _, weights = epanechnikov_grid(grid)
     k, p, _ = samples.shape
-    slot = (np.arange(p, dtype=np.intp)[None, :] * k + np.arange(k)[:, None]) * bins  # (k, P)
-    index = samples + slot[:, :, None]
+    index = samples + _slots(k, p, bins)
     hist = np.bincount(index.ravel(), _tiled_weights(grid, k * p), minlength=p * k * bins)
     return hist.reshape(p, k, bins) / weights.sum()
+
+
+@lru_cache(maxsize=32)
+def _slots(k: int, p: int, bins: int) -> npt.NDArray[np.intp]:
+    """(k, P, 1) first bin of each (feature, candidate) histogram in the flat count (read-only)."""
+    slot = (np.arange(p, dtype=np.intp)[None, :] * k + np.arange(k)[:, None]) * bins
+    out = slot[:, :, None]
+    out.flags.writeable = False
+    return out
 
 
 @lru_cache(maxsize=32)

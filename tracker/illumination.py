@@ -75,8 +75,11 @@ def compensate(window: Window, gain: Gain, cfg: IlluminationConfig, cue: Cue) ->
     factor = effective(gain.gain, cfg).astype(np.float32)
     if not applies(cfg, cue) or np.abs(factor - 1.0).max() < 0.01:
         return window
-    lit = window.patch * factor  # >= 0: only the top is clipped
-    patch = np.minimum(lit, 255, out=lit).astype(np.uint8)
+    # per channel a table of the 256 levels: min(level x factor, 255) truncated, the same
+    # float32 product as on the whole patch, looked up instead of computed per pixel
+    lit = np.arange(256, dtype=np.uint8)[:, None] * factor[None, :]  # (256, 3)
+    table = np.minimum(lit, 255, out=lit).astype(np.uint8).reshape(256, 1, 3)
+    patch = np.asarray(cv2.LUT(window.patch, table), dtype=np.uint8)
     return Window(window.x0, window.y0, window.fx, window.fy, patch)
 
 

@@ -66,9 +66,9 @@ def integral_images(weight_image: npt.NDArray[np.float32]) -> FloatArray:
     wi = weight_image.astype(np.float64)
     xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
     ys = np.arange(h, dtype=np.float64)[:, None] + 0.5
-    stack = np.dstack([wi, wi * xs, wi * ys])
-    table = cv2.integral(stack, sdepth=cv2.CV_64F)  # (H+1, W+1, 3), zero first row/column
-    return np.ascontiguousarray(np.moveaxis(table, 2, 0))
+    # (3, H+1, W+1), zero first row/column: one table per image (the same sums as one
+    # three-channel table, without interleaving the channels and back)
+    return np.stack([cv2.integral(im, sdepth=cv2.CV_64F) for im in (wi, wi * xs, wi * ys)])
 
 
 def window_sums(
