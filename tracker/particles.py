@@ -101,9 +101,7 @@ def mean_shift(
     c = centres.astype(np.float64).copy()
     for _ in range(iterations):
         sums, _ = window_sums(tables, c, half_sizes)
-        ok = sums[0] > 1e-9
-        c[ok, 0] = sums[1, ok] / sums[0, ok]
-        c[ok, 1] = sums[2, ok] / sums[0, ok]
+        np.divide(sums[1:], sums[0], out=c.T, where=sums[0] > 1e-9)  # (x, y) where weighted
     return c
 
 
