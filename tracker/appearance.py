@@ -35,16 +35,26 @@ def sample_index(
     """Flat pixel indices (P, m) of each candidate's kernel sample points on an image of
     ``shape`` (H, W, ...); ``centres`` (P, 2) and ``half_sizes`` (P, 2) in pixels (x, y);
     points outside take the nearest edge pixel."""
-    offsets, _ = epanechnikov_grid(grid)
+    ox, oy = _grid_axes(grid)
     h, w = shape[:2]
-    xs = centres[:, None, 0] + offsets[None, :, 0] * half_sizes[:, None, 0]
-    ys = centres[:, None, 1] + offsets[None, :, 1] * half_sizes[:, None, 1]
+    xs = centres[:, None, 0] + ox * half_sizes[:, None, 0]
+    ys = centres[:, None, 1] + oy * half_sizes[:, None, 1]
     xi, index = xs.astype(np.intp), ys.astype(np.intp)
     np.minimum(np.maximum(xi, 0, out=xi), w - 1, out=xi)
     np.minimum(np.maximum(index, 0, out=index), h - 1, out=index)
     index *= w
     index += xi
     return index
+
+
+@lru_cache(maxsize=8)
+def _grid_axes(grid: int) -> tuple[FloatArray, FloatArray]:
+    """The grid's x and y offsets as two contiguous (1, m) rows (read-only)."""
+    offsets, _ = epanechnikov_grid(grid)
+    axes = np.ascontiguousarray(offsets[:, 0])[None], np.ascontiguousarray(offsets[:, 1])[None]
+    for a in axes:
+        a.flags.writeable = False
+    return axes
 
 
 def sample_bins(

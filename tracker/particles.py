@@ -76,13 +76,17 @@ def window_sums(
 ) -> tuple[FloatArray, FloatArray]:
     """Sums of the tabled images over each centre's box, (3, P), and the box areas (P,) in px."""
     _, hp1, wp1 = tables.shape
-    corners = np.rint(np.hstack([centres - half_sizes, centres + half_sizes])).astype(np.intp)
+    p = len(centres)
+    box = np.empty((p, 4))
+    np.subtract(centres, half_sizes, out=box[:, :2])
+    np.add(centres, half_sizes, out=box[:, 2:])
+    corners = np.rint(box, out=box).astype(np.intp)
     np.minimum(
-        np.maximum(corners, 0, out=corners), [wp1 - 1, hp1 - 1, wp1 - 1, hp1 - 1], out=corners
+        np.maximum(corners, 0, out=corners), (wp1 - 1, hp1 - 1, wp1 - 1, hp1 - 1), out=corners
     )
     x0, y0, x1, y1 = corners.T
-    p = len(centres)
-    index = np.concatenate([y1 * wp1 + x1, y0 * wp1 + x1, y1 * wp1 + x0, y0 * wp1 + x0])
+    r0, r1 = y0 * wp1, y1 * wp1
+    index = np.concatenate([r1 + x1, r0 + x1, r1 + x0, r0 + x0])
     # one take on the flat axis for the four corners: [:, y, x] four times, faster
     at = tables.reshape(len(tables), -1).take(index, axis=1)
     sums = at[:, :p] - at[:, p : 2 * p] - at[:, 2 * p : 3 * p] + at[:, 3 * p :]
