@@ -9,11 +9,13 @@ and lets every particle (with its own scale) be evaluated in one vectorised ``np
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+IntT = TypeVar("IntT", bound=np.integer[Any])
 
 
 @lru_cache(maxsize=8)
@@ -27,21 +29,46 @@ def epanechnikov_grid(n: int) -> tuple[FloatArray, FloatArray]:
     return offsets, 1.0 - r2[inside]  # eq. 3: k(u) = 1 - ||u||^2 inside the unit circle
 
 
-def sample_bins(
-    bin_images: npt.NDArray[np.intp], centres: FloatArray, half_sizes: FloatArray, grid: int
+def sample_index(
+    shape: tuple[int, ...], centres: FloatArray, half_sizes: FloatArray, grid: int
 ) -> npt.NDArray[np.intp]:
+    """Flat pixel indices (P, m) of each candidate's kernel sample points on an image of
+    ``shape`` (H, W, ...); ``centres`` (P, 2) and ``half_sizes`` (P, 2) in pixels (x, y);
+    points outside take the nearest edge pixel."""
+    ox, oy = _grid_axes(grid)
+    h, w = shape[:2]
+    xs = centres[:, None, 0] + ox * half_sizes[:, None, 0]
+    ys = centres[:, None, 1] + oy * half_sizes[:, None, 1]
+    xi, index = xs.astype(np.intp), ys.astype(np.intp)
+    np.minimum(np.maximum(xi, 0, out=xi), w - 1, out=xi)
+    np.minimum(np.maximum(index, 0, out=index), h - 1, out=index)
+    index *= w
+    index += xi
+    return index
+
+
+@lru_cache(maxsize=8)
+def _grid_axes(grid: int) -> tuple[FloatArray, FloatArray]:
+    """The grid's x and y offsets as two contiguous (1, m) rows (read-only)."""
+    offsets, _ = epanechnikov_grid(grid)
+    axes = np.ascontiguousarray(offsets[:, 0])[None], np.ascontiguousarray(offsets[:, 1])[None]
+    for a in axes:
+        a.flags.writeable = False
+    return axes
+
+
+def sample_bins(
+    bin_images: npt.NDArray[IntT], centres: FloatArray, half_sizes: FloatArray, grid: int
+) -> npt.NDArray[IntT]:
     """Bin indices at each candidate's kernel sample points, shape (k, P, m).
 
     ``bin_images`` (k, H, W); ``centres`` (P, 2) and ``half_sizes`` (P, 2) in patch pixels
     (x, y); points outside the patch take the nearest edge pixel.
     """
-    offsets, _ = epanechnikov_grid(grid)
-    k, h, w = bin_images.shape
-    xs = centres[:, None, 0] + offsets[None, :, 0] * half_sizes[:, None, 0]
-    ys = centres[:, None, 1] + offsets[None, :, 1] * half_sizes[:, None, 1]
-    xi = np.minimum(np.maximum(xs.astype(np.intp), 0), w - 1)
-    yi = np.minimum(np.maximum(ys.astype(np.intp), 0), h - 1)
-    return bin_images.reshape(k, -1)[:, yi * w + xi]
+    k = bin_images.shape[0]
+    index = sample_index(bin_images.shape[1:], centres, half_sizes, grid)
+    # take along the flat axis: the same gather as ``[:, index]``, 5-6x faster in numpy
+    return bin_images.reshape(k, -1).take(index, axis=1)
 
 
 def histograms_from_samples(samples: npt.NDArray[np.intp], grid: int, bins: int) -> FloatArray:
@@ -51,11 +78,26 @@ def histograms_from_samples(samples: npt.NDArray[np.intp], grid: int, bins: int)
     """
     _, weights = epanechnikov_grid(grid)
     k, p, _ = samples.shape
-    slot = (np.arange(p, dtype=np.intp)[None, :] * k + np.arange(k)[:, None]) * bins  # (k, P)
-    index = samples + slot[:, :, None]
-    wts = np.broadcast_to(weights, index.shape)
-    hist = np.bincount(index.ravel(), wts.ravel(), minlength=p * k * bins)
+    index = samples + _slots(k, p, bins)
+    hist = np.bincount(index.ravel(), _tiled_weights(grid, k * p), minlength=p * k * bins)
     return hist.reshape(p, k, bins) / weights.sum()
+
+
+@lru_cache(maxsize=32)
+def _slots(k: int, p: int, bins: int) -> npt.NDArray[np.intp]:
+    """(k, P, 1) first bin of each (feature, candidate) histogram in the flat count (read-only)."""
+    slot = (np.arange(p, dtype=np.intp)[None, :] * k + np.arange(k)[:, None]) * bins
+    out = slot[:, :, None]
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=32)
+def _tiled_weights(grid: int, copies: int) -> FloatArray:
+    """The kernel weights of :func:`epanechnikov_grid` repeated ``copies`` times (read-only)."""
+    tiled = np.tile(epanechnikov_grid(grid)[1], copies)
+    tiled.flags.writeable = False
+    return tiled
 
 
 def kernel_histograms(
@@ -71,7 +113,8 @@ def kernel_histograms(
 
 def bhattacharyya(hists: FloatArray, model: FloatArray) -> FloatArray:
     """Eq. 4: coefficient ``rho = sum sqrt(p q)``, averaged over the k features -> (P,)."""
-    return np.sqrt(hists * model[None]).sum(axis=-1).mean(axis=-1)
+    per_feature = np.sqrt(hists * model[None]).sum(axis=-1)
+    return per_feature.sum(axis=-1) / per_feature.shape[-1]  # the mean, without its overhead
 
 
 def bhattacharyya_distance(rho: FloatArray) -> FloatArray:
@@ -93,7 +136,9 @@ def joint_planes(
     ``joint_bins**k`` bins and keeps the correlation between features that marginals lose.
     Works on whole planes (k, H, W) or on samples (k, P, m).
     """
-    out = np.zeros(bin_images.shape[1:], dtype=np.intp)
-    for plane in bin_images:
-        out = out * joint_bins + (plane * joint_bins) // bins
+    level = (np.arange(bins, dtype=np.intp) * joint_bins) // bins  # bin -> joint level
+    out = level.take(bin_images[0])
+    for plane in bin_images[1:]:
+        out *= joint_bins
+        out += level.take(plane)
     return out[None]

@@ -103,14 +103,16 @@ def colour_feature_bins(
     matrix, offset = _colour_mapping(ids, bins)
     h, w = patch_bgr.shape[:2]
     pixels = patch_bgr.reshape(-1, 3).astype(np.float32)
-    values = pixels @ matrix + offset  # (N, k) = ((w . rgb) - low) * bins / (range + 1)
+    values = pixels @ matrix  # (N, k) = ((w . rgb) - low) * bins / (range + 1)
+    values += offset
     if stretch:
         low = values.min(axis=0)
         span = values.max(axis=0) - low
         values = (values - low) * (bins / np.maximum(span * (1.0 + 1.0 / bins), 1e-3))
-    out = values.astype(np.intp).T.reshape(len(ids), h, w)
-    np.minimum(np.maximum(out, 0, out=out), bins - 1, out=out)
-    return out
+    # clipped before truncating to int: the same bins (truncation maps (-1, 0) to 0 and
+    # [bins - 1, bins) to bins - 1), on float32 and laid out (k, N) in one copy
+    np.clip(values, 0, bins - 1, out=values)
+    return values.T.astype(np.intp, order="C").reshape(len(ids), h, w)
 
 
 def gray_feature_bins(

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.appearance import bhattacharyya, sample_bins
+from tracker.appearance import bhattacharyya, sample_index
 from tracker.config import IlluminationConfig, TrackerConfig
 from tracker.target_model import TargetModel, planes_of, sample_histograms
 from tracker.types import Cue
@@ -75,7 +75,11 @@ def compensate(window: Window, gain: Gain, cfg: IlluminationConfig, cue: Cue) ->
     factor = effective(gain.gain, cfg).astype(np.float32)
     if not applies(cfg, cue) or np.abs(factor - 1.0).max() < 0.01:
         return window
-    patch = np.clip(window.patch * factor, 0, 255).astype(np.uint8)
+    # per channel a table of the 256 levels: min(level x factor, 255) truncated, the same
+    # float32 product as on the whole patch, looked up instead of computed per pixel
+    lit = np.arange(256, dtype=np.uint8)[:, None] * factor[None, :]  # (256, 3)
+    table = np.minimum(lit, 255, out=lit).astype(np.uint8).reshape(256, 1, 3)
+    patch = np.asarray(cv2.LUT(window.patch, table), dtype=np.uint8)
     return Window(window.x0, window.y0, window.fx, window.fy, patch)
 
 
@@ -112,8 +116,8 @@ def rho_under_gains(
 ) -> FloatArray:
     """Bhattacharyya ``rho`` against the model of the box ``centre`` +- ``half`` (patch
     pixels) of the uncompensated window ``raw``, compensated with each gain of (G, 3)."""
-    channels = np.moveaxis(raw.patch, 2, 0).astype(np.intp)
-    pixels = sample_bins(channels, centre, half, cfg.filter.sample_grid)[:, 0].T
+    index = sample_index(raw.patch.shape, centre, half, cfg.filter.sample_grid)[0]
+    pixels = raw.patch.reshape(-1, 3).take(index, axis=0)  # (m, 3) B, G, R
     factors = np.stack([effective(g, cfg.illumination) for g in gains])
     lit = np.clip(pixels[None] * factors[:, None, :], 0, 255).astype(np.uint8)
     planes = planes_of(lit, model.features, cfg)
@@ -141,10 +145,11 @@ def from_target(
     new = proposed(gain, box_mean(raw, xy, half, light), light)
     if light.gain_check and applies(light, cue):
         centre = raw.to_patch(xy[None])
-        if known is None:
-            now = rho_under_gains(raw, centre, half[None], gain.gain[None], model, cfg)
+        if known is None:  # both gains in one pass (each histogram as if alone)
+            rho = rho_under_gains(raw, centre, half[None], np.stack([new, gain.gain]), model, cfg)
         else:
             now = bhattacharyya(known[None], model.hist(cfg.features.anchor_weight))
-        if rho_under_gains(raw, centre, half[None], new[None], model, cfg)[0] < now[0]:
+            rho = np.append(rho_under_gains(raw, centre, half[None], new[None], model, cfg), now)
+        if rho[0] < rho[1]:
             return gain
     return Gain(new, gain.target_mean, gain.frame_mean)

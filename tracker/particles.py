@@ -66,9 +66,9 @@ def integral_images(weight_image: npt.NDArray[np.float32]) -> FloatArray:
     wi = weight_image.astype(np.float64)
     xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
     ys = np.arange(h, dtype=np.float64)[:, None] + 0.5
-    stack = np.dstack([wi, wi * xs, wi * ys])
-    table = cv2.integral(stack, sdepth=cv2.CV_64F)  # (H+1, W+1, 3), zero first row/column
-    return np.ascontiguousarray(np.moveaxis(table, 2, 0))
+    # (3, H+1, W+1), zero first row/column: one table per image (the same sums as one
+    # three-channel table, without interleaving the channels and back)
+    return np.stack([cv2.integral(im, sdepth=cv2.CV_64F) for im in (wi, wi * xs, wi * ys)])
 
 
 def window_sums(
@@ -76,12 +76,20 @@ def window_sums(
 ) -> tuple[FloatArray, FloatArray]:
     """Sums of the tabled images over each centre's box, (3, P), and the box areas (P,) in px."""
     _, hp1, wp1 = tables.shape
-    corners = np.rint(np.hstack([centres - half_sizes, centres + half_sizes])).astype(np.intp)
+    p = len(centres)
+    box = np.empty((p, 4))
+    np.subtract(centres, half_sizes, out=box[:, :2])
+    np.add(centres, half_sizes, out=box[:, 2:])
+    corners = np.rint(box, out=box).astype(np.intp)
     np.minimum(
-        np.maximum(corners, 0, out=corners), [wp1 - 1, hp1 - 1, wp1 - 1, hp1 - 1], out=corners
+        np.maximum(corners, 0, out=corners), (wp1 - 1, hp1 - 1, wp1 - 1, hp1 - 1), out=corners
     )
     x0, y0, x1, y1 = corners.T
-    sums = tables[:, y1, x1] - tables[:, y0, x1] - tables[:, y1, x0] + tables[:, y0, x0]
+    r0, r1 = y0 * wp1, y1 * wp1
+    index = np.concatenate([r1 + x1, r0 + x1, r1 + x0, r0 + x0])
+    # one take on the flat axis for the four corners: [:, y, x] four times, faster
+    at = tables.reshape(len(tables), -1).take(index, axis=1)
+    sums = at[:, :p] - at[:, p : 2 * p] - at[:, 2 * p : 3 * p] + at[:, 3 * p :]
     return sums, ((x1 - x0) * (y1 - y0)).astype(np.float64)
 
 
@@ -97,9 +105,7 @@ def mean_shift(
     c = centres.astype(np.float64).copy()
     for _ in range(iterations):
         sums, _ = window_sums(tables, c, half_sizes)
-        ok = sums[0] > 1e-9
-        c[ok, 0] = sums[1, ok] / sums[0, ok]
-        c[ok, 1] = sums[2, ok] / sums[0, ok]
+        np.divide(sums[1:], sums[0], out=c.T, where=sums[0] > 1e-9)  # (x, y) where weighted
     return c
 
 

@@ -47,7 +47,15 @@ from tracker.particles import (
     weighted_estimate,
 )
 from tracker.refine import Refiner
-from tracker.target_model import FirstFrame, TargetModel, kernel, likelihood, llr_factor, rank
+from tracker.target_model import (
+    Counted,
+    FirstFrame,
+    TargetModel,
+    kernel,
+    likelihood,
+    llr_factor,
+    rank,
+)
 from tracker.template import as_float
 from tracker.types import Box, TrackResult
 from tracker.window import Window, cut_window, work_factor
@@ -79,7 +87,7 @@ def half_size(size: tuple[float, float], scale: FloatArray | float, window: Wind
     """Half box sizes in patch pixels for one or more scales -> (P, 2)."""
     w0, h0 = size
     half = np.array([w0 * window.fx / 2.0, h0 * window.fy / 2.0])
-    return np.multiply.outer(np.atleast_1d(np.asarray(scale, dtype=np.float64)), half)
+    return np.multiply.outer(np.asarray(scale, dtype=np.float64).reshape(-1), half)
 
 
 def _window(
@@ -196,8 +204,8 @@ def _propagate(
 
 def _weigh(
     state: TrackState, window: Window, particles: FloatArray, cfg: TrackerConfig
-) -> tuple[npt.NDArray[np.intp], FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Steps 2-5 on the (compensated) window: the selected features' bin planes, the
+) -> tuple[Counted, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Steps 2-5 on the (compensated) window: the selected features' counted planes, the
     particles (the first set mean-shifted on the likelihood image), their weights above the
     threshold, the two candidate estimates (weighted mean, best particle), their histograms
     and the model's."""

@@ -32,6 +32,7 @@ from tracker.window import Window
 
 FloatArray = npt.NDArray[np.float64]
 BinPlanes = npt.NDArray[np.intp]
+Counted = tuple[BinPlanes, int]  # :func:`counted` planes and their number of bins
 _NEIGHBOURS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy], float)
 
 
@@ -82,35 +83,46 @@ def planes_of(
     return feature_bins(patch, features, cfg.features.bins, cfg.features.stretch_features)
 
 
+def counted(planes: BinPlanes, cfg: TrackerConfig) -> Counted:
+    """What kernel histograms count, from bin planes (k, ...) of whole images or of samples:
+    the joint index plane (``appearance = "joint"``: one plane, ``joint_bins**k`` bins) or
+    the k planes (``bins`` each).  Folding a window's planes once per frame, before
+    sampling, gives the same histograms as folding every particle's samples, with a third
+    of the sampling."""
+    f = cfg.features
+    if f.appearance == "joint":
+        return joint_planes(planes, f.bins, f.joint_bins), f.joint_bins ** planes.shape[0]
+    return planes, f.bins
+
+
 def sample_histograms(samples: BinPlanes, cfg: TrackerConfig) -> FloatArray:
     """Kernel histograms from bins sampled on the kernel grid, (k, P, m) -> (P, ...):
     one joint histogram (``appearance = "joint"``) or one per feature."""
-    f = cfg.features
-    grid = cfg.filter.sample_grid
-    if f.appearance == "joint":
-        joint = joint_planes(samples, f.bins, f.joint_bins)
-        nbins = f.joint_bins ** samples.shape[0]
-        return histograms_from_samples(joint, grid, nbins)
-    return histograms_from_samples(samples, grid, f.bins)
+    folded, nbins = counted(samples, cfg)
+    return histograms_from_samples(folded, cfg.filter.sample_grid, nbins)
 
 
 def kernel(
-    planes: BinPlanes, centres: FloatArray, halves: FloatArray, cfg: TrackerConfig
+    planes: Counted, centres: FloatArray, halves: FloatArray, cfg: TrackerConfig
 ) -> FloatArray:
-    """Kernel histograms (eq. 2) of the boxes ``centres`` +- ``halves`` (patch pixels)."""
-    return sample_histograms(sample_bins(planes, centres, halves, cfg.filter.sample_grid), cfg)
+    """Kernel histograms (eq. 2) of the boxes ``centres`` +- ``halves`` (patch pixels) on
+    :func:`counted` planes."""
+    folded, nbins = planes
+    grid = cfg.filter.sample_grid
+    return histograms_from_samples(sample_bins(folded, centres, halves, grid), grid, nbins)
 
 
 def likelihood(
     patch: npt.NDArray[np.uint8], model: TargetModel, cfg: TrackerConfig
-) -> tuple[BinPlanes, npt.NDArray[np.float32]]:
-    """Bin images of the selected features and their mean back-projected LLR image."""
+) -> tuple[Counted, npt.NDArray[np.float32]]:
+    """The selected features' :func:`counted` planes and their mean back-projected LLR
+    image."""
     planes = planes_of(patch, model.features, cfg)
     llr = model.llr
-    image = llr[0][planes[0]]
+    image = llr[0].take(planes[0])  # take: the same gather as llr[0][planes[0]], faster
     for i in range(1, len(planes)):
-        image = image + llr[i][planes[i]]
-    return planes, (image / len(planes)).astype(np.float32)
+        image = image + llr[i].take(planes[i])
+    return counted(planes, cfg), (image / len(planes)).astype(np.float32)
 
 
 def llr_factor(
@@ -178,8 +190,9 @@ def rank(
     )
     rows = [first.candidates.index(i) for i in top]
     llr = log_likelihood_ratio(p[rows], q[rows], f.loglik_floor)
-    first_hist = kernel(planes_of(first.window.patch, top, cfg), first.centre, first_half, cfg)[0]
-    sel = planes_of(window.patch, top, cfg)
+    first_planes = counted(planes_of(first.window.patch, top, cfg), cfg)
+    first_hist = kernel(first_planes, first.centre, first_half, cfg)[0]
+    sel = counted(planes_of(window.patch, top, cfg), cfg)
     recent = kernel(sel, centre[None], half[None], cfg)[0] if trusted else first_hist
     model = f.anchor_weight * first_hist + (1.0 - f.anchor_weight) * recent
     around = centre[None] + _NEIGHBOURS * 2.0 * half[None]

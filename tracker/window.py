@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -26,13 +27,21 @@ class Window:
     fy: float
     patch: npt.NDArray[np.uint8]
 
+    @cached_property
+    def _origin(self) -> FloatArray:
+        return np.array([self.x0, self.y0])
+
+    @cached_property
+    def _factor(self) -> FloatArray:
+        return np.array([self.fx, self.fy])
+
     def to_patch(self, xy: FloatArray) -> FloatArray:
         """Frame pixel coordinates (..., 2) -> patch coordinates."""
-        return (xy - np.array([self.x0, self.y0])) * np.array([self.fx, self.fy])
+        return (xy - self._origin) * self._factor
 
     def to_frame(self, xy: FloatArray) -> FloatArray:
         """Patch coordinates (..., 2) -> frame pixel coordinates."""
-        return xy / np.array([self.fx, self.fy]) + np.array([self.x0, self.y0])
+        return xy / self._factor + self._origin
 
 
 def work_factor(box_w: float, box_h: float, work_area_px: int) -> float:
