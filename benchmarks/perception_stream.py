@@ -18,7 +18,8 @@ of its stated sigmas (``perception_survey.noisy_attitude``).  Prints, per run:
   (the perception's no-fix reason up to its first colon, counted).
 
     PYTHONPATH=. python benchmarks/perception_stream.py STREAM [--runs 3] [--deployment]
-        [--attitude-offset-deg R P Y [--attitude-sigma-deg RP YAW]] [--light-step-s 12] [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
+        [--attitude-offset-deg R P Y [--attitude-sigma-deg RP YAW]] [--light-step-s 12]
+        [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
 
 Real-imagery worlds are measured with ``--set 'acquire.features="sift"' --set
 acquire.min_inliers=6 --set fixgate.max_sigma_rel=0.05`` (the sim layer keeps ORB and the
