@@ -18,7 +18,8 @@ of its stated sigmas (``perception_survey.noisy_attitude``).  Prints, per run:
   (the perception's no-fix reason up to its first colon, counted).
 
     PYTHONPATH=. python benchmarks/perception_stream.py STREAM [--runs 3] [--deployment]
-        [--light-step-s 12] [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
+        [--attitude-offset-deg R P Y [--attitude-sigma-deg RP YAW]] [--light-step-s 12]
+        [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
 
 Real-imagery worlds are measured with ``--set 'acquire.features="sift"' --set
 acquire.min_inliers=6 --set fixgate.max_sigma_rel=0.05`` (the sim layer keeps ORB and the
@@ -131,9 +132,17 @@ def run_once(folder: Path, args: argparse.Namespace, seed: int) -> dict[str, Any
         if ft is None:
             return SideSensors()
         p = ft.pose
+        if args.attitude_offset_deg is not None:  # an EKF's slow error, stated honestly
+            off = np.deg2rad(args.attitude_offset_deg)
+            return SideSensors(attitude=AttitudeSample(
+                t_us, p.roll_rad + off[0], p.pitch_rad + off[1], p.yaw_rad + off[2],
+                *np.deg2rad(args.attitude_sigma_deg)))
         att = AttitudeSample(t_us, p.roll_rad, p.pitch_rad, p.yaw_rad, *ATT_SIGMA_RAD)
-        return SideSensors(attitude=noisy_attitude(dataclasses.replace(
-            att, time_us=t_us + 1_000_003 * seed)) if not args.exact_attitude else att)
+        if args.exact_attitude:
+            return SideSensors(attitude=att)
+        # another draw per run (the noise is seeded by the sample's time), at the frame's time
+        drawn = noisy_attitude(dataclasses.replace(att, time_us=t_us + 1_000_003 * seed))
+        return SideSensors(attitude=dataclasses.replace(drawn, time_us=t_us))
 
     perception = Perception(meta.camera, landmarks, refs, sensors=sensors,
                             config=settings.perception, tracker_config=settings.tracker,
@@ -190,6 +199,14 @@ def main() -> int:
     parser.add_argument("--deployment", action="store_true",
                         help="default.toml only (as companion run), not the sim layer")
     parser.add_argument("--exact-attitude", action="store_true")
+    parser.add_argument("--attitude-offset-deg", type=float, nargs=3, default=None,
+                        metavar=("ROLL", "PITCH", "YAW"),
+                        help="the attitude off truth by these constant angles (the strict "
+                        "fake autopilot's EKF: about 1, -1, 3), stated as --attitude-sigma-deg")
+    parser.add_argument("--attitude-sigma-deg", type=float, nargs=2, default=(2.5, 5.0),
+                        metavar=("ROLL_PITCH", "YAW"),
+                        help="stated 1-sigma with --attitude-offset-deg (default 2.5 5: "
+                        "pose.attitude_*_sigma_deg's defaults)")
     parser.add_argument("--light-step-s", type=float, default=None)
     parser.add_argument("--wrong-iou", type=float, default=0.2,
                         help="a track whose box overlaps its landmark's truth box less is "

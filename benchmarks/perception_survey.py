@@ -55,6 +55,8 @@ def main() -> int:
     parser.add_argument("--one-plate-outline-sigma-rel", type=float, default=0.0,
                         help="pose.one_plate_outline_sigma_rel (0 in both shipped layers: a lone "
                         "plate's corners independent)")
+    parser.add_argument("--one-plate-tilt-sigma-rel", type=float, default=0.0,
+                        help="pose.one_plate_tilt_sigma_rel (config/sim.toml's: 8)")
     parser.add_argument("--check", action="store_true", help="exit 1 below issue 6's targets")
     parser.add_argument("--exact-attitude", action="store_true",
                         help="feed the true attitude (default: the truth plus the autopilot's "
@@ -86,7 +88,8 @@ def main() -> int:
     perception = Perception(sim.scenario.camera, landmarks, references, sensors=sensors,
                             pose_config=PoseConfig(
                                 pixel_sigma_px=args.pixel_sigma,
-                                one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel))
+                                one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel,
+                                one_plate_tilt_sigma_rel=args.one_plate_tilt_sigma_rel))
     process_ms, house_ms, errors, dists, nees, counts, traces = [], [], [], [], [], [], []
     corner_err: dict[str, list[float]] = {b: [] for b in (*WIDTH_BINS, "box centre")}
     for i in range(args.frames):

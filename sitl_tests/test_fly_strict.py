@@ -99,11 +99,11 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a finding (issue 19, open): cut plates now give "
-                   "their corners (offline lap: gap 6.5 -> 0.7-1.9 s), but wall-01's corners "
-                   "carry a ~1 px keystone bias that puts lone-plate fixes 0.83 m off at a "
-                   "stated 0.11 m, a plate entering cut by the edge is acquired late, and on "
-                   "a loaded machine fixes go stale (docs/sitl.md, 'Measured')")
+@pytest.mark.xfail(strict=True, reason="a finding (issue 19, open): wall-01's lone-plate "
+                   "keystone is declared now (pose.one_plate_tilt_sigma_rel: its fixes 0.07 m "
+                   "off, not 0.9), but at the (6, 6) hover the cut plates give no fix for "
+                   "6-7 s (EKF failsafe), a plate entering cut by the edge is acquired late, "
+                   "and on a loaded machine fixes go stale (docs/sitl.md, 'Measured')")
 @pytest.mark.parametrize("seed", SEEDS)
 def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
     with fake_thread(guided(seed)) as (fake, _loop):

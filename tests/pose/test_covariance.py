@@ -177,6 +177,54 @@ def test_one_plates_outline_error_is_in_its_covariance(camera: CameraModel) -> N
     np.testing.assert_array_equal(with_rel.covariance, without.covariance)
 
 
+def test_one_plates_tilt_error_is_in_its_covariance(camera: CameraModel) -> None:
+    """One plate whose keystone along its height errs (the square flight's wall-01: 7.7 x
+    its corner sigma, docs/decisions.md "A lone plate's tilt"), the other outline modes
+    not: with ``one_plate_tilt_sigma_rel`` its fixes have NEES ~ chi-square(3), without it
+    they are overconfident; the other modes' sigma is ``one_plate_outline_sigma_rel``'s
+    (so the tilt alone costs less than the whole outline at that sigma); two plates are
+    left as they were."""
+    lms = wall()[:1]
+    clean = see(lms, camera)[0]
+    assert clean.corners_px is not None
+    c = np.array(clean.corners_px)
+    sigma, rel = 0.1, 8.0
+    cfgs = {"tilt": PoseConfig(one_plate_tilt_sigma_rel=rel), "naive": PoseConfig(),
+            "outline": PoseConfig(one_plate_outline_sigma_rel=rel)}
+    rng = np.random.default_rng(13)
+    nees: dict[str, list[float]] = {k: [] for k in cfgs}
+    trace: dict[str, list[float]] = {k: [] for k in cfgs}
+    for _ in range(200):
+        att = _drawn_attitude(rng)
+        amplitude = np.zeros(5)
+        amplitude[4] = rng.normal(0.0, rel * sigma)
+        noisy = c + _outline_error(c, amplitude) + rng.normal(0.0, sigma, c.shape)
+        obs = replace(clean, corners_px=tuple((float(u), float(v)) for u, v in noisy),
+                      corner_sigma_px=sigma)
+        for name, cfg in cfgs.items():
+            fix = solve_pose([obs], lms, camera, 0, attitude=att, config=cfg)
+            if name == "naive" and not isinstance(fix, PoseFix):
+                continue  # refused: "reprojection error N sigma"
+            assert isinstance(fix, PoseFix), getattr(fix, "reason", "")
+            cov = fix.covariance[:3, :3]
+            e = np.asarray(fix.position_ned_m) - TRUE_P
+            nees[name].append(float(e @ np.linalg.solve(cov, e)))
+            trace[name].append(float(np.trace(cov)))
+    told = np.array(nees["tilt"])
+    assert 2.4 < told.mean() < 3.6
+    assert np.mean((told >= NEES_LOW_3DOF) & (told <= NEES_HIGH_3DOF)) >= 0.9
+    # independent corners: the keystone's error unaccounted for (or the plate refused)
+    assert len(nees["naive"]) < 180 or np.median(nees["naive"]) > 2 * np.median(told)
+    assert np.median(trace["tilt"]) < np.median(trace["outline"])
+    two = wall()[:2]
+    seen = see(two, camera)
+    exact = AttitudeSample(0, *TRUE_RPY)
+    with_rel, without = (solve_pose(seen, two, camera, 0, attitude=exact, config=cfg)
+                         for cfg in (cfgs["tilt"], PoseConfig()))
+    assert isinstance(with_rel, PoseFix) and isinstance(without, PoseFix)
+    np.testing.assert_array_equal(with_rel.covariance, without.covariance)
+
+
 _num = st.floats(allow_nan=True, allow_infinity=True, width=64) | st.floats(-2000, 2000)
 _pair = st.tuples(_num, _num)
 

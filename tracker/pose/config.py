@@ -89,6 +89,13 @@ class PoseConfig:
     #: outline as a whole; its perspective decides the plate's tilt, and was measured
     #: 0.6-5.5 x the corner sigma (docs/pose.md, "One plate's outline").
     one_plate_outline_sigma_rel: float = field(default=0.0, metadata={"ge": 0})
+    #: The same for one mode alone, if larger: the keystone along the image's height (the
+    #: perspective that decides a wall plate's tilt towards the camera, and so where on the
+    #: sphere about the plate the camera sits).  Measured 7.7 x the corner sigma on wall-01
+    #: of the square flight's hover (a 0.9 px bias that ECC's own fit puts at 0.07 px),
+    #: 5.5 x on wall-04, 0.8-1.3 x on survey and street (docs/decisions.md, "A lone plate's
+    #: tilt").  0: the plate's own keystone is trusted as the corners' sigma says.
+    one_plate_tilt_sigma_rel: float = field(default=0.0, metadata={"ge": 0})
     #: Gauss-Newton iterations of the final refinement.
     max_iterations: int = field(default=10, metadata={"ge": 1})
     #: Largest accepted condition number of the normal matrix (degenerate geometry).

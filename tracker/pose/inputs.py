@@ -48,6 +48,9 @@ class Group:
     #: 1-sigma (px) of the outline's common scale and perspective when this plate's corners
     #: are all the fix has (``PoseConfig.one_plate_outline_sigma_rel``; see :func:`point_set`)
     outline_sigma_px: float = 0.0
+    #: 1-sigma (px) of its keystone along the image's height (the plate's tilt towards the
+    #: camera) when its corners are all the fix has, if larger (``one_plate_tilt_sigma_rel``)
+    tilt_sigma_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -116,9 +119,10 @@ def make_groups(
         ideal = _undistort(ctx, px) if ctx.distorted else px
         # a whole outline's common errors; a cut one's measured corners are points
         scale = obs.corner_scale_sigma_px if obs.all_corners else None
-        outline = cfg.one_plate_outline_sigma_rel * sig if obs.all_corners else 0.0
+        rel = (cfg.one_plate_outline_sigma_rel, cfg.one_plate_tilt_sigma_rel)
+        outline, tilt = (r * sig if obs.all_corners else 0.0 for r in rel)
         groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale),
-                            outline))
+                            outline, tilt))
     return groups
 
 
@@ -153,7 +157,8 @@ def _outline_modes(g: Group) -> tuple[FloatArray, FloatArray]:
     their betas (5,).
 
     The scale mode's variance is the declared width error's (``scale_beta``) plus
-    ``outline_sigma_px**2``; each other mode's is ``outline_sigma_px**2``."""
+    ``outline_sigma_px**2``; each other mode's is ``outline_sigma_px**2``, the keystone
+    along the height's at least ``tilt_sigma_px**2``."""
     d = g.pixels_ideal - g.pixels_ideal.mean(axis=0)
     x, y = d[:, 0], d[:, 1]
     one, zero = np.ones_like(x), np.zeros_like(x)
@@ -163,6 +168,7 @@ def _outline_modes(g: Group) -> tuple[FloatArray, FloatArray]:
     q = np.linalg.qr(basis)[0][:, 3:]  # scale, aspect, shear, perspective across, along
     sig = g.sigma_px
     var = np.full(5, g.outline_sigma_px**2)
+    var[4] = max(var[4], g.tilt_sigma_px**2)
     if g.scale_beta > 0.0:  # beta = 1 - sigma / sqrt(sigma^2 + a): a back from beta
         var[0] += sig**2 * ((1.0 / (1.0 - g.scale_beta)) ** 2 - 1.0)
     return q.reshape(-1, 2, 5), 1.0 - sig / np.sqrt(sig**2 + var)
@@ -172,8 +178,8 @@ def point_set(groups: list[Group]) -> PointSet:
     """Stack every landmark's points for the refinement.  One plate alone (its corners
     all the fix has) also gets its outline's common scale and perspective errors
     (:func:`_outline_modes`): one plate cannot average them out."""
-    if len(groups) == 1 and groups[0].outline_sigma_px > 0.0 and (
-            groups[0].observation.all_corners):
+    if len(groups) == 1 and max(groups[0].outline_sigma_px, groups[0].tilt_sigma_px) > 0.0 \
+            and groups[0].observation.all_corners:
         g = groups[0]
         dirs, betas = _outline_modes(g)
         k = g.points_ned.shape[0]
