@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import logging
 import multiprocessing
+import resource
 import time
 from collections import OrderedDict
 from multiprocessing import shared_memory
@@ -16,6 +18,8 @@ from companion.core.stream_format import FrameTruth
 from companion.sim.scenario import ScenarioConfig
 from companion.sim.simulator import Simulator
 from tracker.camera import CameraModel
+
+log = logging.getLogger(__name__)
 
 TRUTH_KEPT = 256
 #: The next frame is rendered ahead, starting its expected render time plus this margin
@@ -94,18 +98,17 @@ class SimCameraSource(OfSimulatedWorld):
         self._slots: shared_memory.SharedMemory | None = None
         if own_process:  # spawned, not forked: this process runs threads (Zenoh's too)
             camera = simulator.scenario.camera
-            self._slots = shared_memory.SharedMemory(
-                create=True, size=FRAME_SLOTS * camera.height * camera.width * 3)
+            self._slots = _frame_slots(FRAME_SLOTS * camera.height * camera.width * 3)
             self._process = concurrent.futures.ProcessPoolExecutor(
                 1, multiprocessing.get_context("spawn"), initializer=_start_renderer,
-                initargs=(simulator.scenario, self._slots.name))
+                initargs=(simulator.scenario, None if self._slots is None else self._slots.name))
 
     async def start(self) -> None:
         """Wait until the rendering process renders (it imports and builds its world
         first): call before the camera's clock starts.  Nothing to do in this process."""
         if self._process is not None:
             loop = asyncio.get_running_loop()
-            await loop.run_in_executor(self._process, _render_elsewhere, 0, 0.0, 0)
+            await loop.run_in_executor(self._process, _render_elsewhere, 0, 0.0, None)
 
     def anchor(self, t0_us: int) -> None:
         """Scenario time 0 is ``t0_us`` on the monotonic clock (see ``t0_us`` above)."""
@@ -164,11 +167,15 @@ class SimCameraSource(OfSimulatedWorld):
 
     async def _render_there(self, loop: asyncio.AbstractEventLoop, index: int, t_s: float
                             ) -> tuple[ImageU8, FrameTruth]:
-        assert self._process is not None and self._slots is not None
-        slot = index % FRAME_SLOTS
-        shape, truth, took, cpu_s = await loop.run_in_executor(
+        assert self._process is not None
+        slot = None if self._slots is None else index % FRAME_SLOTS
+        piped, shape, truth, took, cpu_s = await loop.run_in_executor(
             self._process, _render_elsewhere, index, t_s, slot)
-        image = _from_slot(self._slots, slot, shape).copy()
+        if piped is not None:
+            image = piped
+        else:
+            assert self._slots is not None and slot is not None
+            image = _from_slot(self._slots, slot, shape).copy()
         self.render_cpu_elsewhere_s += cpu_s
         self._render_wall_s = max(RENDER_TIME_DECAY * self._render_wall_s, took)
         return image, truth
@@ -240,7 +247,22 @@ class SimCameraSource(OfSimulatedWorld):
 #: pipe: the pipe cost the companion's process 1.5 ms of CPU a frame (issue 23).
 FRAME_SLOTS = 2
 
-_RENDERER: list[tuple[Simulator, shared_memory.SharedMemory]] = []  # the renderer's own
+_RENDERER: list[tuple[Simulator, shared_memory.SharedMemory | None]] = []  # the renderer's
+
+
+def _frame_slots(size: int) -> shared_memory.SharedMemory | None:
+    """The frame slots' shared memory; None (frames then come pickled through the pool's
+    pipe) where the process may not make a file that large (``RLIMIT_FSIZE``: shared
+    memory is a file in /dev/shm) or the system refuses it."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft != resource.RLIM_INFINITY and soft < size:
+        log.info("demo camera: frames through a pipe (file size limit %d bytes)", soft)
+        return None
+    try:
+        return shared_memory.SharedMemory(create=True, size=size)
+    except OSError as exc:
+        log.info("demo camera: frames through a pipe (no shared memory: %s)", exc)
+        return None
 
 
 def _from_slot(slots: shared_memory.SharedMemory, slot: int, shape: tuple[int, ...]) -> ImageU8:
@@ -249,20 +271,24 @@ def _from_slot(slots: shared_memory.SharedMemory, slot: int, shape: tuple[int, .
     return np.ndarray(shape, np.uint8, buffer=slots.buf, offset=slot * size)
 
 
-def _start_renderer(scenario: ScenarioConfig, slots_name: str) -> None:
+def _start_renderer(scenario: ScenarioConfig, slots_name: str | None) -> None:
     # the creator unlinks the block.  Mapping it registers it again with the resource
     # tracker, which a spawned process shares with its parent (a set: no second entry),
     # so it is not unregistered here: that would take the parent's entry away
-    slots = shared_memory.SharedMemory(slots_name)
+    slots = None if slots_name is None else shared_memory.SharedMemory(slots_name)
     _RENDERER[:] = [(Simulator(scenario), slots)]
 
 
-def _render_elsewhere(index: int, t_s: float, slot: int
-                      ) -> tuple[tuple[int, ...], FrameTruth, float, float]:
-    """In the rendering process: frame ``index`` into frame slot ``slot``; its shape, truth,
-    and the wall and CPU time it took."""
+def _render_elsewhere(index: int, t_s: float, slot: int | None
+                      ) -> tuple[ImageU8 | None, tuple[int, ...], FrameTruth, float, float]:
+    """In the rendering process: frame ``index`` into frame slot ``slot`` (None: no slots,
+    the image is returned); the image or None, its shape, truth, and the wall and CPU time
+    it took."""
     wall, cpu = time.monotonic(), time.process_time()
     simulator, slots = _RENDERER[0]
     image, truth = simulator.render(index, t_s)
-    _from_slot(slots, slot, image.shape)[...] = image
-    return image.shape, truth, time.monotonic() - wall, time.process_time() - cpu
+    piped: ImageU8 | None = image
+    if slots is not None and slot is not None:
+        _from_slot(slots, slot, image.shape)[...] = image
+        piped = None
+    return piped, image.shape, truth, time.monotonic() - wall, time.process_time() - cpu

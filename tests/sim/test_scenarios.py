@@ -223,3 +223,24 @@ async def test_frames_from_the_rendering_process_are_the_companions_own() -> Non
         image, _ = sim.render(frame.index)
         assert np.array_equal(frame.image, image), frame.index
     assert len(blocks()) == len(before)
+
+
+async def test_frames_come_through_the_pipe_where_no_shared_memory_may_be_made(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Shared memory is a file in /dev/shm: under a file size limit smaller than the slots
+    (tests/test_flightlog_faults.py's demo runs with 16 kB) the frames come pickled through
+    the pool's pipe instead, the same frames."""
+    import companion.sim.source as source_module
+
+    monkeypatch.setattr(source_module.resource, "getrlimit", lambda _which: (16_000, -1))
+    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=2.0, fps=30.0))
+    source = SimCameraSource(sim, realtime=False, own_process=True)
+    try:
+        assert source._slots is None
+        await source.start()
+        frames = [await source.recv() for _ in range(3)]
+    finally:
+        source.close()
+    for frame in frames:
+        image, _ = sim.render(frame.index)
+        assert np.array_equal(frame.image, image)
