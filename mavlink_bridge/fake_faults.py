@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,6 +30,16 @@ class FaultCounters:
     lost: int = 0
     corrupted: int = 0
     delayed: int = 0
+    #: each HEARTBEAT sent while corruption was on: True where it was corrupted (a run of
+    #: them is a heartbeat gap the other side may rightly call a lost link)
+    heartbeats_corrupted: list[bool] = field(default_factory=list)
+
+
+def is_heartbeat(data: bytes) -> bool:
+    """A MAVLink 1 or 2 frame of message id 0 (HEARTBEAT)."""
+    if len(data) >= 10 and data[0] == 0xFD:
+        return data[7] == 0 and data[8] == 0 and data[9] == 0
+    return len(data) >= 6 and data[0] == 0xFE and data[5] == 0
 
 
 class FaultInjector:
@@ -53,12 +63,16 @@ class FaultInjector:
         if s.loss_probability > 0 and self._rng.random() < s.loss_probability:
             self.counters.lost += 1
             return
-        if corrupt and s.corrupt_probability > 0 and self._rng.random() < s.corrupt_probability:
-            buf = bytearray(data)
-            i = int(self._rng.integers(0, len(buf)))
-            buf[i] ^= int(self._rng.integers(1, 256))
-            data = bytes(buf)
-            self.counters.corrupted += 1
+        if corrupt and s.corrupt_probability > 0:
+            hit = bool(self._rng.random() < s.corrupt_probability)
+            if is_heartbeat(data):
+                self.counters.heartbeats_corrupted.append(hit)
+            if hit:
+                buf = bytearray(data)
+                i = int(self._rng.integers(0, len(buf)))
+                buf[i] ^= int(self._rng.integers(1, 256))
+                data = bytes(buf)
+                self.counters.corrupted += 1
         delay = s.latency_s
         if s.jitter_s > 0:
             delay += float(self._rng.uniform(0.0, s.jitter_s))

@@ -77,9 +77,17 @@ def test_run_on_a_recording_sends_fixes_the_autopilot_accepts(
     assert sent >= 10, last  # 0 before (all "stale"); ~44-120 seen, fewer under load
     assert accepted > 0.8 * sent, (accepted, sent)
     # scored against the recording's truth_pose.csv: the pose records carry the error
-    errors = [r["truth_error_m"] for r in records if r["kind"] == "fix"]
+    fixes = [r for r in records if r["kind"] == "fix"]
+    errors = [r["truth_error_m"] for r in fixes]
     assert len(errors) == sent
-    assert float(np.median(errors)) < 0.1, np.median(errors)
+    # a lone plate's tilt rests on the autopilot's attitude since issue 19's tilt sigma
+    # (config/sim.toml one_plate_tilt_sigma_rel = 8; docs/decisions.md "A lone plate's
+    # tilt"): the median error is the attitude's at ~10 m (0.177 m seen; 0.08 m before,
+    # from the plate's own tilt), and the covariance says so: errors within 3 sigma
+    sigmas = [float(np.sqrt(sum(r["covariance_diag"][:3]))) for r in fixes]
+    within = float(np.mean([e <= 3.0 * s for e, s in zip(errors, sigmas, strict=True)]))
+    assert float(np.median(errors)) < 0.25, np.median(errors)
+    assert within >= 0.9, (within, np.median(errors), np.median(sigmas))
 
 
 def test_the_truth_is_placed_about_the_flights_origin(hover: Path) -> None:
