@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import itertools
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from companion.sim.simulator import Simulator
 from companion.sim.source import SimCameraSource
 from companion.sim.synth import synth_stream
 from companion.sim.trajectory import KinematicState
-from companion.sources.base import EndOfStream
+from companion.sources.base import EndOfStream, Frame
 from companion.sources.files import RecordedStreamSource
 
 REQUIRED = ("hover", "survey", "illumination_ramp", "sudden_light", "occlusion")
@@ -186,18 +187,30 @@ def _distorted_sim() -> Simulator:
     return Simulator(load_scenario("survey_distorted"))
 
 
-async def test_sim_source_in_its_own_process_renders_the_same_frames() -> None:
-    """Rendering out of the companion's process (issue 23) gives the in-process frames."""
-    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=2.0, fps=30.0))
-    source = SimCameraSource(sim, realtime=False, own_process=True)
+def short_survey() -> Simulator:
+    return Simulator(dataclasses.replace(load_scenario("survey"), seconds=2.0, fps=30.0))
+
+
+async def rendered_elsewhere(source: SimCameraSource, count: int,
+                             during: Callable[[], None] = lambda: None) -> list[Frame]:
+    """``count`` frames of a source rendering in its own process (closed after them), each
+    checked against the same frame rendered here; ``during`` runs once it has started."""
     try:
         await source.start()
-        frames = [await source.recv() for _ in range(3)]
+        during()
+        frames = [await source.recv() for _ in range(count)]
     finally:
         source.close()
     for frame in frames:
-        image, _ = sim.render(frame.index)
-        assert np.array_equal(frame.image, image)
+        image, _ = source.sim.render(frame.index)
+        assert np.array_equal(frame.image, image), frame.index
+    return frames
+
+
+async def test_sim_source_in_its_own_process_renders_the_same_frames() -> None:
+    """Rendering out of the companion's process (issue 23) gives the in-process frames."""
+    source = SimCameraSource(short_survey(), realtime=False, own_process=True)
+    await rendered_elsewhere(source, 3)
     assert source.render_cpu_s == 0.0 and source.render_cpu_elsewhere_s > 0.0
 
 
@@ -205,23 +218,16 @@ async def test_frames_from_the_rendering_process_are_the_companions_own() -> Non
     """In real time a frame is rendered ahead while the last one is in use; frames come back
     through shared memory slots (issue 23): a frame delivered must not change when a later
     one is rendered into its slot, and closing the source removes the block."""
-    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=2.0, fps=30.0))
     shm = Path("/dev/shm")
     def blocks() -> set[Path]:  # shared memory blocks (not the pool's semaphores)
         return set(shm.glob("psm_*")) if shm.is_dir() else set()
     before = blocks()
-    source = SimCameraSource(sim, realtime=True, own_process=True)
-    try:
-        await source.start()
-        assert len(blocks() - before) == 1
-        frames = [await source.recv() for _ in range(6)]
-    finally:
-        source.close()
+    made: list[int] = []
+    source = SimCameraSource(short_survey(), realtime=True, own_process=True)
+    frames = await rendered_elsewhere(source, 6, lambda: made.append(len(blocks() - before)))
+    assert made == [1]
     indices = [f.index for f in frames]
     assert indices == sorted(set(indices)) and len(set(i % 2 for i in indices)) == 2
-    for frame in frames:
-        image, _ = sim.render(frame.index)
-        assert np.array_equal(frame.image, image), frame.index
     assert len(blocks()) == len(before)
 
 
@@ -233,14 +239,6 @@ async def test_frames_come_through_the_pipe_where_no_shared_memory_may_be_made(
     import companion.sim.source as source_module
 
     monkeypatch.setattr(source_module.resource, "getrlimit", lambda _which: (16_000, -1))
-    sim = Simulator(dataclasses.replace(load_scenario("survey"), seconds=2.0, fps=30.0))
-    source = SimCameraSource(sim, realtime=False, own_process=True)
-    try:
-        assert source._slots is None
-        await source.start()
-        frames = [await source.recv() for _ in range(3)]
-    finally:
-        source.close()
-    for frame in frames:
-        image, _ = sim.render(frame.index)
-        assert np.array_equal(frame.image, image)
+    source = SimCameraSource(short_survey(), realtime=False, own_process=True)
+    assert source._slots is None
+    assert len(await rendered_elsewhere(source, 3)) == 3
