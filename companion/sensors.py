@@ -126,8 +126,9 @@ class SensorHistory:
         self.received[name] += 1
 
     def __call__(self, t_us: int) -> SideSensors:
-        return SideSensors(self.attitude_at(t_us), self.altitude_at(t_us), self.range_at(t_us),
-                           self.position_at(t_us))
+        position = self.position_at(t_us)  # once: the height is its down
+        return SideSensors(self.attitude_at(t_us), self._altitude(t_us, position),
+                           self.range_at(t_us), position)
 
     def _gap_us(self) -> int:
         return round(self.config.max_sample_age_s * 1e6)
@@ -161,10 +162,13 @@ class SensorHistory:
 
     def altitude_at(self, t_us: int) -> AltitudeSample | None:
         """The EKF's NED down at ``t_us`` (``pose.use_altitude``), or None."""
-        if not self.config.use_altitude:
+        return self._altitude(t_us, self.position_at(t_us))
+
+    def _altitude(self, t_us: int, position: tuple[float, float, float] | None
+                  ) -> AltitudeSample | None:
+        if not self.config.use_altitude or position is None:
             return None
-        v = interpolate(list(self.samples["LOCAL_POSITION_NED"]), t_us, self._gap_us())
-        return None if v is None else AltitudeSample(t_us, v[2], self.config.altitude_sigma_m)
+        return AltitudeSample(t_us, position[2], self.config.altitude_sigma_m)
 
     def position_at(self, t_us: int) -> tuple[float, float, float] | None:
         """The EKF's position (NED about its origin) at ``t_us``, or None."""

@@ -147,8 +147,9 @@ async def test_corrupted_bytes_from_autopilot(settings: Settings) -> None:
     times = flight.fake.accepted_times()
     assert max_gap_s(times, t0, t1) < 1.0, "fixes stopped during the corruption"
     # the link stays up unless corruption itself took out the heartbeats for the link's
-    # timeout (3 s at 1 Hz: two or more in a row, with the loop's timing; 20 % makes two
-    # in a row about once in 25 runs): then going down is right, and it must come back
+    # timeout (3 s at 1 Hz: two or more in a row, with the loop's timing; at 20 % two in a
+    # row among the ~5 heartbeats of the 5 s happen in about one run in seven): then going
+    # down is right, and it must come back
     hits = flight.fake.faults.counters.heartbeats_corrupted
     in_a_row = max((len(run) for run in "".join("x" if h else "." for h in hits).split(".")),
                    default=0)
