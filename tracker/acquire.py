@@ -10,6 +10,7 @@ bottom-right, bottom-left), ready for the pose solver; the bounding box starts a
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -68,9 +69,18 @@ class Reference:
     #: ``colour`` projected on colour features (see :func:`reference_plane`), made on demand
     planes: dict[tuple[float, float, float], npt.NDArray[np.float32]] = field(
         default_factory=dict, compare=False, repr=False)
+    #: a plane resized to a size in the frame (see :func:`reference_template`), kept
+    templates: dict[tuple[tuple[float, float, float] | None, tuple[int, int]],
+                    npt.NDArray[np.float32]] = field(default_factory=dict, compare=False,
+                                                     repr=False)
 
 
 Weights = tuple[float, float, float]
+#: Resized planes kept per reference (:func:`reference_template`): a tracked plate keeps
+#: its size in the frame, to the pixel, for most frames (88 % on the survey), and a few
+#: sizes cover a plate growing or shrinking by a pixel back and forth.
+TEMPLATES_KEPT = 6
+_templates_lock = threading.Lock()  # the frame's threads and the lane share references
 
 
 def reference_plane(ref: Reference, weights_bgr: Weights | None) -> npt.NDArray[np.float32]:
@@ -82,6 +92,24 @@ def reference_plane(ref: Reference, weights_bgr: Weights | None) -> npt.NDArray[
         plane = project(ref.colour, weights_bgr)
         ref.planes[weights_bgr] = plane
     return plane
+
+
+def reference_template(ref: Reference, weights_bgr: Weights | None, size: tuple[int, int]
+                       ) -> npt.NDArray[np.float32]:
+    """The reference's plane (:func:`reference_plane`) resized to ``size`` (w, h) by area
+    averaging, float32, read-only; the last ``TEMPLATES_KEPT`` sizes are kept (issue 23:
+    resizing the 256 px reference every frame cost more than the crop it is aligned on)."""
+    key = (weights_bgr, size)
+    template = ref.templates.get(key)
+    if template is None:
+        template = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
+                                         interpolation=cv2.INTER_AREA), np.float32)
+        template.flags.writeable = False
+        with _templates_lock:
+            if len(ref.templates) >= TEMPLATES_KEPT:
+                del ref.templates[next(iter(ref.templates))]  # the oldest
+            ref.templates[key] = template
+    return template
 
 
 def project(image_bgr: npt.NDArray[np.uint8], weights_bgr: Weights) -> npt.NDArray[np.float32]:
@@ -376,9 +404,7 @@ def ecc_start(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     if window is None:
         return None
     x0, y0, x1, y1 = window
-    size = size_in_frame(ref, corners, 8)
-    template = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
-                                     interpolation=cv2.INTER_AREA), np.float32)
+    template = reference_template(ref, weights_bgr, size_in_frame(ref, corners, 8))
     s_ref = resize_map(ref.size_px, template.shape[1::-1])  # ref -> template
     t_roi = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # roi -> frame
     warp = np.linalg.inv(t_roi) @ hom @ np.linalg.inv(s_ref)  # template -> roi

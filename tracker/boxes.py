@@ -73,11 +73,14 @@ def saturated_share(image: np.ndarray, corners: FloatArray) -> float:
     if x1 <= x0 or y1 <= y0:
         return 0.0
     mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
-    cv2.fillConvexPoly(mask, np.round(quad - (x0, y0)).astype(np.int32), 1)
-    inside_px = mask.astype(bool)
-    if not inside_px.any():
+    cv2.fillConvexPoly(mask, np.round(quad - (x0, y0)).astype(np.int32), 255)
+    inside = cv2.countNonZero(mask)
+    if inside == 0:
         return 0.0
-    hot = np.asarray(image[y0:y1, x0:x1] >= SATURATED_LEVEL)
-    if hot.ndim == 3:
-        hot = np.asarray(hot.any(axis=2))
-    return float(np.count_nonzero(hot & inside_px)) / float(np.count_nonzero(inside_px))
+    # pixels with every channel under the level, by OpenCV (no per-channel temporaries):
+    # a frame's plates cost 0.3 ms a frame in numpy (issue 23)
+    crop = image[y0:y1, x0:x1]
+    channels = 1 if crop.ndim == 2 else crop.shape[2]
+    below = cv2.inRange(crop, (0,) * channels, (SATURATED_LEVEL - 1,) * channels)
+    cool = cv2.countNonZero(cv2.bitwise_and(below, mask))
+    return float(inside - cool) / float(inside)

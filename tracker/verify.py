@@ -31,6 +31,7 @@ from tracker.acquire import (
     homography_to,
     outline_window,
     project_corners,
+    reference_template,
     resize_map,
     size_in_frame,
 )
@@ -72,7 +73,7 @@ def overlay(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
     x0, y0, x1, y1 = window
     w, h = ref.size_px
     size = size_in_frame(ref, corners, 6)
-    small = np.asarray(cv2.resize(ref.gray, size, interpolation=cv2.INTER_AREA), np.float32)
+    small = reference_template(ref, None, size)
     to_roi = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]])
     warp = to_roi @ hom @ np.linalg.inv(resize_map((w, h), size))
     roi_size = (x1 - x0, y1 - y0)

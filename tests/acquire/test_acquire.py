@@ -9,7 +9,15 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.acquire import ReferenceMatcher, homography_to, project_corners, refine_ecc
+from tracker.acquire import (
+    TEMPLATES_KEPT,
+    ReferenceMatcher,
+    homography_to,
+    project_corners,
+    reference_plane,
+    reference_template,
+    refine_ecc,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 OTB = Path(os.environ.get("LMC_SHARED_DATA", ROOT.parent / "shared" / "data")) / "otb"
@@ -133,3 +141,22 @@ def test_real_photo_crop_found_when_placed_in_a_real_scene() -> None:
     found = matcher.find(frame)
     assert [m.landmark_id for m in found] == ["tiger-poster"]
     assert np.abs(found[0].corners_px - corners).max() < 2.0
+
+
+def test_a_reference_template_is_the_resized_plane_kept_for_the_last_sizes() -> None:
+    """The reference resized to a plate's size in the frame is made once per size (issue
+    23: every frame's alignment resized the whole reference), read-only, and only the last
+    ``TEMPLATES_KEPT`` sizes are kept."""
+    ref = ReferenceMatcher().add("poster", textured_poster(2, 256, 170))
+    weights = (0.5, 0.25, -0.75)
+    first = reference_template(ref, weights, (90, 60))
+    expected = cv2.resize(reference_plane(ref, weights), (90, 60), interpolation=cv2.INTER_AREA)
+    assert first.dtype == np.float32 and np.array_equal(first, expected)
+    assert not first.flags.writeable
+    assert reference_template(ref, weights, (90, 60)) is first
+    grey = reference_template(ref, None, (90, 60))  # another plane: another template
+    assert np.array_equal(grey, cv2.resize(ref.gray, (90, 60), interpolation=cv2.INTER_AREA))
+    for w in range(91, 91 + TEMPLATES_KEPT - 1):
+        reference_template(ref, weights, (w, 60))
+    assert len(ref.templates) == TEMPLATES_KEPT
+    assert reference_template(ref, weights, (90, 60)) is not first  # the oldest went first

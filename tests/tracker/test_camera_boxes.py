@@ -65,6 +65,18 @@ def test_saturated_share_counts_pixels_inside_the_quadrilateral() -> None:
     assert saturated_share(image[:, :, 2], quad) == pytest.approx(0.5, abs=0.03)  # grey
 
 
+def test_saturated_share_is_any_channel_at_255_counted_exactly() -> None:
+    """One channel at 255 makes a pixel saturated, 254 in every channel does not; the share
+    is the exact count over the quadrilateral's pixels (issue 23 counts them in OpenCV)."""
+    image = np.full((40, 40, 3), 254, np.uint8)
+    image[10:20, 10:15, 1] = 255  # 50 pixels with only green saturated
+    image[10:20, 15:20] = 255  # 50 pixels with every channel saturated
+    quad = np.array([[10.0, 10.0], [29.0, 10.0], [29.0, 19.0], [10.0, 19.0]])  # 20 x 10 px
+    assert saturated_share(image, quad) == 100 / 200
+    assert saturated_share(image[:, :, 0], quad) == 50 / 200  # grey: only the 255s
+    assert saturated_share(np.full((40, 40, 3), 254, np.uint8), quad) == 0.0
+
+
 def test_box_helpers() -> None:
     assert box_iou((0, 0, 10, 10), (5, 0, 10, 10)) == pytest.approx(50 / 150)
     assert clip_box((-5, -5, 20, 20), 10, 10) == (0.0, 0.0, 10.0, 10.0)
