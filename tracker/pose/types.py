@@ -177,6 +177,10 @@ class PoseFix:
     attitude_prior: str = "none"
     #: whitened residual sum of squares at the solution (pixels and priors), chi-square
     chi2: float = 0.0
+    #: the part of ``covariance`` carried by the autopilot's own attitude and height (6x6;
+    #: None without them): its error comes back in every fix while it lasts, so a stream of
+    #: such fixes is not independent (companion.fixgate states it so)
+    echo_covariance: FloatArray | None = None
 
     @property
     def covariance_urt(self) -> tuple[float, ...]:
