@@ -84,7 +84,7 @@ def main() -> int:
         fix = perception.process(frame).fix
         perception.housekeeping(frame)
         if isinstance(fix, PoseFix):
-            var = np.diag(np.asarray(fix.covariance))[:3]
+            var = np.diag(np.asarray(fix.autopilot_covariance))[:3]  # as the bridge sends
             if ekf.fuse(t, fix.position_ned_m, (var[0], var[1], var[2])).accepted:
                 fused.append(t)
         if ekf.initialised:

@@ -13,7 +13,8 @@ the last one it let through:
 * a fix whose own position 1-sigma exceeds ``max_sigma_rel`` of the distance to the
   landmarks it used is not passed on: too vague to help, and on real imagery such fixes
   (one plate, seen small) were the ones whose covariance was not honest (issue 25);
-* :meth:`FixGate.stated` gives the covariance a passed fix is sent with: the part that the
+* :meth:`FixGate.stated` gives the covariance a passed fix is sent with (``PoseFix.
+  sent_covariance``; its own ``covariance`` is kept): the part that the
   autopilot's own attitude and height carry (``PoseFix.echo_covariance``) is the
   autopilot's error coming back, the same in every fix while it lasts, so it is stated
   as one fix per ``echo_correlation_s`` would state it -- times that many fixes' intervals
@@ -92,12 +93,13 @@ class FixGate:
         return False
 
     def stated(self, fix: PoseFix) -> PoseFix:
-        """``fix`` as it goes to the autopilot: its covariance plus ``n - 1`` times the part
-        the autopilot's own attitude and height carry, ``n`` = ``echo_correlation_s`` over
-        the time since the previous fix passed on (at least 1: a fix after a longer pause
-        is stated as solved).  Over a correlation time the stream then carries that part's
-        information once, as the errors do.  Unchanged when ``echo_correlation_s`` is 0 or
-        the fix has no such part."""
+        """``fix`` with ``sent_covariance``, what the autopilot is given: its covariance plus
+        ``n - 1`` times the part the autopilot's own attitude and height carry, ``n`` =
+        ``echo_correlation_s`` over the time since the previous fix passed on (at least 1: a
+        fix after a longer pause is sent as solved).  Over a correlation time the stream
+        then carries that part's information once, as the errors do.  Unchanged when
+        ``echo_correlation_s`` is 0 or the fix has no such part; ``covariance`` (the fix's
+        own, for its NEES and the reports) is never changed."""
         last, self._last_stated_us = self._last_stated_us, fix.time_us
         tau = self.config.echo_correlation_s
         if tau <= 0.0 or fix.echo_covariance is None or last is None:
@@ -108,4 +110,4 @@ class FixGate:
             return fix
         cov = np.asarray(fix.covariance) + (n - 1.0) * np.asarray(fix.echo_covariance)
         note = f"the autopilot's attitude and height part stated x {n:.0f} (time-correlated)"
-        return replace(fix, covariance=cov, notes=(*fix.notes, note))
+        return replace(fix, sent_covariance=cov, notes=(*fix.notes, note))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from companion.autopilot import vision_fix
 from companion.fixgate import FixGate, FixGateConfig
 from tracker.pose.types import PoseFix
 
@@ -34,14 +35,14 @@ def echoing(t_s: float, east_m: float, sigma_m: float = 4.0) -> PoseFix:
 
 def test_a_stream_is_stated_as_one_fix_per_correlation_time() -> None:
     gate = FixGate(FixGateConfig(echo_correlation_s=20.0))
-    first = gate.stated(echoing(0.0, 6.0))
-    np.testing.assert_array_equal(first.covariance, echoing(0.0, 6.0).covariance)
+    assert gate.stated(echoing(0.0, 6.0)).sent_covariance is None  # the first: as solved
     at_30_hz = gate.stated(echoing(1 / 30, 6.0))  # 600 fixes per 20 s
-    np.testing.assert_allclose(at_30_hz.covariance, 600.0 * echoing(0.0, 6.0).covariance,
-                               rtol=1e-4)
+    assert at_30_hz.sent_covariance is not None
+    np.testing.assert_allclose(at_30_hz.sent_covariance,
+                               600.0 * echoing(0.0, 6.0).covariance, rtol=1e-4)
+    np.testing.assert_array_equal(at_30_hz.covariance, echoing(0.0, 6.0).covariance)  # own
     assert "x 600" in at_30_hz.notes[-1]
-    after_a_pause = gate.stated(echoing(30.0, 6.0))  # longer than the correlation time
-    np.testing.assert_array_equal(after_a_pause.covariance, echoing(0.0, 6.0).covariance)
+    assert gate.stated(echoing(30.0, 6.0)).sent_covariance is None  # after a longer pause
 
 
 def test_only_the_autopilots_part_is_inflated() -> None:
@@ -51,15 +52,16 @@ def test_only_the_autopilots_part_is_inflated() -> None:
     half = PoseFix(100_000, own.position_ned_m, own.attitude_rpy_rad, own.covariance, 80,
                    ("a",), "pnp", echo_covariance=0.5 * own.covariance)
     stated = gate.stated(half)  # 0.1 s after the last: 10 per correlation time
-    np.testing.assert_allclose(stated.covariance, own.covariance + 9 * 0.5 * own.covariance)
-    np.testing.assert_array_equal(gate.stated(fix(0.3)).covariance, own.covariance)  # none
+    assert stated.sent_covariance is not None
+    np.testing.assert_allclose(stated.sent_covariance,
+                               own.covariance + 9 * 0.5 * own.covariance)
+    assert gate.stated(fix(0.3)).sent_covariance is None  # no autopilot part: as solved
 
 
 def test_the_statement_is_off_by_default() -> None:
     gate = FixGate()
     gate.stated(echoing(0.0, 6.0))
-    np.testing.assert_array_equal(gate.stated(echoing(1 / 30, 6.0)).covariance,
-                                  echoing(0.0, 6.0).covariance)
+    assert gate.stated(echoing(1 / 30, 6.0)).sent_covariance is None
 
 
 def test_an_autopilot_does_not_follow_a_biased_stream_stated_so() -> None:
@@ -80,8 +82,9 @@ def test_an_autopilot_does_not_follow_a_biased_stream_stated_so() -> None:
         for _ in range(120):
             t += 1 / 30
             ekf.predict(t, np.zeros(3))
-            sent = gate.stated(echoing(t, 9.0))
-            cov = np.asarray(sent.covariance)
+            sent = vision_fix(gate.stated(echoing(t, 9.0)), 0)  # what the bridge sends
+            cov = np.zeros((6, 6))
+            cov[np.triu_indices(6)] = sent.covariance
             assert ekf.fuse(t, sent.position_ned_m, (cov[0, 0], cov[1, 1], cov[2, 2])).accepted
         return abs(ekf.position()[1] - 6.0)
 
