@@ -18,7 +18,8 @@ of its stated sigmas (``perception_survey.noisy_attitude``).  Prints, per run:
   (the perception's no-fix reason up to its first colon, counted).
 
     PYTHONPATH=. python benchmarks/perception_stream.py STREAM [--runs 3] [--deployment]
-        [--attitude-offset-deg R P Y [--attitude-sigma-deg RP YAW]] [--light-step-s 12]
+        [--attitude-offset-deg R P Y [--attitude-sigma-deg RP YAW]]
+        [--altitude-sigma-m S [--altitude-offset-m D]] [--light-step-s 12]
         [--frames N] [--json] [--dump] [--set KEY=VALUE ...]
 
 Real-imagery worlds are measured with ``--set 'acquire.features="sift"' --set
@@ -50,7 +51,7 @@ from companion.perception import Perception, SideSensors
 from companion.settings import SIM_LAYERS, load_settings
 from companion.sources.base import Frame
 from tracker.boxes import box_iou
-from tracker.pose.types import AttitudeSample, MapLandmark, PoseFix
+from tracker.pose.types import AltitudeSample, AttitudeSample, MapLandmark, PoseFix
 
 ATT_SIGMA_RAD = (float(np.deg2rad(0.2)), float(np.deg2rad(1.0)))  # the fake autopilot's
 
@@ -119,6 +120,15 @@ def score_track(score: Score, lid: str, box: tuple[float, float, float, float] |
     score.longest_wrong = max(score.longest_wrong, run)
 
 
+def echo_text(fix: PoseFix) -> str:
+    """The share of the fix's position sigma that the autopilot's attitude and height
+    carry (``PoseFix.echo_covariance``), for ``--dump``."""
+    if fix.echo_covariance is None:
+        return ""
+    echo = float(np.sqrt(np.trace(np.asarray(fix.echo_covariance)[:3, :3])))
+    return f" autopilot's part {echo:.3f} m"
+
+
 def run_once(folder: Path, args: argparse.Namespace, seed: int) -> dict[str, Any]:
     """One pass of the perception over the stream; its summary."""
     meta = read_meta(folder)
@@ -132,17 +142,19 @@ def run_once(folder: Path, args: argparse.Namespace, seed: int) -> dict[str, Any
         if ft is None:
             return SideSensors()
         p = ft.pose
+        alt = None if args.altitude_sigma_m is None else AltitudeSample(
+            t_us, p.down_m + args.altitude_offset_m, args.altitude_sigma_m)
         if args.attitude_offset_deg is not None:  # an EKF's slow error, stated honestly
             off = np.deg2rad(args.attitude_offset_deg)
             return SideSensors(attitude=AttitudeSample(
                 t_us, p.roll_rad + off[0], p.pitch_rad + off[1], p.yaw_rad + off[2],
-                *np.deg2rad(args.attitude_sigma_deg)))
+                *np.deg2rad(args.attitude_sigma_deg)), altitude=alt)
         att = AttitudeSample(t_us, p.roll_rad, p.pitch_rad, p.yaw_rad, *ATT_SIGMA_RAD)
         if args.exact_attitude:
-            return SideSensors(attitude=att)
+            return SideSensors(attitude=att, altitude=alt)
         # another draw per run (the noise is seeded by the sample's time), at the frame's time
         drawn = noisy_attitude(dataclasses.replace(att, time_us=t_us + 1_000_003 * seed))
-        return SideSensors(attitude=dataclasses.replace(drawn, time_us=t_us))
+        return SideSensors(attitude=dataclasses.replace(drawn, time_us=t_us), altitude=alt)
 
     perception = Perception(meta.camera, landmarks, refs, sensors=sensors,
                             config=settings.perception, tracker_config=settings.tracker,
@@ -184,9 +196,11 @@ def run_once(folder: Path, args: argparse.Namespace, seed: int) -> dict[str, Any
         cov = np.asarray(fix.covariance)[:3, :3]
         score.nees.append(float(err @ np.linalg.solve(cov, err)))
         if args.dump:
-            print(f"frame {frame.index} fix {','.join(fix.landmark_ids)} error "
-                  f"{score.err[-1]:.3f} m sigma {np.sqrt(np.trace(cov)):.3f} m NEES "
-                  f"{score.nees[-1]:.1f}")
+            print(f"frame {frame.index} fix {','.join(fix.landmark_ids)} {fix.solver} error "
+                  f"{score.err[-1]:.3f} m ({', '.join(f'{v:+.2f}' for v in err)}) sigma "
+                  f"{np.sqrt(np.trace(cov)):.3f} m "
+                  f"({', '.join(f'{v:.2f}' for v in np.sqrt(np.diag(cov)))}) NEES "
+                  f"{score.nees[-1]:.1f}{echo_text(fix)}")
     perception.close()
     return score.summary()
 
@@ -207,6 +221,12 @@ def main() -> int:
                         metavar=("ROLL_PITCH", "YAW"),
                         help="stated 1-sigma with --attitude-offset-deg (default 2.5 5: "
                         "pose.attitude_*_sigma_deg's defaults)")
+    parser.add_argument("--altitude-sigma-m", type=float, default=None,
+                        help="give the height prior (LOCAL_POSITION_NED's down in a flight): "
+                        "the truth plus --altitude-offset-m, stated with this 1-sigma "
+                        "(pose.altitude_sigma_m is 0.5); default: no height")
+    parser.add_argument("--altitude-offset-m", type=float, default=0.0,
+                        help="the height prior's constant error (m, down)")
     parser.add_argument("--light-step-s", type=float, default=None)
     parser.add_argument("--wrong-iou", type=float, default=0.2,
                         help="a track whose box overlaps its landmark's truth box less is "

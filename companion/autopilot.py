@@ -36,8 +36,11 @@ HEARTBEAT_HEALTH: dict[State, HealthState] = {
 
 
 def vision_fix(fix: PoseFix, reset_counter: int) -> VisionFix:
-    """The bridge's input for a pose fix (covariance as the 6x6 matrix, quality 0..100)."""
-    cov = np.asarray(fix.covariance, dtype=np.float64)
+    """The bridge's input for a pose fix (covariance as the 6x6 matrix, quality 0..100):
+    the covariance the fix gate stated for the autopilot when it stated one
+    (``PoseFix.sent_covariance``, docs/decisions.md "Fixes that echo the autopilot's own
+    error"), else the fix's own."""
+    cov = np.asarray(fix.autopilot_covariance, dtype=np.float64)
     return VisionFix(
         time_us=int(fix.time_us),
         position_ned_m=tuple(float(v) for v in fix.position_ned_m),  # type: ignore[arg-type]

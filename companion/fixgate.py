@@ -12,13 +12,19 @@ the last one it let through:
   the gate onto itself;
 * a fix whose own position 1-sigma exceeds ``max_sigma_rel`` of the distance to the
   landmarks it used is not passed on: too vague to help, and on real imagery such fixes
-  (one plate, seen small) were the ones whose covariance was not honest (issue 25).
+  (one plate, seen small) were the ones whose covariance was not honest (issue 25);
+* :meth:`FixGate.stated` gives the covariance a passed fix is sent with (``PoseFix.
+  sent_covariance``; its own ``covariance`` is kept): the part that the
+  autopilot's own attitude and height carry (``PoseFix.echo_covariance``) is the
+  autopilot's error coming back, the same in every fix while it lasts, so it is stated
+  as one fix per ``echo_correlation_s`` would state it -- times that many fixes' intervals
+  -- and the autopilot does not take a stream of such fixes as independent (issue 19).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -35,6 +41,9 @@ class FixGateConfig:
     max_gap_s: float = field(default=1.0, metadata={"gt": 0})
     confirm: int = field(default=3, metadata={"ge": 1})
     max_sigma_rel: float = field(default=0.0, metadata={"ge": 0})  # 0: off
+    #: how long the autopilot's attitude and height errors last (s; 0: fixes are stated
+    #: as solved, each as if independent)
+    echo_correlation_s: float = field(default=0.0, metadata={"ge": 0})
 
 
 @dataclass
@@ -45,6 +54,7 @@ class FixGate:
     rejected: int = 0
     _last: PoseFix | None = None
     _candidates: list[PoseFix] = field(default_factory=list)
+    _last_stated_us: int | None = None
 
     def _consistent(self, a: PoseFix, b: PoseFix) -> bool:
         cfg = self.config
@@ -81,3 +91,23 @@ class FixGate:
             return True
         self.rejected += 1
         return False
+
+    def stated(self, fix: PoseFix) -> PoseFix:
+        """``fix`` with ``sent_covariance``, what the autopilot is given: its covariance plus
+        ``n - 1`` times the part the autopilot's own attitude and height carry, ``n`` =
+        ``echo_correlation_s`` over the time since the previous fix passed on (at least 1: a
+        fix after a longer pause is sent as solved).  Over a correlation time the stream
+        then carries that part's information once, as the errors do.  Unchanged when
+        ``echo_correlation_s`` is 0 or the fix has no such part; ``covariance`` (the fix's
+        own, for its NEES and the reports) is never changed."""
+        last, self._last_stated_us = self._last_stated_us, fix.time_us
+        tau = self.config.echo_correlation_s
+        if tau <= 0.0 or fix.echo_covariance is None or last is None:
+            return fix
+        dt = (fix.time_us - last) / 1e6
+        n = tau / dt if dt > 0.0 else 1.0
+        if n <= 1.0:
+            return fix
+        cov = np.asarray(fix.covariance) + (n - 1.0) * np.asarray(fix.echo_covariance)
+        note = f"the autopilot's attitude and height part stated x {n:.0f} (time-correlated)"
+        return replace(fix, sent_covariance=cov, notes=(*fix.notes, note))

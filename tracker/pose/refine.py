@@ -93,6 +93,10 @@ class Refined:
     reason: str = ""
     bad_point: int = -1  # the point behind the camera, when that is the reason
     cost: float = 0.0  # whitened residual sum of squares (chi-square) at the solution
+    #: the part of ``covariance`` that the autopilot's own attitude and height priors carry,
+    #: ``P J_a^T J_a P`` over their rows (``P`` = the covariance): what an error of the
+    #: autopilot's estimate moves the solution by (None: no such prior)
+    echo_covariance: FloatArray | None = None
 
 
 def _rotation_and_derivatives(rpy: FloatArray) -> FloatArray:
@@ -276,11 +280,19 @@ def refine_pose(
                 break
         if not accepted:
             break
-    return _finish(x, r, j, z, pts, max_condition)
+    return _finish(x, r, j, z, pts, max_condition, _autopilot_rows(priors))
+
+
+def _autopilot_rows(priors: Priors) -> int:
+    """How many prior rows (right after the pixels', :func:`_prior_rows`' order) are the
+    autopilot's own estimate: its attitude (3) and its height (1)."""
+    attitude = priors.attitude_rpy_rad is not None and priors.attitude_sigma_rad is not None
+    return 3 * attitude + (priors.altitude_down_m is not None)
 
 
 def _finish(
-    x: FloatArray, r: FloatArray, j: FloatArray, z: FloatArray, pts: PointSet, max_cond: float
+    x: FloatArray, r: FloatArray, j: FloatArray, z: FloatArray, pts: PointSet, max_cond: float,
+    autopilot_rows: int = 0,
 ) -> Refined:
     """Covariance at the solution, cheirality and conditioning checks."""
     if np.any(z <= _MIN_DEPTH_M):
@@ -300,7 +312,12 @@ def _finish(
     n = pts.points_ned.shape[0]
     errs = np.sum(r[: 2 * n].reshape(n, 2) ** 2, axis=1)
     x[3:] = wrap_angle(x[3:])
-    return Refined(x[:3].copy(), x[3:].copy(), cov, errs, cost=float(r @ r))
+    echo = None
+    if autopilot_rows:
+        ja = j[2 * n: 2 * n + autopilot_rows] @ cov
+        echo = ja.T @ ja
+    return Refined(x[:3].copy(), x[3:].copy(), cov, errs, cost=float(r @ r),
+                   echo_covariance=echo)
 
 
 def arc_correction(cov: FloatArray, position: FloatArray, points_ned: FloatArray) -> FloatArray:

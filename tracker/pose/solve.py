@@ -526,4 +526,5 @@ def _make_fix(
         reprojection_rms_px=rms,
         notes=tuple(notes),
         chi2=ref.cost,
+        echo_covariance=ref.echo_covariance,
     )

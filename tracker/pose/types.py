@@ -177,6 +177,14 @@ class PoseFix:
     attitude_prior: str = "none"
     #: whitened residual sum of squares at the solution (pixels and priors), chi-square
     chi2: float = 0.0
+    #: the part of ``covariance`` carried by the autopilot's own attitude and height (6x6;
+    #: None without them): its error comes back in every fix while it lasts, so a stream of
+    #: such fixes is not independent (companion.fixgate states it so)
+    echo_covariance: FloatArray | None = None
+    #: the covariance the autopilot is sent (companion.fixgate's ``stated``: the autopilot's
+    #: part counted once per correlation time); None: ``covariance`` itself.  ``covariance``
+    #: stays this fix's own (its NEES, the reports)
+    sent_covariance: FloatArray | None = None
 
     @property
     def covariance_urt(self) -> tuple[float, ...]:
@@ -184,6 +192,12 @@ class PoseFix:
         and ODOMETRY expect them (first row 6 entries, then 5, ...; x y z roll pitch yaw)."""
         rows, cols = np.triu_indices(6)
         return tuple(float(v) for v in self.covariance[rows, cols])
+
+    @property
+    def autopilot_covariance(self) -> FloatArray:
+        """The covariance the autopilot is sent: ``sent_covariance`` when stated, else
+        ``covariance``."""
+        return self.covariance if self.sent_covariance is None else self.sent_covariance
 
     @property
     def position_sigma_m(self) -> tuple[float, float, float]:
