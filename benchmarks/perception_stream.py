@@ -82,6 +82,9 @@ class Score:
             "fix_share_2plus_visible": round(self.fixes_2plus / max(self.frames_2plus, 1), 3),
             "rmse_m": round(rmse, 4), "rmse_pct_distance": round(100 * rmse / d, 3),
             "nees_inside_95_share": round(inside, 3),
+            # outside the bounds: too cautious (under) or overconfident (over)
+            "nees_under_95_share": round(float(np.mean(nees <= NEES_LOW)), 3) if len(nees) else 0.0,
+            "nees_over_95_share": round(float(np.mean(nees >= NEES_HIGH)), 3) if len(nees) else 0.0,
             "longest_wrong_track_frames": self.longest_wrong,
             "first_fix_after_step_s": self.first_fix_after_step_s,
             "no_fix_2plus_visible": dict(sorted(self.no_fix_2plus.items(),

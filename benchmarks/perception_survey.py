@@ -14,8 +14,12 @@ corners the perception hands the pose solver against the rendered truth, by the 
 width on screen (plates wholly in view), and of the tracker's box centres.
 
     PYTHONPATH=. python benchmarks/perception_survey.py [--scenario survey] [--frames 900]
-        [--pixel-sigma 0.15] [--one-plate-outline-sigma-rel 0] [--exact-attitude]
+        [--pixel-sigma P] [--one-plate-outline-sigma-rel 0] [--exact-attitude]
         [--attitude-sigma-deg 0.2 1.0] [--check]
+
+The perception's settings are the simulator's layer (config/sim.toml: the rendered camera's
+corner sigmas, ``--pixel-sigma`` defaults to its ``pose.pixel_sigma_px``); the pose's are
+the code's but for the options below.
 
 ``--check`` exits 1 when fewer than 90 % of the fixes (all, or those from 2+ landmarks) have
 their NEES inside the 95 % bounds, or the 2+ fixes' RMSE is above 0.5 % of their distance
@@ -36,6 +40,7 @@ import numpy.typing as npt
 from companion.core.stream_format import TruthBox
 from companion.demo import map_landmarks
 from companion.perception import Perception, SideSensors
+from companion.settings import SIM_LAYERS, load_settings
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
 from companion.sources.base import Frame
@@ -51,7 +56,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="survey")
     parser.add_argument("--frames", type=int, default=900)
-    parser.add_argument("--pixel-sigma", type=float, default=0.15)
+    parser.add_argument("--pixel-sigma", type=float, default=None,
+                        help="pose.pixel_sigma_px (default: config/sim.toml's)")
     parser.add_argument("--one-plate-outline-sigma-rel", type=float, default=0.0,
                         help="pose.one_plate_outline_sigma_rel (0 in both shipped layers: a lone "
                         "plate's corners independent)")
@@ -68,6 +74,9 @@ def main() -> int:
                         help="also give the autopilot's height, the truth plus noise of this "
                         "1-sigma, stated to the solver (default: no height)")
     args = parser.parse_args()
+    settings = load_settings(shipped=SIM_LAYERS)
+    if args.pixel_sigma is None:
+        args.pixel_sigma = settings.pose.pixel_sigma_px
     sig_rp, sig_yaw = (float(np.deg2rad(v)) for v in args.attitude_sigma_deg)
     cv2.setNumThreads(1)
     sim = Simulator(dataclasses.replace(load_scenario(args.scenario),
@@ -86,7 +95,7 @@ def main() -> int:
                            altitude=alt)
 
     perception = Perception(sim.scenario.camera, landmarks, references, sensors=sensors,
-                            pose_config=PoseConfig(
+                            config=settings.perception, pose_config=PoseConfig(
                                 pixel_sigma_px=args.pixel_sigma,
                                 one_plate_outline_sigma_rel=args.one_plate_outline_sigma_rel,
                                 one_plate_tilt_sigma_rel=args.one_plate_tilt_sigma_rel))

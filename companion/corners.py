@@ -52,10 +52,13 @@ def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
         hom: FloatArray, verify: bool = True, weights: Weights | None = None
         ) -> FloatArray | None:
     """ECC alignment with the perception's settings; ``verify``: a new sighting, held to
-    ``verify_correlation`` (a running track to ``TRACK_MIN_CORRELATION``)."""
-    least = config.verify_correlation if verify else TRACK_MIN_CORRELATION
-    return refine_ecc(ref, frame, hom, config.ecc_iterations, least,
-                      config.ecc_fine_iterations, weights)
+    ``verify_correlation`` over the whole reference (a running track to
+    ``TRACK_MIN_CORRELATION``, its outer ring left out: ``ecc_edge_band_px``)."""
+    if verify:
+        return refine_ecc(ref, frame, hom, config.ecc_iterations, config.verify_correlation,
+                          config.ecc_fine_iterations, weights)
+    return refine_ecc(ref, frame, hom, config.ecc_iterations, TRACK_MIN_CORRELATION,
+                      config.ecc_fine_iterations, weights, config.ecc_edge_band_px)
 
 
 def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:

@@ -222,6 +222,9 @@ def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, res
         "no_fix_frames": app.counters.no_fix,
         "nees_inside_95": round(float(np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF
                                                for n in nees])), 3) if nees else None,
+        # the rest: too cautious (under the lower bound) or overconfident (over the upper)
+        "nees_under_95": round(float(np.mean([n < NEES_LOW_3DOF for n in nees])), 3)
+        if nees else None,
         "attitude_prior_rejected": sum(f.attitude_prior == "rejected" for f, _, _ in
                                        result.fixes),
         "solvers": dict(Counter(f.solver for f, _, _ in result.fixes)),

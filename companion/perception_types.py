@@ -35,6 +35,9 @@ class PerceptionConfig:
     ecc_iterations: int = field(default=10, metadata={"ge": 1})
     #: Unsmoothed ECC iterations after the smoothed ones (tracker.acquire.refine_ecc).
     ecc_fine_iterations: int = field(default=6, metadata={"ge": 0})
+    #: The unsmoothed stage leaves out the reference's outer ring of this many pixels
+    #: (0: none): there the frame mixes in what is behind the plate (docs/pose.md).
+    ecc_edge_band_px: int = field(default=1, metadata={"ge": 0, "le": 8})
     #: A track's corners feed the pose only while this share of its quadrilateral is in
     #: the image: corners extrapolated from a sliver are off by pixels.
     min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})

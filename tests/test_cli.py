@@ -123,7 +123,7 @@ def test_config_json_names_the_layer_that_set_each_key() -> None:
     sim = json.loads(companion("config", "--sim", "--json").stdout)
     assert sim["origins"]["pose.pixel_sigma_px"] == "config/sim.toml"
     assert sim["origins"]["camera.fx"] == "config/cameras/sim-640x480.toml"
-    assert sim["settings"]["pose"]["pixel_sigma_px"] == 0.15
+    assert sim["settings"]["pose"]["pixel_sigma_px"] == 0.07
     assert sim["noise"] == "measured"
 
 

@@ -20,7 +20,7 @@ from tracker.pose.types import PoseFix
 DEMO_KEYS = ("frames", "fps", "fixes_sent", "fixes_accepted", "position_rmse_m",
              "mean_landmark_distance_m", "position_rmse_pct_of_distance", "latency_p50_ms",
              "latency_p99_ms", "dropped_frames", "cpu_cores_busy", "nees_inside_95",
-             "no_fix_frames", "solvers")
+             "nees_under_95", "no_fix_frames", "solvers")
 REPLAY_KEYS = ("frames_2plus_visible", "fix_share_2plus_visible", "nees_inside_95_share",
                "fixes_refused", "fixes_solved", "attitude", "attitude_error_deg")
 

@@ -169,8 +169,8 @@ def test_the_deployment_defaults_are_not_the_simulators() -> None:
     assert deploy.origin_of("camera.fx") == BUILT_IN
     sim = load_settings(shipped=SIM_LAYERS)
     assert sim.source.kind == "sim"
-    assert sim.pose.pixel_sigma_px == 0.15
-    assert sim.perception.corner_sigma_exponent == 0.8
+    assert sim.pose.pixel_sigma_px == 0.07
+    assert sim.perception.corner_sigma_exponent == 1.4
     assert sim.camera.mount_rpy_deg == (0.0, -30.0, 0.0)
     assert sim.noise_measured
     assert sim.origin_of("pose.pixel_sigma_px").endswith("config/sim.toml")
@@ -189,7 +189,7 @@ def test_the_sitl_configs_fly_the_simulators_layer() -> None:
     root = Path(__file__).resolve().parents[1] / "config"
     for name in ("sitl-ardupilot.toml", "sitl-px4.toml"):
         settings = load_settings([root / name])
-        assert settings.pose.pixel_sigma_px == 0.15, name
+        assert settings.pose.pixel_sigma_px == 0.07, name
         assert settings.source.kind == "follow", name
 
 

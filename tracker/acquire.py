@@ -335,8 +335,8 @@ def size_in_frame(ref: Reference, corners: FloatArray, least: int) -> tuple[int,
 
 def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
                iterations: int = 40, min_correlation: float = 0.6,
-               fine_iterations: int = 10, weights_bgr: Weights | None = None
-               ) -> FloatArray | None:
+               fine_iterations: int = 10, weights_bgr: Weights | None = None,
+               edge_band_px: int = 0) -> FloatArray | None:
     """Sub-pixel homography (reference -> frame) by ECC alignment, from an estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
@@ -364,7 +364,7 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     try:
         cc, warp = _ecc_coarse(template, roi, warp, iterations)
         if fine_iterations > 0:
-            cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1)
+            cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1, edge_band_px)
     except cv2.error:
         return None
     out = start.from_roi @ warp @ start.to_template
@@ -418,6 +418,11 @@ def ecc_start(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     return EccStart(template, roi, s_ref, t_roi, warp)
 
 
+#: The unsmoothed stage leaves out the template's outer ring (``refine_ecc``'s
+#: ``edge_band_px``) only when its short side is at least this long: a small plate's
+#: outline is most of what holds it.
+BAND_FROM_PX = 48
+
 #: The coarse ECC stage runs at half resolution when the template's short side is at
 #: least this long (so that the halved one still has some 24 px to align).
 HALVE_FROM_PX = 48
@@ -446,10 +451,18 @@ def _ecc_coarse(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32],
 
 
 def _ecc(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32], warp: FloatArray,
-         iterations: int, eps: float, blur: int) -> tuple[float, FloatArray]:
-    """One cv2.findTransformECC run (homography template -> roi); raises cv2.error."""
+         iterations: int, eps: float, blur: int, band: int = 0) -> tuple[float, FloatArray]:
+    """One cv2.findTransformECC run (homography template -> roi); raises cv2.error.
+    ``band``: the template's outer ``band`` px are left out."""
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, eps)
     start = (warp / warp[2, 2]).astype(np.float32)
+    if band > 0 and min(template.shape[:2]) >= BAND_FROM_PX:
+        mask = np.zeros(template.shape[:2], np.uint8)
+        mask[band:-band, band:-band] = 1
+        cc, found = cv2.findTransformECCWithMask(
+            template, roi, mask, np.ones(roi.shape[:2], np.uint8), start,
+            cv2.MOTION_HOMOGRAPHY, criteria, blur)
+        return float(cc), np.asarray(found, np.float64)
     # the stubs want a mask before gaussFiltSize; OpenCV takes None (no mask)
     cc, found = cv2.findTransformECC(  # type: ignore[call-overload]
         template, roi, start, cv2.MOTION_HOMOGRAPHY, criteria, None, blur)
