@@ -54,11 +54,10 @@ def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
     """ECC alignment with the perception's settings; ``verify``: a new sighting, held to
     ``verify_correlation`` over the whole reference (a running track to
     ``TRACK_MIN_CORRELATION``, its outer ring left out: ``ecc_edge_band_px``)."""
-    if verify:
-        return refine_ecc(ref, frame, hom, config.ecc_iterations, config.verify_correlation,
-                          config.ecc_fine_iterations, weights)
-    return refine_ecc(ref, frame, hom, config.ecc_iterations, TRACK_MIN_CORRELATION,
-                      config.ecc_fine_iterations, weights, config.ecc_edge_band_px)
+    least, band = ((config.verify_correlation, 0) if verify
+                   else (TRACK_MIN_CORRELATION, config.ecc_edge_band_px))
+    return refine_ecc(ref, frame, hom, config.ecc_iterations, least,
+                      config.ecc_fine_iterations, weights, band)
 
 
 def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:
