@@ -105,8 +105,6 @@ class LostConfig:
     lost_after_frames: int = field(default=3, metadata={"ge": 1})
     reacquire_confidence: float = field(default=0.45, metadata={"ge": 0.0, "le": 1.0})
     reacquire_growth: float = field(default=1.5, metadata={"gt": 1.0})
-    occlusion_below_confidence: float = field(default=0.3, metadata={"ge": 0.0, "le": 1.0})
-    occlusion_hold_frames: int = field(default=20, metadata={"ge": 0})
 
 
 @dataclass(frozen=True)
@@ -123,7 +121,6 @@ class RefineConfig:
     template_jump_frac: float = field(default=0.25, metadata={"gt": 0.0})
     template_update_rate: float = field(default=0.1, metadata={"ge": 0.0, "le": 1.0})
     template_anchor: float = field(default=0.3, metadata={"ge": 0.0, "le": 1.0})
-    template_reliability: bool = True
     size_filters: Literal["scale", "scale+aspect", "width+height"] = "width+height"
     scale_filter_scales: int = field(default=17, metadata={"ge": 3, "le": 65})
     scale_filter_step: float = field(default=1.02, metadata={"gt": 1.0, "le": 1.2})

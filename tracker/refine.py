@@ -23,7 +23,6 @@ from tracker.scale_filter import (
     sample_size,
     samples,
 )
-from tracker.reliability import Weights, prior, reliability
 from tracker.template import Match, crop, match, ncc, template_size
 
 FloatArray = npt.NDArray[np.float64]
@@ -58,17 +57,12 @@ class Refiner:
         frame: Frame,
         xy: FloatArray,
         box_px: FloatArray,
-        llr: Patch | None = None,
     ) -> None:
         self.config = config
         self._size = template_size(box)
         self._first = crop(patch, centre, box, self._size)
         self._current = self._first.copy()  # slow: learns where it matches closely
         self._fast = self._first.copy()  # fast: learns on more frames, locates the centre
-        self._prior = prior(self._size)
-        # the pixels' weights in the match (first frame's, running), None: plain NCC
-        self._first_weights = self._reliability(llr, centre, box)
-        self._weights = self._first_weights
         self._shape = sample_size(box_px)
         count, step = config.scale_filter_scales, config.scale_filter_step
         steps = [factor_pairs(count, step, kind) for kind in config.size_filters.split("+")]
@@ -101,26 +95,6 @@ class Refiner:
         count = self.config.scale_filter_scales
         return [rows[i : i + count] for i in range(0, len(rows), count)]
 
-    def _reliability(
-        self, llr: Patch | None, centre: FloatArray, box: FloatArray
-    ) -> Weights | None:
-        """The box's reliability map from the likelihood image ``llr`` (patch pixels), None
-        when the template is matched without one (``template_reliability`` off, no image)."""
-        if llr is None or not self.config.template_reliability:
-            return None
-        return reliability(crop(llr, centre, box, self._size), self._prior)
-
-    def weights(self) -> Weights | None:
-        """``template_anchor`` x the first frame's reliability map + the rest x the running
-        one (learnt with the fast template), or None (plain NCC)."""
-        import os
-        if os.environ.get("REL_MODE", "soft").startswith("learn"):
-            return None
-        if self._first_weights is None or self._weights is None:
-            return None
-        a = self.config.template_anchor
-        return np.asarray(a * self._first_weights + (1.0 - a) * self._weights, np.float32)
-
     def template(self, running: Patch | None = None) -> Patch:
         """``template_anchor`` x the first frame's template + the rest x a running one (by
         default the fast one, which locates the target)."""
@@ -140,15 +114,12 @@ class Refiner:
         leaving the bridge's shadow) loses the car when the light comes back, and the slow
         one, which never learnt the shadow, finds it.
         """
-        weights = self.weights()
-        found = self._search(patch, centres, box, self.template(), weights)
-        import os
+        found = self._search(patch, centres, box, self.template())
         self.slow_score = ncc(
-            crop(patch, found.centre, box, self._size), self.template(self._current),
-            None if os.environ.get("REL_SLOW") == "plain" else weights,
+            crop(patch, found.centre, box, self._size), self.template(self._current)
         )
         if found.score < self.config.template_update_score:
-            slow = self._search(patch, centres, box, self.template(self._current), weights)
+            slow = self._search(patch, centres, box, self.template(self._current))
             if slow.score > found.score:
                 found, self._fast = slow, self._current.copy()
                 self.slow_score = slow.score
@@ -158,20 +129,13 @@ class Refiner:
         )
         return found
 
-    def _search(
-        self,
-        patch: Patch,
-        centres: FloatArray,
-        box: FloatArray,
-        template: Patch,
-        weights: Weights | None,
-    ) -> Match:
+    def _search(self, patch: Patch, centres: FloatArray, box: FloatArray, template: Patch) -> Match:
         """``template``'s best match near the filter's estimate or the last one (ambiguous
-        peaks: :meth:`_nearer_if_ambiguous`), its pixels weighted by ``weights``."""
+        peaks: :meth:`_nearer_if_ambiguous`)."""
         frac = self.config.template_search_frac
-        found = match(patch, template, centres[0], box, frac, ((1.0, 1.0),), weights)
+        found = match(patch, template, centres[0], box, frac, ((1.0, 1.0),))
         if np.any(np.abs(centres[1] - centres[0]) > frac * box):
-            last = match(patch, template, centres[1], box, frac, ((1.0, 1.0),), weights)
+            last = match(patch, template, centres[1], box, frac, ((1.0, 1.0),))
             found = last if last.score > found.score else found
         return self._nearer_if_ambiguous(found, centres[1])
 
@@ -208,7 +172,6 @@ class Refiner:
         frame: Frame,
         box_in_frame: tuple[FloatArray, FloatArray],
         score: float,
-        llr: Patch | None = None,
     ) -> None:
         """Learn the box given (centre, size) on a frame where the template matched at ``score``.
 
@@ -219,27 +182,15 @@ class Refiner:
         shadow's edge creeping over the target (Car4 under the bridge): it then matches the lit
         half at NCC 0.9, and size filters learning from those frames shrank the box to half its
         height.  The slow template does not follow the shadow, so it keeps the size filters
-        off those frames.  The reliability map (``llr``: the likelihood image on the patch)
-        learns with the fast template, at its rate.
+        off those frames.
         """
         cfg = self.config
         centre, box = box_on_patch
         fresh = crop(patch, centre, box, self._size)
         rate = cfg.template_update_rate
         clear = self.rival < score - cfg.template_rival_margin and not self.jumped
-        import os
-        mode = os.environ.get("REL_MODE", "soft")
-        if mode.startswith("learn") and self._weights is not None:
-            m = self._reliability(llr, centre, box)
-            assert m is not None
-            m3 = m[:, :, None] if fresh.ndim == 3 else m
-            if score >= cfg.template_update_score and clear:
-                self._fast = self._fast + rate * m3 * (fresh - self._fast)
-        elif score >= cfg.template_update_score and clear:
+        if score >= cfg.template_update_score and clear:
             self._fast = (1.0 - rate) * self._fast + rate * fresh
-            fresh_weights = self._reliability(llr, centre, box)
-            if self._weights is not None and fresh_weights is not None:
-                self._weights = (1.0 - rate) * self._weights + rate * fresh_weights
         if self.slow_score < cfg.scale_update_score:
             return
         self._current = (1.0 - rate) * self._current + rate * fresh

@@ -62,7 +62,6 @@ from tracker.window import Window, cut_window, work_factor
 
 FloatArray = npt.NDArray[np.float64]
 Frame = npt.NDArray[np.uint8]
-LikImage = npt.NDArray[np.float32]  # float32 images: the likelihood image, the float patch
 
 
 @dataclass(frozen=True)
@@ -82,8 +81,6 @@ class TrackState:
     low_frames: int  # consecutive frames of low confidence
     lost_frames: int  # 0 while tracking; frames since the target was lost + 1
     frames: int = 0  # frames stepped since the first
-    hidden: int = 0  # frames held on the motion prediction (the target occluded)
-    coast: tuple[float, float] = (0.0, 0.0)  # the prediction's step while hidden
 
 
 def half_size(size: tuple[float, float], scale: FloatArray | float, window: Window) -> FloatArray:
@@ -145,17 +142,14 @@ def start(image: Frame, box: Box, cfg: TrackerConfig, rank_phase: int = 0) -> Tr
     centre = window.to_patch(estimate[None, :2])
     first = FirstFrame("grayscale" if grey else "colour", candidates, window, centre)
     half = half_size(size, 1.0, window)
+    refiner = Refiner(
+        cfg.refine, as_float(window.patch, grey), centre[0], 2.0 * half[0],
+        image, estimate[:2], np.array(size),
+    )
     gain = illumination.start(
         illumination.box_mean(window, estimate[:2], half[0], cfg.illumination), image
     )
     model, p_first = rank(window, centre[0], half[0], first, half, True, cfg)
-    # the template's reliability map from the colour histograms only (grey ones separate the
-    # target too weakly: Car4 lost the car with it)
-    llr = None if grey else likelihood(window.patch, model, cfg)[1]
-    refiner = Refiner(
-        cfg.refine, as_float(window.patch, grey), centre[0], 2.0 * half[0],
-        image, estimate[:2], np.array(size), llr,
-    )
     return TrackState(
         shape=image.shape,
         first=replace(first, p=p_first),
@@ -210,11 +204,11 @@ def _propagate(
 
 def _weigh(
     state: TrackState, window: Window, particles: FloatArray, cfg: TrackerConfig
-) -> tuple[Counted, FloatArray, FloatArray, FloatArray, FloatArray, LikImage]:
+) -> tuple[Counted, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Steps 2-5 on the (compensated) window: the selected features' counted planes, the
     particles (the first set mean-shifted on the likelihood image), their weights above the
-    threshold, the two candidate estimates (weighted mean, best particle), their histograms,
-    the model's and the likelihood image."""
+    threshold, the two candidate estimates (weighted mean, best particle), their histograms
+    and the model's."""
     f = cfg.filter
     planes, lik = likelihood(window.patch, state.model, cfg)
     centres = window.to_patch(particles[:, :2])
@@ -237,7 +231,7 @@ def _weigh(
     candidates = np.stack([weighted_estimate(particles, kept), particles[np.argmax(kept)]])
     cand_centres = window.to_patch(candidates[:, :2])
     cand_hists = kernel(planes, cand_centres, half_size(state.size, candidates[:, 2], window), cfg)
-    return planes, kept, candidates, cand_hists, model, lik
+    return planes, kept, candidates, cand_hists, model
 
 
 def _track(
@@ -250,7 +244,7 @@ def _track(
         state = replace(state, gain=illumination.from_frame(state.gain, image, cfg.illumination))
     raw = _window(state.size, image, state.estimate, 2.0 * noise, 1.0, cfg)
     window = illumination.compensate(raw, state.gain, cfg.illumination, state.first.cue)
-    planes, kept, candidates, cand_hists, model, lik = _weigh(state, window, particles, cfg)
+    planes, kept, candidates, cand_hists, model = _weigh(state, window, particles, cfg)
     rhos = bhattacharyya(cand_hists, model)
     best = int(np.argmax(rhos))
     particles = particles[systematic_resample(kept, rng)]
@@ -262,22 +256,17 @@ def _track(
         hist = kernel(planes, window.to_patch(at[None, :2]), half_size(size, at[2], window), cfg)[0]
         rho = float(bhattacharyya(hist[None], model)[0])
     features = state.model.features
-    if cfg.lost.occlusion_hold_frames > 0 and state.first.cue == "colour":
-        held = _occlusion(state, particles, rho, score, cfg)
-        if held is not None:
-            return held
-        state = replace(state, hidden=0)
     state, result = _accept(state, (particles, size), window, (at, hist, rho, score), cfg)
     if result.box is not None and result.confidence >= cfg.lost.lost_below_confidence:
         # the box's histogram under the current gain (window compensated, same features)
         known = hist if window is not raw and features == state.model.features else None
-        state = _learn(state, (image, image_f32, lik), raw, at, score, known, cfg)
+        state = _learn(state, (image, image_f32), raw, at, score, known, cfg)
     return state, result
 
 
 def _learn(
     state: TrackState,
-    images: tuple[Frame, LikImage, LikImage],
+    images: tuple[Frame, npt.NDArray[np.float32]],
     raw: Window,
     at: FloatArray,
     score: float,
@@ -294,10 +283,10 @@ def _learn(
         if gain is not state.gain:
             state = replace(state, gain=gain)
     if score >= cfg.refine.template_accept_score:
-        frame, image_f32, lik = images
+        frame, image_f32 = images
         box = (raw.to_patch(at[:2]), 2.0 * half)
         in_frame = (at[:2], np.array(state.size) * at[2])
-        state.refiner.learn(image_f32, box, frame, in_frame, score, lik)
+        state.refiner.learn(image_f32, box, frame, in_frame, score)
     return state
 
 
@@ -419,57 +408,6 @@ def _accept(
         low_frames=low_frames,
     )
     return state, _result(state, box_of(state, estimate), reported, cfg)
-
-
-def _occlusion(
-    state: TrackState, particles: FloatArray, rho: float, score: float, cfg: TrackerConfig
-) -> tuple[TrackState, TrackResult] | None:
-    """The occlusion state: None when the frame is tracked as usual, else the held state.
-
-    Entered where the histograms' confidence at the refined box falls below
-    ``occlusion_below_confidence`` and the template did not follow the target smoothly
-    (jumped or not located); held while neither cue finds it again (confidence back to
-    ``reacquire_confidence`` with the template located): the estimate coasts on the last
-    velocity, damped, nothing learns.  After ``occlusion_hold_frames`` the target is lost.
-    """
-    import os
-    lc = cfg.lost
-    confidence = float(state.model.confidence(np.array([rho]))[0])
-    located = score >= cfg.refine.template_accept_score
-    trig = os.environ.get("OCC_TRIG", "conf")
-    exit_ = os.environ.get("OCC_EXIT", "conf")
-    if state.hidden > 0:
-        if exit_ == "conf" and confidence >= lc.reacquire_confidence and located:
-            return None
-        if exit_ == "nojump" and located and not state.refiner.jumped:
-            return None
-    elif trig == "conf" and (
-        confidence >= lc.occlusion_below_confidence or (located and not state.refiner.jumped)
-    ):
-        return None
-    elif trig == "template" and located:
-        return None
-    elif trig == "slow" and (located or state.refiner.slow_score >= 0.1):
-        return None
-    if state.hidden >= lc.occlusion_hold_frames:
-        state = replace(state, hidden=0, lost_frames=1)
-        return state, _result(state, None, confidence, cfg)
-    decay = float(os.environ.get("OCC_DECAY", "0.8"))
-    if state.hidden == 0:
-        steps = np.diff(np.asarray(state.history), axis=0)
-        coast = tuple(steps.mean(axis=0) * decay) if len(steps) else (0.0, 0.0)
-    else:
-        coast = (state.coast[0] * decay, state.coast[1] * decay)
-    estimate = _inside(state.shape, state.estimate + np.array([coast[0], coast[1], 0.0]))
-    if os.environ.get("OCC_PARTICLES") == "keep":
-        pass
-    else:
-        particles = np.tile(estimate, (len(particles), 1))
-    state = replace(
-        state, estimate=estimate, particles=particles, hidden=state.hidden + 1,
-        coast=(float(coast[0]), float(coast[1])),
-    )
-    return state, _result(state, box_of(state, estimate), confidence, cfg)
 
 
 def _search_lost(

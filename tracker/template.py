@@ -22,7 +22,6 @@ import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
 Image = npt.NDArray[np.float32]
-Weights = npt.NDArray[np.float32]
 MIN_TEMPLATE_SIDE_PX = 8
 
 
@@ -74,41 +73,9 @@ def crop(image: Image, centre: FloatArray, box_wh: FloatArray, size: tuple[int, 
     return _resample(image, centre, step, size)
 
 
-def response(region: Image, template: Image, weights: Weights | None = None) -> Image:
-    """NCC of ``template`` at every offset in ``region`` (``TM_CCOEFF_NORMED``), or with
-    ``weights`` (one per template pixel, :mod:`tracker.reliability`) the weighted NCC: each
-    channel's mean and the products weighted by the pixels' weights, over all channels
-    together, as ``TM_CCOEFF_NORMED`` does with equal weights.
-
-    Five ``TM_CCORR`` passes (OpenCV's own masked ``TM_CCOEFF_NORMED`` took ten times the
-    plain match's time): the weighted, mean-free template against the region, the weights
-    against the region's squared norm and against each channel.  The region's mean is taken
-    out first (the score does not change) so that the float32 sums keep their precision.
-    """
-    if weights is None:
-        return np.asarray(cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED), np.float32)
-    colour = template.ndim == 3
-    axes = (0, 1)
-    w = weights[:, :, None] if colour else weights
-    total = float(weights.sum())
-    centred_t = template - (w * template).sum(axis=axes) / total
-    weighted_t = np.ascontiguousarray(w * centred_t, dtype=np.float32)
-    t_var = float((weighted_t * centred_t).sum())
-    region = np.asarray(region - region.mean(axis=axes), dtype=np.float32)
-    num = cv2.matchTemplate(region, weighted_t, cv2.TM_CCORR)
-    squares = (region * region).sum(axis=2) if colour else region * region
-    i_var = cv2.matchTemplate(squares, weights, cv2.TM_CCORR)
-    channels = [region[:, :, c] for c in range(region.shape[2])] if colour else [region]
-    for plane in channels:
-        sums = cv2.matchTemplate(np.ascontiguousarray(plane), weights, cv2.TM_CCORR)
-        i_var = i_var - sums * sums / total
-    scored = num / np.sqrt(np.maximum(i_var, 1e-6) * max(t_var, 1e-6))
-    return np.asarray(np.clip(scored, -1.0, 1.0), dtype=np.float32)
-
-
-def ncc(a: Image, b: Image, weights: Weights | None = None) -> float:
-    """Normalised cross-correlation of two images of one shape (:func:`response`)."""
-    return float(response(a, b, weights)[0, 0])
+def ncc(a: Image, b: Image) -> float:
+    """Normalised cross-correlation of two images of one shape (``TM_CCOEFF_NORMED``)."""
+    return float(cv2.matchTemplate(a, b, cv2.TM_CCOEFF_NORMED)[0, 0])
 
 
 def _rival(
@@ -147,12 +114,10 @@ def match(
     box_wh: FloatArray,
     search_frac: float,
     scales: tuple[tuple[float, float], ...],
-    weights: Weights | None = None,
 ) -> Match:
     """Best NCC match of ``template`` around ``centre`` over ``scales`` (x, y) of ``box_wh``.
 
-    The search reaches ``search_frac`` of the box size each side of ``centre``; ``weights``
-    weigh the template's pixels (:func:`response`).
+    The search reaches ``search_frac`` of the box size each side of ``centre``.
     """
     th, tw = template.shape[:2]
     mx, my = max(1, round(search_frac * tw)), max(1, round(search_frac * th))
@@ -160,13 +125,15 @@ def match(
     for s in scales:
         step = np.asarray(box_wh, dtype=np.float64) * s / np.array([tw, th], dtype=np.float64)
         region = _resample(image, centre, step, (tw + 2 * mx, th + 2 * my))
-        scores = response(region, template, weights)
-        _, peak, _, (ix, iy) = cv2.minMaxLoc(scores)
+        response = np.asarray(
+            cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED), dtype=np.float32
+        )
+        _, peak, _, (ix, iy) = cv2.minMaxLoc(response)
         if peak > best.score:
-            dx, dy = _subpixel(scores, ix, iy)
+            dx, dy = _subpixel(response, ix, iy)
             offset = np.array([ix + dx - mx, iy + dy - my]) * step
             reach = (max(1, tw // 4), max(1, th // 4))
-            rival, at = _rival(scores, ix, iy, reach)
+            rival, at = _rival(response, ix, iy, reach)
             origin = np.asarray(centre, dtype=np.float64)
             where = None if at is None else origin + (np.array(at) - (mx, my)) * step
             best = Match(origin + offset, s, float(peak), rival, where)
