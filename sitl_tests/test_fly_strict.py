@@ -10,6 +10,8 @@ ground the sample street gives no fix (docs/sitl.md).
   heartbeat says LAND; the companion says why in one line and ``run --fly`` exits 3.
 * Three laps of the square: no EKF failsafe, the longest gap between fused fixes while
   airborne under 1 s, the fake's estimate within 0.10 m (median) / 0.5 m (max) of truth.
+  The fake's height comes from its barometer, as the profile's ``EK3_SRC1_POSZ`` 1 asks
+  (mavlink_bridge/fake_baro.py); the printed line splits the error into horizontal and down.
   Real time (~110 s a seed): marked ``slow``; one seed by default, not the issue's five, to
   keep CI near its budget; ``SITL_SEEDS=0,1,2,3,4`` runs five.
 """
@@ -99,12 +101,11 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a finding (issue 19, open): no failsafe and the "
-                   "(6, 6) hover's correlated fixes no longer pull the estimate "
-                   "(fixgate.echo_correlation_s), but the max is 1.1-1.6 m: the take-off "
-                   "height (the fake's uninitialised estimate as the height prior), dead "
-                   "reckoning through the (6, 6) hover (one corner of one plate) and the ~2 s "
-                   "gap west of it (docs/sitl.md, 'the (6, 6) hover's correlated fixes')")
+@pytest.mark.xfail(strict=True, reason="a finding (issue 19, open): no failsafe, the "
+                   "height from the fake's barometer (EK3_SRC1_POSZ 1: no take-off error, no "
+                   "height echo), but the horizontal max is ~1.2 m: dead reckoning through "
+                   "the (6, 6) hover (one corner of one plate) and the ~2 s gap west of it "
+                   "(docs/sitl.md, 'the fake's height from its barometer')")
 @pytest.mark.parametrize("seed", SEEDS)
 def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
     with fake_thread(guided(seed)) as (fake, _loop):
