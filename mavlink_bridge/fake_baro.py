@@ -15,7 +15,8 @@ barometer, not from the vision fixes:
   variance ``EK3_ALT_M_NSE``^2 -- before any fix, so a vehicle taken off by hand has its
   height from the start.  The barometer's noise in the filter is ``EK3_ALT_M_NSE``, copter
   default 2.0 m (libraries/AP_NavEKF3/AP_NavEKF3.cpp).
-* PX4: ``EKF2_HGT_REF`` 0 baro, 1 GNSS (the default), 2 range, 3 vision, reboot required;
+* PX4: ``EKF2_HGT_REF`` 0 baro, 1 GNSS (the default), 2 range, 3 vision, reboot required
+  (src/modules/ekf2/ekf2_params.c);
   the vision's down is fused only when ``EKF2_EV_CTRL`` has bit 1 (vertical position)
   (src/modules/ekf2/params_external_vision.yaml); without GNSS the barometer
   (``EKF2_BARO_CTRL`` default 1) gives the height, noise ``EKF2_BARO_NOISE`` 3.5 m
