@@ -7,15 +7,19 @@ builds it), every fix it passes on is fused by the strict fake's estimator
 (``mavlink_bridge.fake_ekf.FakeEstimator``, ArduPilot's defaults but no delay: the fix
 comes with its frame), and the side sensors are the autopilot's: its attitude is the
 truth off by ``--attitude-offset-deg`` (stated 2.5 / 5 deg), its height prior is **the
-estimator's own down** (LOCAL_POSITION_NED: 0 until the first fix initialises it), its
-position guess the estimator's position.  The estimator is propagated with the truth's
+estimator's own down** (LOCAL_POSITION_NED), its position guess the estimator's position.
+The estimator's height comes from ``--height``: ``baro`` (the default, as the strict fake
+with the profile's ``EK3_SRC1_POSZ`` 1: a simulated barometer, set before the first fix),
+``extnav`` (``EK3_SRC1_POSZ`` 6: the fixes' down) or ``fixes`` (the old fake: 0 until the
+first fix, then the fixes' down).  The estimator is propagated with the truth's
 acceleration (second differences of the stream's truth) plus its IMU bias and noise.
 
 Prints the estimate's error against the truth (median, max, and where the max is), the
 longest time between fused fixes, and per second the worst estimate error (``--per-second``)::
 
     PYTHONPATH=. python benchmarks/square_loop.py /tmp/sq [--attitude-offset-deg 1 -1 3]
-        [--seed 0] [--per-second] [--set fixgate.echo_correlation_s=0]
+        [--seed 0] [--per-second] [--height baro|extnav|fixes]
+        [--set fixgate.echo_correlation_s=0]
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ def main() -> int:
     parser.add_argument("--altitude-sigma-m", type=float, default=0.5)
     parser.add_argument("--seed", type=int, default=0, help="the estimator's IMU seed")
     parser.add_argument("--per-second", action="store_true")
+    parser.add_argument("--height", choices=("baro", "extnav", "fixes"), default="baro")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
     cv2.setNumThreads(1)
@@ -51,7 +56,8 @@ def main() -> int:
     meta, truth = read_meta(folder), read_truth(folder)
     landmarks, refs = load_stream_map(folder)
     settings = load_settings(sets=args.set, shipped=SIM_LAYERS)
-    ekf = FakeEstimator(EstimatorConfig(delay_ms=0.0), seed=args.seed)
+    ekf = FakeEstimator(EstimatorConfig(delay_ms=0.0, height_source=args.height),
+                        seed=args.seed)
     poses = {i: ft.pose for i, ft in truth.items() if ft.pose is not None}
     off = np.deg2rad(args.attitude_offset_deg)
     sig = np.deg2rad(args.attitude_sigma_deg)
@@ -72,7 +78,7 @@ def main() -> int:
                             pose_config=settings.pose, acquire_config=settings.acquire,
                             gate_config=settings.fixgate, seed=args.seed)
     fps = meta.fps
-    errors: list[tuple[float, float]] = []
+    errors: list[tuple[float, float, float]] = []  # (t, error, its down part)
     fused: list[float] = []
     for frame in frames(folder, None):
         now["index"] = frame.index
@@ -81,6 +87,7 @@ def main() -> int:
             continue
         t = frame.t_us / 1e6
         ekf.predict(t, truth_accel(poses, frame.index, fps))
+        ekf.observe_baro(t, p.down_m)
         fix = perception.process(frame).fix
         perception.housekeeping(frame)
         if isinstance(fix, PoseFix):
@@ -88,8 +95,8 @@ def main() -> int:
             if ekf.fuse(t, fix.position_ned_m, (var[0], var[1], var[2])).accepted:
                 fused.append(t)
         if ekf.initialised:
-            errors.append((t, float(np.linalg.norm(
-                np.subtract(ekf.position(), (p.north_m, p.east_m, p.down_m))))))
+            d = np.subtract(ekf.position(), (p.north_m, p.east_m, p.down_m))
+            errors.append((t, float(np.linalg.norm(d)), abs(float(d[2]))))
     perception.close()
     report(errors, fused, args.per_second)
     return 0
@@ -104,17 +111,19 @@ def truth_accel(poses: dict[int, TruthPose], i: int, fps: float) -> np.ndarray:
     return (pos[0] - 2 * pos[1] + pos[2]) * fps * fps
 
 
-def report(errors: list[tuple[float, float]], fused: list[float], per_second: bool) -> None:
-    e = np.array([v for _, v in errors])
+def report(errors: list[tuple[float, float, float]], fused: list[float],
+           per_second: bool) -> None:
+    e = np.array([v for _, v, _ in errors])
+    down = np.array([v for _, _, v in errors])
     worst = int(np.argmax(e))
     gaps = np.diff(fused) if len(fused) > 1 else np.array([0.0])
     g = int(np.argmax(gaps))
     print(f"estimate error median {np.median(e):.3f} m, max {e[worst]:.3f} m at "
           f"{errors[worst][0]:.1f} s; fused {len(fused)}, longest gap {gaps[g]:.2f} s from "
-          f"{fused[g]:.1f} s")
+          f"{fused[g]:.1f} s; down error median {np.median(down):.3f} m, max {down.max():.3f} m")
     if per_second:
         by: dict[int, float] = {}
-        for t, v in errors:
+        for t, v, _ in errors:
             by[int(t)] = max(by.get(int(t), 0.0), v)
         print(" ".join(f"{s}:{v:.2f}" for s, v in sorted(by.items())))
 

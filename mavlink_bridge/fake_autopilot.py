@@ -13,6 +13,9 @@ It is first-class code: tests, ``companion demo`` and ``companion fake-autopilot
 * Its own estimator (:mod:`mavlink_bridge.fake_ekf`): LOCAL_POSITION_NED, GLOBAL_POSITION_INT,
   ATTITUDE and EKF_STATUS_REPORT report the estimate; fixes are gated against it, never
   against the truth.  Without fixes: "VisOdom: not healthy", flags 0x25, EKF failsafe LAND.
+  Its height comes from a simulated barometer unless its parameters make the fixes the
+  height source (:mod:`mavlink_bridge.fake_baro`: ``EK3_SRC1_POSZ`` 6, PX4 ``EKF2_EV_CTRL``
+  bit 1).
 * Parameters (:mod:`mavlink_bridge.fake_params`): PARAM_REQUEST_READ / _LIST / PARAM_SET
   with the real autopilot's defaults.
 * The old permissive fake -- every stream unasked, fixes judged against the truth -- only
@@ -44,6 +47,7 @@ import pymap3d
 
 from mavlink_bridge.codec import Codec, MAVLinkMessage
 from mavlink_bridge.endpoint import Connection, open_connection, parse_endpoint
+from mavlink_bridge.fake_baro import height_source
 from mavlink_bridge.fake_drift import AttitudeDrift, AttitudeErrorConfig
 from mavlink_bridge.fake_ekf import EstimatorConfig, FakeEstimator, estimator_defaults
 from mavlink_bridge.fake_faults import FaultInjector
@@ -325,6 +329,9 @@ class FakeAutopilot:
                 else (v - prev[1]) / (t - prev[0])
             self._prev_velocity = (t, v)
         self.ekf.predict(t, accel)
+        if self.estimator_config.height_source != "fixes":  # the old fake's only on request
+            self.ekf.height_source = height_source(self.config.profile, self.params.values)
+        self.ekf.observe_baro(t, state.position_ned_m[2])
         if self.config.judge == "estimate":
             # a vehicle flying from the start (scripted, or guided airborne) had its position
             # before this fake began: the failsafe watches outages after the first fix

@@ -15,6 +15,13 @@ and corrected by the vision fixes it accepts.  Every rule copies the real autopi
   ``EK3_POS_I_GATE`` default 500 = 5 sigma; PX4 ``EKF2_EVP_GATE`` default 5).
   The vertical axis has its own test.
 * Process noise of the filter: ``EK3_ACC_P_NSE`` / PX4 ``EKF2_ACC_NOISE``, both 0.35 m/s^2.
+* Height (:mod:`mavlink_bridge.fake_baro`): from the simulated barometer, fused with the
+  variance ``baro_noise_m``^2 (ArduPilot ``EK3_ALT_M_NSE`` 2.0 m; PX4 ``EKF2_BARO_NOISE``
+  3.5 m) and set from it at start, before any fix, as EKF3's bootstrap does; the fixes' down
+  is fused only when :attr:`FakeEstimator.height_source` is ``"extnav"`` (the autopilot's
+  parameters say so: ``EK3_SRC1_POSZ`` 6, PX4 ``EKF2_EV_CTRL`` bit 1) and while they are
+  fresh.  ``"fixes"`` is the old fake (no barometer; the height unset until the first fix,
+  then every fix's down fused): only for a test that asks for it explicitly.
 * Health: ArduPilot's EKF_STATUS_REPORT flags are 0x33f with external navigation fused; the
   horizontal position flags drop (0x25) about ``outage_flags_s`` = 6 s into a vision outage
   (../shared/MAVLINK.md "What a real ArduCopter did"); PX4 declares the horizontal position
@@ -35,6 +42,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from mavlink_bridge.fake_baro import EXTNAV_FRESH_S, BaroConfig, HeightSource, SimBarometer
 
 GRAVITY_M_S2 = 9.80665
 EKF_FLAGS_HEALTHY = 0x33F  # attitude, velocities, positions, pred pos horiz rel/abs (ArduPilot)
@@ -67,12 +76,18 @@ class EstimatorConfig:
     accel_noise_m_s2_rthz: float = 0.02
     outage_flags_s: float = 6.0
     attitude: AttitudeModel = field(default_factory=AttitudeModel)
+    # the height: "baro" or "extnav" (a fake autopilot sets it from its parameters,
+    # fake_baro.height_source), "fixes" the old fake's (module doc)
+    height_source: HeightSource = "baro"
+    baro_noise_m: float = 2.0  # EK3_ALT_M_NSE (PX4 EKF2_BARO_NOISE 3.5)
+    baro: BaroConfig = field(default_factory=BaroConfig)
 
 
 def estimator_defaults(profile: str) -> EstimatorConfig:
     """The real autopilot's defaults (module doc has the sources)."""
     if profile == "px4":
-        return EstimatorConfig(delay_ms=0.0, noise_floor_m=0.1, outage_flags_s=5.0)
+        return EstimatorConfig(delay_ms=0.0, noise_floor_m=0.1, outage_flags_s=5.0,
+                               baro_noise_m=3.5)
     return EstimatorConfig()
 
 
@@ -92,7 +107,13 @@ class FakeEstimator:
         self.bias = self._rng.normal(0.0, config.accel_bias_m_s2, 3)
         self.x = np.zeros((3, 2))
         self.P = np.tile(np.diag([100.0, 1.0]), (3, 1, 1))
-        self.initialised = False
+        self.initialised = False  # horizontal: set by the first fix
+        self.height_source: HeightSource = config.height_source
+        self.height_initialised = False  # vertical: by the barometer at start, or a fix
+        self._height_active: HeightSource = "baro"  # what the down follows now
+        self._last_down_fix_s = -math.inf
+        self._baro_offset_m = 0.0  # barometer reading minus the height estimate (extnav)
+        self.baro = SimBarometer(config.baro, seed)
         self.t_s: float | None = None
         self.t0_s = 0.0  # the first propagation (boot): outages count from it until a fix
         self.last_fused_s: float | None = None
@@ -120,15 +141,43 @@ class FakeEstimator:
         accel += self._rng.normal(0.0, self.config.accel_noise_m_s2_rthz / math.sqrt(dt), 3)
         if a.coupled:
             accel += self._attitude_accel_error(np.asarray(true_accel_ned, float))
-        if not self.initialised:
-            return  # no position source yet: constant-position mode at the origin
+        # no horizontal position source yet: constant-position mode at the origin; the
+        # height runs from the barometer's first reading on
+        axes = [k for k, on in enumerate((self.initialised,) * 2 + (self.height_initialised,))
+                if on]
+        if not axes:
+            return
         f = np.array([[1.0, dt], [0.0, 1.0]])
         q = self.config.filter_accel_noise_m_s2 ** 2
         qm = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
-        for k in range(3):
+        for k in axes:
             self.x[k] = f @ self.x[k] + np.array([0.5 * dt * dt, dt]) * accel[k]
             self.P[k] = f @ self.P[k] @ f.T + qm
         self._history.append((t_s, self.x[:, 0].copy()))
+
+    def observe_baro(self, t_s: float, true_down_m: float) -> None:
+        """The barometer at ``t_s`` (at its own rate): sets the height at start, is fused
+        while it is the active height source, else tracks its offset (module doc)."""
+        if self.height_source == "fixes" or not self.baro.due(t_s):
+            return
+        height = self.baro.read(t_s, true_down_m)
+        extnav = self.height_source == "extnav" and t_s - self._last_down_fix_s <= EXTNAV_FRESH_S
+        if extnav:
+            # calcFiltBaroOffset: low-passed, about 1 s at 20 Hz
+            self._baro_offset_m += 0.05 * (height + self.x[2, 0] - self._baro_offset_m)
+            return
+        self._height_active = "baro"
+        z, r = -(height - self._baro_offset_m), self.config.baro_noise_m ** 2
+        if not self.height_initialised:  # InitialiseFilterBootstrap -> ResetHeight
+            self.x[2] = (z, 0.0)
+            self.P[2] = np.diag([r, 1.0])
+            self.height_initialised = True
+            return
+        s = self.P[2][0, 0] + r
+        if (z - self.x[2, 0]) ** 2 / s <= self.config.gate_sigma ** 2:  # EK3_HGT_I_GATE 500
+            gain = self.P[2][:, 0] / s
+            self.x[2] += gain * (z - self.x[2, 0])
+            self.P[2] = self.P[2] - np.outer(gain, self.P[2][0, :])
 
     def _attitude_accel_error(self, accel_ned: np.ndarray) -> np.ndarray:
         """A tilt error leaks gravity (g d); a yaw error rotates the horizontal acceleration."""
@@ -152,14 +201,22 @@ class FakeEstimator:
         z = np.asarray(z_ned, float)
         floor2 = self.config.noise_floor_m ** 2
         r = np.array([v if math.isfinite(v) and v > floor2 else floor2 for v in var_ned])
+        down = self._down_from_fixes(t_s)
         if not self.initialised or reset:
-            self.x[:, 0], self.x[:, 1] = z, 0.0 if not self.initialised else self.x[:, 1]
-            for k in range(3):
+            # the first fix (or a reset_counter change) sets the horizontal position, and
+            # the height when it comes from the fixes (EKF3 ResetPositionD on a source change)
+            with_down = down == "reset" or (bool(down) and (reset or not self.height_initialised))
+            axes = [0, 1, 2] if with_down else [0, 1]
+            for k in axes:
+                self.x[k] = (z[k], self.x[k, 1] if self.initialised else 0.0)
                 self.P[k] = np.diag([r[k], self.P[k][1, 1] if self.initialised else 1.0])
+            self.height_initialised = self.height_initialised or 2 in axes
             self.initialised = True
             self._history.clear()
             self.last_fused_s = t_s
             return Verdict(True, "reset" if reset else "fused", 0.0)  # the first sets it
+        if down == "reset":
+            self.x[2, 0], self.P[2][0, 0], self.P[2][0, 1], self.P[2][1, 0] = z[2], r[2], 0, 0
         nu = z - self.position_at(t_s - self.config.delay_ms / 1000.0)
         s = np.array([self.P[k][0, 0] + r[k] for k in range(3)])
         gate2 = self.config.gate_sigma ** 2
@@ -167,8 +224,8 @@ class FakeEstimator:
         if (nu[0] ** 2 / s[0] + nu[1] ** 2 / s[1]) > gate2:
             self.rejected += 1
             return Verdict(False, "innovation_gate", innovation)
-        axes = range(3) if nu[2] ** 2 / s[2] <= gate2 else range(2)
-        for k in axes:
+        fused_axes = range(3) if down == "fuse" and nu[2] ** 2 / s[2] <= gate2 else range(2)
+        for k in fused_axes:
             gain = self.P[k][:, 0] / s[k]
             self.x[k] += gain * nu[k]
             self.P[k] = self.P[k] - np.outer(gain, self.P[k][0, :])
@@ -177,6 +234,19 @@ class FakeEstimator:
         self.fused += 1
         self.last_fused_s = t_s
         return Verdict(True, "fused", innovation)
+
+    def _down_from_fixes(self, t_s: float) -> str:
+        """Whether this fix's down is used: "" no (barometer), "fuse", or "reset" (the
+        height source changes from the barometer to the fixes: EKF3 ResetPositionD)."""
+        if self.height_source == "fixes":
+            return "fuse"
+        if self.height_source != "extnav":
+            return ""
+        self._last_down_fix_s = t_s
+        if self._height_active != "extnav":
+            self._height_active = "extnav"
+            return "reset"
+        return "fuse"
 
     def _pull_attitude(self, nu: np.ndarray) -> None:
         """A fix north of the estimate says the acceleration north was under-estimated: the

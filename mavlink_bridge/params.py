@@ -10,7 +10,9 @@ unconfigured vehicle has) and whether a change needs a reboot.  Sources:
   ``GPS1_TYPE`` 1 (auto), reboot required (libraries/AP_GPS/AP_GPS.cpp).
 * PX4: ``EKF2_EV_CTRL`` 0 (src/modules/ekf2/params_external_vision.yaml, no vision fusion),
   ``EKF2_EV_DELAY`` 0 ms, ``EKF2_EVP_NOISE`` 0.1 m, ``EKF2_EV_NOISE_MD`` 0,
-  ``EKF2_GPS_CTRL`` 7, ``EKF2_HGT_REF`` 1 (GNSS); EKF2 parameters apply without a reboot.
+  ``EKF2_GPS_CTRL`` 7, ``EKF2_HGT_REF`` 1 (GNSS; 0 baro, 3 vision; reboot required,
+  src/modules/ekf2/ekf2_params.c ``@reboot_required true``); the other EKF2
+  parameters apply without a reboot.
 
 Protocol (MAVLink parameter microservice): PARAM_REQUEST_READ by name (param_index -1) is
 answered with PARAM_VALUE; PARAM_SET is answered with PARAM_VALUE carrying the value now in
@@ -58,7 +60,7 @@ def parameter_specs(profile: str, delay_ms: float | None = None) -> tuple[ParamS
             ParamSpec("EKF2_EV_NOISE_MD", 0, 0, False, "use the fixes' covariances"),
             ParamSpec("EKF2_EVP_NOISE", 0.1, 0.1, False, "position noise floor (m)", False),
             ParamSpec("EKF2_GPS_CTRL", 0, 7, False, "no GPS: position from vision only"),
-            ParamSpec("EKF2_HGT_REF", 0, 1, False, "height from the barometer"),
+            ParamSpec("EKF2_HGT_REF", 0, 1, True, "height from the barometer"),
         )
     return (
         ParamSpec("VISO_TYPE", 1, 0, True, "MAVLink external navigation"),

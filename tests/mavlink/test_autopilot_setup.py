@@ -35,8 +35,8 @@ def test_setup_sets_reads_back_and_says_reboot(profile: str,
     assert values[delay] == 45.0
     if profile == "ardupilot":
         assert "reboot the autopilot: VISO_TYPE, GPS1_TYPE" in out, out
-    else:
-        assert "no reboot needed" in out, out
+    else:  # PX4's EKF2_HGT_REF: @reboot_required true
+        assert "reboot the autopilot: EKF2_HGT_REF" in out, out
     assert again == 0 and "nothing to set" in out2, out2
 
 

@@ -68,6 +68,7 @@ def hover_estimator(config: EstimatorConfig | None = None) -> FakeEstimator:
     for k in range(200):
         t = k * 0.01
         ekf.predict(t, np.zeros(3))
+        ekf.observe_baro(t, -5.0)
         if k % 5 == 0:
             assert ekf.fuse(t, (0.0, 0.0, -5.0), (0.01, 0.01, 0.01)).accepted
     return ekf
