@@ -53,11 +53,13 @@ def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
         ) -> FloatArray | None:
     """ECC alignment with the perception's settings; ``verify``: a new sighting, held to
     ``verify_correlation`` over the whole reference (a running track to
-    ``TRACK_MIN_CORRELATION``, its outer ring left out: ``ecc_edge_band_px``)."""
-    least, band = ((config.verify_correlation, 0) if verify
-                   else (TRACK_MIN_CORRELATION, config.ecc_edge_band_px))
+    ``TRACK_MIN_CORRELATION``, its outer ring left out: ``ecc_edge_band_px``, and its
+    unsmoothed stage on the feature mixed with grey levels: ``ecc_fine_grey_share``)."""
+    least, band, grey = ((config.verify_correlation, 0, 0.0) if verify
+                         else (TRACK_MIN_CORRELATION, config.ecc_edge_band_px,
+                               config.ecc_fine_grey_share))
     return refine_ecc(ref, frame, hom, config.ecc_iterations, least,
-                      config.ecc_fine_iterations, weights, band)
+                      config.ecc_fine_iterations, weights, band, grey)
 
 
 def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:

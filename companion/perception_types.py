@@ -38,6 +38,9 @@ class PerceptionConfig:
     #: The unsmoothed stage leaves out the reference's outer ring of this many pixels
     #: (0: none): there the frame mixes in what is behind the plate (docs/pose.md).
     ecc_edge_band_px: int = field(default=1, metadata={"ge": 0, "le": 8})
+    #: ... and aligns a colour feature mixed with this share of grey levels: a camera keeps
+    #: chroma at half resolution, grey levels at full (tracker.acquire.mixed_weights).
+    ecc_fine_grey_share: float = field(default=0.5, metadata={"ge": 0, "le": 1})
     #: A track's corners feed the pose only while this share of its quadrilateral is in
     #: the image: corners extrapolated from a sliver are off by pixels.
     min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})

@@ -73,6 +73,9 @@ class Reference:
     templates: dict[tuple[tuple[float, float, float] | None, tuple[int, int]],
                     npt.NDArray[np.float32]] = field(default_factory=dict, compare=False,
                                                      repr=False)
+    #: a colour feature mixed with grey levels (see :func:`mixed_weights`), made on demand
+    mixes: dict[tuple[tuple[float, float, float], float], tuple[float, float, float]] = field(
+        default_factory=dict, compare=False, repr=False)
 
 
 Weights = tuple[float, float, float]
@@ -110,6 +113,34 @@ def reference_template(ref: Reference, weights_bgr: Weights | None, size: tuple[
                 del ref.templates[next(iter(ref.templates))]  # the oldest
             ref.templates[key] = template
     return template
+
+
+#: OpenCV's grey levels of BGR (``cv2.COLOR_BGR2GRAY``) as weights.
+GREY_WEIGHTS: Weights = (0.114, 0.587, 0.299)
+
+
+def mixed_weights(ref: Reference, weights_bgr: Weights, grey_share: float) -> Weights:
+    """A plane ``grey_share`` grey levels and the rest ``weights_bgr``'s colour feature, each
+    scaled to unit spread on the reference, grey's sign taken so that the two add up where
+    they agree (kept per reference).
+
+    A colour feature is mostly chroma, and a camera's frames keep chroma at half
+    resolution (YUV 4:2:0, JPEG): an edge on the feature alone is blurred over two pixels.
+    Grey levels keep the luma's full resolution, the feature the contrast that grey
+    levels may lack; the mix aligns on both (docs/pose.md, "The fine stage's plane")."""
+    key = (weights_bgr, grey_share)
+    mixed = ref.mixes.get(key)
+    if mixed is None:  # two threads may both make it: the same values, no harm
+        feature, grey = reference_plane(ref, weights_bgr), ref.gray
+        spread_f, spread_g = max(float(np.std(feature)), 1e-3), max(float(np.std(grey)), 1e-3)
+        agree = float(np.mean((feature - feature.mean()) * (grey - grey.mean())))
+        sign = 1.0 if agree >= 0 else -1.0
+        v = ((1.0 - grey_share) * np.asarray(weights_bgr) / spread_f
+             + grey_share * sign * np.asarray(GREY_WEIGHTS) / spread_g)
+        v = v / max(float(np.abs(v).sum()), 1e-12)
+        mixed = (float(v[0]), float(v[1]), float(v[2]))
+        ref.mixes[key] = mixed
+    return mixed
 
 
 def project(image_bgr: npt.NDArray[np.uint8], weights_bgr: Weights) -> npt.NDArray[np.float32]:
@@ -336,7 +367,7 @@ def size_in_frame(ref: Reference, corners: FloatArray, least: int) -> tuple[int,
 def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
                iterations: int = 40, min_correlation: float = 0.6,
                fine_iterations: int = 10, weights_bgr: Weights | None = None,
-               edge_band_px: int = 0) -> FloatArray | None:
+               edge_band_px: int = 0, fine_grey_share: float = 0.0) -> FloatArray | None:
     """Sub-pixel homography (reference -> frame) by ECC alignment, from an estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
@@ -355,7 +386,9 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     ``frame`` is grey (H, W) or BGR (H, W, 3), aligned with the reference's grey levels;
     with ``weights_bgr`` it is BGR and aligned on that colour feature of both (the
     tracker's best feature separates the plate from what surrounds it, where grey levels
-    may not: an edge without grey contrast cannot hold a corner).
+    may not: an edge without grey contrast cannot hold a corner).  ``fine_grey_share``:
+    the unsmoothed stage aligns on the feature mixed with that share of grey levels
+    (:func:`mixed_weights`; the same window and template size, so the warp carries over).
     """
     start = ecc_start(ref, frame, hom, weights_bgr)
     if start is None:
@@ -364,6 +397,11 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     try:
         cc, warp = _ecc_coarse(template, roi, warp, iterations)
         if fine_iterations > 0:
+            if weights_bgr is not None and fine_grey_share > 0.0:
+                fine = ecc_start(ref, frame, hom, mixed_weights(ref, weights_bgr,
+                                                                fine_grey_share))
+                assert fine is not None  # the same outline as ``start``'s
+                template, roi = fine.template, fine.roi
             cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1, edge_band_px)
     except cv2.error:
         return None
