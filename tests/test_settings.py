@@ -164,6 +164,7 @@ def test_the_deployment_defaults_are_not_the_simulators() -> None:
     assert (deploy.source.kind, deploy.source.spec) == ("camera", "0")
     assert deploy.pose.pixel_sigma_px == 1.0
     assert deploy.perception.corner_sigma_exponent == 0.0
+    assert not deploy.pose.learn_attitude_bias  # a real autopilot's attitude error: unmeasured
     assert not deploy.noise_measured
     assert not any("sim" in Path(f).name for f in deploy.config_files)
     assert deploy.origin_of("camera.fx") == BUILT_IN
@@ -171,6 +172,7 @@ def test_the_deployment_defaults_are_not_the_simulators() -> None:
     assert sim.source.kind == "sim"
     assert sim.pose.pixel_sigma_px == 0.07
     assert sim.perception.corner_sigma_exponent == 1.4
+    assert sim.pose.learn_attitude_bias  # the simulated autopilots' Gauss-Markov error
     assert sim.camera.mount_rpy_deg == (0.0, -30.0, 0.0)
     assert sim.noise_measured
     assert sim.origin_of("pose.pixel_sigma_px").endswith("config/sim.toml")

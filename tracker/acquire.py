@@ -100,17 +100,19 @@ def reference_plane(ref: Reference, weights_bgr: Weights | None) -> npt.NDArray[
 def reference_template(ref: Reference, weights_bgr: Weights | None, size: tuple[int, int]
                        ) -> npt.NDArray[np.float32]:
     """The reference's plane (:func:`reference_plane`) resized to ``size`` (w, h) by area
-    averaging, float32, read-only; the last ``TEMPLATES_KEPT`` sizes are kept (issue 23:
-    resizing the 256 px reference every frame cost more than the crop it is aligned on)."""
+    averaging, float32, read-only; the last ``TEMPLATES_KEPT`` sizes of each plane are kept
+    (issue 23: resizing the 256 px reference every frame cost more than the crop it is
+    aligned on)."""
     key = (weights_bgr, size)
     template = ref.templates.get(key)
     if template is None:
         template = np.asarray(cv2.resize(reference_plane(ref, weights_bgr), size,
                                          interpolation=cv2.INTER_AREA), np.float32)
         template.flags.writeable = False
-        with _templates_lock:
-            if len(ref.templates) >= TEMPLATES_KEPT:
-                del ref.templates[next(iter(ref.templates))]  # the oldest
+        with _templates_lock:  # per plane: a running track aligns two (refine_ecc)
+            same = [k for k in ref.templates if k[0] == weights_bgr]
+            if len(same) >= TEMPLATES_KEPT:
+                del ref.templates[same[0]]  # the plane's oldest
             ref.templates[key] = template
     return template
 

@@ -148,7 +148,7 @@ def test_real_photo_crop_found_when_placed_in_a_real_scene() -> None:
 def test_a_reference_template_is_the_resized_plane_kept_for_the_last_sizes() -> None:
     """The reference resized to a plate's size in the frame is made once per size (issue
     23: every frame's alignment resized the whole reference), read-only, and only the last
-    ``TEMPLATES_KEPT`` sizes are kept."""
+    ``TEMPLATES_KEPT`` sizes of each plane are kept (a running track aligns two planes)."""
     ref = ReferenceMatcher().add("poster", textured_poster(2, 256, 170))
     weights = (0.5, 0.25, -0.75)
     first = reference_template(ref, weights, (90, 60))
@@ -160,7 +160,10 @@ def test_a_reference_template_is_the_resized_plane_kept_for_the_last_sizes() -> 
     assert np.array_equal(grey, cv2.resize(ref.gray, (90, 60), interpolation=cv2.INTER_AREA))
     for w in range(91, 91 + TEMPLATES_KEPT - 1):
         reference_template(ref, weights, (w, 60))
-    assert len(ref.templates) == TEMPLATES_KEPT
+    assert reference_template(ref, weights, (90, 60)) is first  # each plane keeps its own
+    reference_template(ref, weights, (91 + TEMPLATES_KEPT, 60))
+    assert len(ref.templates) == TEMPLATES_KEPT + 1
+    assert reference_template(ref, None, (90, 60)) is grey
     assert reference_template(ref, weights, (90, 60)) is not first  # the oldest went first
 
 
