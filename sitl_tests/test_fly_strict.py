@@ -103,9 +103,9 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="a finding (issue 19, open): no failsafe, the "
                    "height from the fake's barometer (EK3_SRC1_POSZ 1: no take-off error, no "
-                   "height echo), but the horizontal max is ~1.2 m: dead reckoning through "
-                   "the (6, 6) hover (one corner of one plate) and the ~2 s gap west of it "
-                   "(docs/sitl.md, 'the fake's height from its barometer')")
+                   "height echo), but the longest gap is ~2.1 s and the horizontal max "
+                   "0.56-0.91 m: nothing is tracked leaving the (6, 6) hover westwards "
+                   "(docs/sitl.md, 'After the fine stage's mix and the attitude learning')")
 @pytest.mark.parametrize("seed", SEEDS)
 def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
     with fake_thread(guided(seed)) as (fake, _loop):
