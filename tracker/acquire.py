@@ -400,10 +400,8 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
         cc, warp = _ecc_coarse(template, roi, warp, iterations)
         if fine_iterations > 0:
             if weights_bgr is not None and fine_grey_share > 0.0:
-                fine = ecc_start(ref, frame, hom, mixed_weights(ref, weights_bgr,
-                                                                fine_grey_share))
-                assert fine is not None  # the same outline as ``start``'s
-                template, roi = fine.template, fine.roi
+                template, roi = on_plane(start, ref, frame, mixed_weights(
+                    ref, weights_bgr, fine_grey_share))
             cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1, edge_band_px)
     except cv2.error:
         return None
@@ -456,6 +454,17 @@ def ecc_start(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     else:
         roi = crop.astype(np.float32)
     return EccStart(template, roi, s_ref, t_roi, warp)
+
+
+def on_plane(start: EccStart, ref: Reference, frame: npt.NDArray[np.uint8],
+             weights_bgr: Weights) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """The template and the window of ``start`` (:func:`ecc_start`, same outline, same
+    sizes: its warps carry over) on ``weights_bgr``'s plane, without finding the window
+    again (issue 23: the same values as a second :func:`ecc_start`)."""
+    x0, y0 = int(start.from_roi[0, 2]), int(start.from_roi[1, 2])
+    height, width = start.roi.shape[:2]
+    template = reference_template(ref, weights_bgr, start.template.shape[1::-1])
+    return template, project(frame[y0:y0 + height, x0:x0 + width], weights_bgr)
 
 
 #: The unsmoothed stage leaves out the template's outer ring (``refine_ecc``'s

@@ -12,8 +12,10 @@ import pytest
 from tracker.acquire import (
     TEMPLATES_KEPT,
     ReferenceMatcher,
+    ecc_start,
     homography_to,
     mixed_weights,
+    on_plane,
     project,
     project_corners,
     reference_plane,
@@ -207,3 +209,30 @@ def test_a_mixed_plane_weighs_feature_and_grey_levels_by_their_spread() -> None:
     unit += 0.5 * sign * (grey - grey.mean()) / grey.std()
     assert abs(float(np.corrcoef(plane.ravel(), unit.ravel())[0, 1])) > 0.999
     assert np.corrcoef(plane.ravel(), grey.ravel())[0, 1] * sign > 0.3
+
+
+@pytest.mark.parametrize("corners", [
+    [[250, 150], [370, 156], [368, 236], [252, 232]],  # inside the frame
+    [[-30, 400], [90, 396], [92, 470], [-28, 476]],  # its window clipped by two edges
+])
+def test_the_fine_stage_plane_is_a_second_ecc_start_without_finding_the_window_again(
+        corners: list[list[float]]) -> None:
+    """:func:`on_plane` (issue 23) gives the template and window a second
+    :func:`ecc_start` on the other plane gives, value for value: the same outline."""
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    quad = np.array(corners, np.float64)
+    frame = place(poster, quad, seed=3)
+    hom = homography_to(ref, quad + 1.5)
+    chroma = (-0.5, 1.0, -0.5)
+    start = ecc_start(ref, frame, hom, chroma)
+    assert start is not None
+    mixed = mixed_weights(ref, chroma, 0.5)
+    again = ecc_start(ref, frame, hom, mixed)
+    assert again is not None
+    template, roi = on_plane(start, ref, frame, mixed)
+    assert template is again.template  # the kept template of that plane and size
+    assert roi.dtype == again.roi.dtype and np.array_equal(roi, again.roi)
+    assert not np.array_equal(roi, start.roi)  # another plane indeed
+    assert np.array_equal(again.warp, start.warp) and np.array_equal(
+        again.from_roi, start.from_roi)
