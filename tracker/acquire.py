@@ -56,7 +56,8 @@ class AcquireConfig:
     ecc_fine_iterations: int = field(default=10, metadata={"ge": 0})
     #: ``find(cut=True)``: a plate cut by the image's edge whose inliers are too few or too
     #: bunched for a homography is matched by a similarity (4 parameters) and aligned by
-    #: ECC from there; it needs this many of the similarity's inliers (issue 19).
+    #: ECC from there; it needs this many of the similarity's inliers (issue 19; not tuned:
+    #: the code's ``min_inliers``, kept when a layer lowers that for whole plates).
     min_cut_inliers: int = field(default=12, metadata={"ge": 3})
 
 
