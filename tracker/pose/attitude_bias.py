@@ -12,12 +12,9 @@ measured -- never above the sigma the autopilot's sample states (then the estima
 forgotten and the raw attitude is used as before).
 
 The loop cannot run away on its own: the corrected attitude is still checked against the
-landmarks by the solver (``PoseConfig.check_attitude``), and the estimate is only ever set,
-axis by axis, from what the fix's landmarks fix *without* the prior: its variance is at least
-the landmarks' own (:meth:`AttitudeBias.landmarks_only`), since consecutive frames' pixel
-errors are not independent (a long stare at the same plates is one measurement, not many),
-and an axis they fix no better than the estimate already knows keeps it (one small plate's
-tilt). ``attitude_bias_floor_*_deg`` is only a last guard under that.
+landmarks by the solver (``PoseConfig.check_attitude``), the estimate is only ever set
+from a fix's attitude covariance (one small plate hardly narrows it) and floored at
+``attitude_bias_floor_*_deg``, since consecutive frames' pixel errors are not independent.
 Pure: no clock of its own; times are the samples' microseconds.
 """
 
@@ -32,9 +29,6 @@ from tracker.pose.config import PoseConfig
 from tracker.pose.refine import wrap_angle
 from tracker.pose.types import AttitudeSample, PoseFix
 
-#: Information (eigenvalue) below this share of the largest: that direction is not fixed.
-_MIN_INFO_RATIO = 1e-9
-
 
 class AttitudeBias:
     """See module doc.  ``correct`` before solving a frame, ``learn`` after."""
@@ -48,8 +42,6 @@ class AttitudeBias:
         self.var_rad2: np.ndarray | None = None  # None: nothing learnt (or forgotten)
         self.t_us: int | None = None
         self.learnt = 0
-        #: the attitude variances the last corrected sample stated (roll, pitch, yaw)
-        self.given_var: np.ndarray | None = None
 
     def _grow(self, sample: AttitudeSample) -> np.ndarray | None:
         """The estimate's variance at the sample's time (None: forgotten)."""
@@ -68,11 +60,7 @@ class AttitudeBias:
             return None
         var = self._grow(sample)
         if var is None:
-            self.given_var = np.array([sample.roll_pitch_sigma_rad, sample.roll_pitch_sigma_rad,
-                                       sample.yaw_sigma_rad]) ** 2
             return sample
-        rp_var = max(var[0], var[1])
-        self.given_var = np.array([rp_var, rp_var, var[2]])
         r, p, y = np.array([sample.roll_rad, sample.pitch_rad, sample.yaw_rad]) - self.error_rad
         return replace(sample, roll_rad=float(r), pitch_rad=float(p),
                        yaw_rad=math.remainder(float(y), math.tau),
@@ -80,43 +68,15 @@ class AttitudeBias:
                        yaw_sigma_rad=float(np.sqrt(var[2])))
 
     def learn(self, raw: AttitudeSample | None, fix: object) -> None:
-        """After a fix solved with ``correct(raw)`` as its prior: on each axis the
-        landmarks themselves fix better than the estimate already knows, the fix's
-        attitude is the new estimate of the autopilot's error, good to the larger of the
-        fix's own variance and the landmarks' alone (:meth:`landmarks_only`: what the same
-        pixels will still miss by in the next frames); other axes keep their estimate.  A fix
-        that rejected the prior teaches nothing: the landmarks and the estimate disagree, and
-        which of them is wrong is not known (one misaligned plate's fix, taken as the
-        truth, carried its 0.8 deg yaw error into the next second of the survey as JPEG)."""
-        if raw is None or not isinstance(fix, PoseFix) or fix.attitude_prior != "used":
+        """After a fix solved with ``correct(raw)`` (or rejecting it): its attitude and
+        attitude covariance are the new estimate of the autopilot's error."""
+        if raw is None or not isinstance(fix, PoseFix) or fix.attitude_prior == "none":
             return
-        cov = np.asarray(fix.covariance, dtype=np.float64)
-        own = self.landmarks_only(cov)
-        grown = self._grow(raw)
-        known = grown if grown is not None else np.array(
-            [raw.roll_pitch_sigma_rad, raw.roll_pitch_sigma_rad, raw.yaw_sigma_rad]) ** 2
-        learn = own < known
-        if not np.any(learn) or (grown is None and not np.all(learn)):
-            return  # nothing new, or not every axis of a first estimate
-        var = np.maximum(np.maximum(np.diag(cov)[3:], own), self.floor_rad[[0, 0, 1]] ** 2)
+        cov = np.asarray(fix.covariance)[3:, 3:]
+        var = np.maximum(np.diag(cov), self.floor_rad[[0, 0, 1]] ** 2)
+        if not np.all(np.isfinite(var)):
+            return
         raw_rpy = np.array([raw.roll_rad, raw.pitch_rad, raw.yaw_rad])
-        error = wrap_angle(raw_rpy - np.asarray(fix.attitude_rpy_rad))
-        self.error_rad = np.where(learn, error, self.error_rad)
-        self.var_rad2 = np.where(learn, var, known)
-        self.t_us = fix.time_us
+        self.error_rad = wrap_angle(raw_rpy - np.asarray(fix.attitude_rpy_rad))
+        self.var_rad2, self.t_us = var, fix.time_us
         self.learnt += 1
-
-    def landmarks_only(self, cov: np.ndarray) -> np.ndarray:
-        """The attitude variances (roll, pitch, yaw) a fix's landmarks give without the
-        autopilot's attitude: the fix's information (``cov`` inverted) less the attitude
-        prior's (:meth:`correct`'s last sigmas); infinite when they do not fix the pose."""
-        try:
-            info = np.linalg.inv(cov)
-        except np.linalg.LinAlgError:
-            return np.full(3, np.inf)
-        if self.given_var is not None:
-            info[3:, 3:] -= np.diag(1.0 / self.given_var)
-        w, v = np.linalg.eigh(0.5 * (info + info.T))
-        if not np.all(np.isfinite(w)) or w.min() <= _MIN_INFO_RATIO * w.max():
-            return np.full(3, np.inf)
-        return np.asarray(np.diag((v / w) @ v.T)[3:], dtype=np.float64)

@@ -59,19 +59,16 @@ class PoseConfig:
     #: the next frames' attitude by it (tracker/pose/attitude_bias.py); its 1-sigma grows by
     #: a random walk of these deg/sqrt(s) (roll/pitch, yaw: an EKF's error wanders by about
     #: its sigma over its correlation time, sqrt(2 sigma^2 / tau): 1 deg over 20 s, 3 deg
-    #: over 120 s, mavlink_bridge/fake_drift.py); it is never below what the fix's landmarks
-    #: fix without the prior (frames' pixel errors are correlated: a long stare at one plate
-    #: is not many measurements), nor below these degrees (roll/pitch: the plates' corners
-    #: share errors a per-corner sigma does not state, 0.18 deg of roll on the real-imagery
-    #: world seed 2; docs/decisions.md, "The attitude learner trusts the landmarks").
+    #: over 120 s, mavlink_bridge/fake_drift.py) and is floored at these degrees (frames'
+    #: pixel errors are correlated: a long stare at one plate is not many measurements).
     #: Off by default: offline it cut the survey's RMSE 3x, in the real-time demo it gained
     #: nothing and its NEES fell from 1.0 to 0.73 inside (docs/pose.md, "Learning the
     #: autopilot's attitude error").
     learn_attitude_bias: bool = False
     attitude_bias_walk_rp_deg_rt_s: float = field(default=0.3, metadata={"gt": 0})
     attitude_bias_walk_yaw_deg_rt_s: float = field(default=0.4, metadata={"gt": 0})
-    attitude_bias_floor_rp_deg: float = field(default=0.15, metadata={"gt": 0})
-    attitude_bias_floor_yaw_deg: float = field(default=0.05, metadata={"gt": 0})
+    attitude_bias_floor_rp_deg: float = field(default=0.2, metadata={"gt": 0})
+    attitude_bias_floor_yaw_deg: float = field(default=0.5, metadata={"gt": 0})
     #: 1-sigma of the autopilot's height (LOCAL_POSITION_NED down) as a prior.
     altitude_sigma_m: float = field(default=0.5, metadata={"gt": 0})
     #: Use the autopilot's height (LOCAL_POSITION_NED down) as a prior.
