@@ -19,8 +19,8 @@ clock), so 30 minutes take 30 minutes:
 
     PYTHONPATH=. python benchmarks/soak.py --minutes 30 --json soak-30min.json
 
-``LMC_SOAK_MINUTES`` sets the default length; CI runs ``sitl_tests/test_soak.py``, a 45 s
-form of the same checks.  Exit status 0 when every check passes, 1 otherwise.
+``LMC_SOAK_MINUTES`` sets the default length; CI runs ``sitl_tests/test_soak.py``, a 75 s
+form of the same checks (a 30 s warm-up).  Exit status 0 when every check passes, 1 otherwise.
 """
 
 from __future__ import annotations

@@ -55,8 +55,10 @@ def run_config(tmp: Path, scenario: Path, port: int) -> Path:
 
 
 async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
-               tmp: Path | None = None, thread_slack: int = 0) -> dict[str, Any]:
-    """Fly ``seconds`` and return the samples and the verdicts."""
+               tmp: Path | None = None, thread_slack: int = 0,
+               warm_up_s: float | None = None) -> dict[str, Any]:
+    """Fly ``seconds`` and return the samples and the verdicts (``warm_up_s``: see
+    :func:`verdict`)."""
     tmp = tmp or Path(tempfile.mkdtemp(prefix="lmc-soak-"))
     scenario = soak_scenario(tmp, seconds + 60.0, fps)
     sim = Simulator(load_scenario(str(scenario)))
@@ -88,14 +90,15 @@ async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
     return {"seconds": seconds, "sample_s": sample_s, "fps": fps,
             "exit_status": proc.returncode, "stderr_tail": err.decode()[-500:],
             "samples": [asdict(s) for s in samples],
-            "verdict": verdict(samples, seconds, thread_slack)}
+            "verdict": verdict(samples, seconds, thread_slack, warm_up_s)}
 
 
-def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0) -> dict[str, Any]:
+def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0,
+            warm_up_s: float | None = None) -> dict[str, Any]:
     """The soak's checks on samples after the warm-up (``thread_slack``: threads the last
     third may have beyond the first third's peak; the short CI form allows 1, for a pool
-    thread started late under load)."""
-    warm = max(15.0, 0.1 * seconds)
+    thread started late under load; ``warm_up_s``: None = 10 % of the flight, at least 15 s)."""
+    warm = max(15.0, 0.1 * seconds) if warm_up_s is None else warm_up_s
     after = [s for s in samples if s.t_s >= warm]
     if len(after) < 3:
         return {"ok": False, "reason": f"only {len(after)} samples after warm-up"}
