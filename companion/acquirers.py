@@ -133,7 +133,8 @@ class FeatureAcquirer:
                   if ref.matchable and not sight.seen.taken(lid, earlier)]
         starts: list[Start] = list(earlier)
         height, width = sight.image.shape[:2]
-        for match in self.matcher.find(sight.image, wanted):
+        # cut plates only without a fix, as PredictionAcquirer (docs/decisions.md)
+        for match in self.matcher.find(sight.image, wanted, cut=sight.fix is None):
             box = clip_box(match.box, width, height)
             if box is None or sight.seen.busy(starts) >= self.starter.config.max_tracks:
                 continue

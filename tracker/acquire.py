@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from tracker.boxes import in_view_share
 from tracker.validation import check_image
 
 FloatArray = npt.NDArray[np.float64]
@@ -53,6 +54,11 @@ class AcquireConfig:
     refine_ecc: bool = True
     ecc_iterations: int = field(default=40, metadata={"ge": 1})
     ecc_fine_iterations: int = field(default=10, metadata={"ge": 0})
+    #: ``find(cut=True)``: a plate cut by the image's edge whose inliers are too few or too
+    #: bunched for a homography is matched by a similarity (4 parameters) and aligned by
+    #: ECC from there; it needs this many of the similarity's inliers (issue 19; not tuned:
+    #: the code's ``min_inliers``, kept when a layer lowers that for whole plates).
+    min_cut_inliers: int = field(default=12, metadata={"ge": 3})
 
 
 @dataclass(frozen=True)
@@ -224,11 +230,14 @@ class ReferenceMatcher:
         return ref
 
     def find(self, image_bgr: npt.NDArray[np.uint8], landmark_ids: list[str] | None = None,
-             roi: tuple[float, float, float, float] | None = None) -> list[Match]:
+             roi: tuple[float, float, float, float] | None = None, cut: bool = False
+             ) -> list[Match]:
         """Verified matches of the given references (all when None), best first.
 
         ``roi`` (x, y, w, h) limits the search to that part of the frame (cheaper; used to
-        recover a tracked landmark's corners); results are in frame coordinates.
+        recover a tracked landmark's corners); results are in frame coordinates.  With
+        ``cut``, a plate cut by the image's edge is also found from the matches on its part
+        in view (:meth:`_match_cut`).
         """
         check_image(image_bgr, "image_bgr")
         x0, y0 = 0, 0
@@ -249,25 +258,65 @@ class ReferenceMatcher:
         frame_gray = np.asarray(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY), np.uint8)
         ids = self.references if landmark_ids is None else landmark_ids
         frame_desc = np.asarray(desc)
-        found = [self._match_one(self.references[i], frame_pts, frame_desc, frame_gray)
+        found = [self._match_one(self.references[i], frame_pts, frame_desc, frame_gray, cut)
                  for i in ids if i in self.references and self.references[i].matchable]
         return sorted((m for m in found if m is not None), key=lambda m: -m.inliers)
 
     def _match_one(self, ref: Reference, frame_pts: npt.NDArray[np.float32],
-                   frame_desc: npt.NDArray[Any],
-                   frame_gray: npt.NDArray[np.uint8]) -> Match | None:
+                   frame_desc: npt.NDArray[Any], frame_gray: npt.NDArray[np.uint8],
+                   cut: bool = False) -> Match | None:
         cfg = self.config
         pairs = self._matcher.knnMatch(ref.descriptors, frame_desc, k=2)
         good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < cfg.ratio * p[1].distance]
-        if len(good) < cfg.min_inliers:
-            return None
         src = ref.keypoints_px[[m.queryIdx for m in good]]
         dst = frame_pts[[m.trainIdx for m in good]]
+        whole = self._match_whole(ref, src, dst, frame_gray) \
+            if len(good) >= cfg.min_inliers else None
+        if whole is not None or not cut or len(good) < cfg.min_cut_inliers:
+            return whole
+        return self._match_cut(ref, src, dst, frame_gray)
+
+    def _match_cut(self, ref: Reference, src: npt.NDArray[np.float32],
+                   dst: npt.NDArray[np.float32], frame_gray: npt.NDArray[np.uint8]
+                   ) -> Match | None:
+        """A plate cut by the image's edge from the matches ``src`` (reference px) ->
+        ``dst`` (frame px) on its part in view: a similarity by RANSAC (its inliers bunch
+        on that part, where a homography's extrapolated corners go hundreds of pixels
+        astray: measured on the square's wall-01 entering at 31-42 % in view), then the
+        homography by ECC from there (:func:`refine_ecc`, held to its correlation); None
+        when too few inliers agree, ECC fails, the plate is not cut by the edge or its
+        outline is implausible.  Whether it is the plate is then the caller's to verify
+        (its warped appearance on the part in view)."""
+        cfg = self.config
+        rough, mask = cv2.estimateAffinePartial2D(src, dst, method=cv2.RANSAC,
+                                                  ransacReprojThreshold=cfg.ransac_px)
+        if rough is None or mask is None:
+            return None
+        inliers = int(mask.sum())
+        if inliers < cfg.min_cut_inliers or inliers / len(src) < cfg.min_inlier_ratio:
+            return None
+        hom = refine_ecc(ref, frame_gray, np.vstack([rough, (0.0, 0.0, 1.0)]),
+                         cfg.ecc_iterations, fine_iterations=cfg.ecc_fine_iterations)
+        if hom is None:
+            return None
+        corners = project_corners(ref, hom)
+        height, width = frame_gray.shape[:2]
+        if in_view_share(corners, width, height) >= 1.0 or \
+                not plausible_quad(corners, ref.size_px, cfg):
+            return None  # a whole plate is the homography's to find
+        return _match_of(ref, corners, inliers, inliers / len(src), hom)
+
+    def _match_whole(self, ref: Reference, src: npt.NDArray[np.float32],
+                     dst: npt.NDArray[np.float32], frame_gray: npt.NDArray[np.uint8]
+                     ) -> Match | None:
+        """A plate from the matches ``src`` -> ``dst`` by a homography (RANSAC), its
+        inliers spread over the reference, refined by ECC."""
+        cfg = self.config
         rough, mask = cv2.findHomography(src, dst, cv2.RANSAC, cfg.ransac_px)
         if rough is None or mask is None:
             return None
         inliers = int(mask.sum())
-        if inliers < cfg.min_inliers or inliers / len(good) < cfg.min_inlier_ratio:
+        if inliers < cfg.min_inliers or inliers / len(src) < cfg.min_inlier_ratio:
             return None
         w, h = ref.size_px
         # inliers bunched in one corner extrapolate the corners badly: ask for spread
@@ -284,11 +333,16 @@ class ReferenceMatcher:
         corners = project_corners(ref, hom)
         if not plausible_quad(corners, (w, h), cfg):
             return None
-        x0, y0 = corners.min(axis=0)
-        x1, y1 = corners.max(axis=0)
-        box = (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
-        return Match(ref.landmark_id, corners, box, inliers, inliers / len(good),
-                     np.asarray(hom, np.float64))
+        return _match_of(ref, corners, inliers, inliers / len(src), hom)
+
+
+def _match_of(ref: Reference, corners: FloatArray, inliers: int, ratio: float,
+              hom: FloatArray) -> Match:
+    """The :class:`Match` of ``ref`` at ``corners`` (the box around them)."""
+    x0, y0 = corners.min(axis=0)
+    x1, y1 = corners.max(axis=0)
+    box = (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
+    return Match(ref.landmark_id, corners, box, inliers, ratio, np.asarray(hom, np.float64))
 
 
 def search_template(ref: Reference, frame_bgr: npt.NDArray[np.uint8],
