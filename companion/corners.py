@@ -34,7 +34,7 @@ from tracker.acquire import (
 )
 from tracker.boxes import box_corners, in_view_share, saturated_share
 from tracker.camera import CameraModel
-from tracker.edge_align import align_cut, box_shift, shifted
+from tracker.edge_align import align_cut, box_shift, patch_around, patch_shift, shifted
 from tracker.types import Box
 from tracker.verify import check_appearance, check_appearance_near, quad_iou
 
@@ -116,6 +116,9 @@ class Corners:
                 track.corners = project_corners(self.references[track.landmark_id], aligned)
         if track.homography is None or track.misses >= self.config.max_corner_misses:
             self.recover(track, image)
+        cut = track.homography is not None and self.is_cut(track.landmark_id, track.homography)
+        track.patch = patch_around(image, track.corners) \
+            if cut and track.corners is not None else None
         track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
 
     def align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
@@ -153,12 +156,17 @@ class Corners:
                   last_box: Box) -> FloatArray | None:
         """A cut plate's homography moved by the affine alignment of its part in view
         (tracker/edge_align.py): a full alignment on a corner region bends the rest.  It
-        starts moved as the tracker's box moved since ``last_box`` (its edges inside the
-        image) when it does not align where it was: a plate sliding 10-20 px a frame is out
+        starts moved by the shift of the frame around the plate since the last frame
+        (``track.patch``: the affine alignment holds a plate from where it is, not from a
+        few pixels off); else where it was, then moved as the tracker's box moved since
+        ``last_box`` (its edges inside the image): a plate sliding 10-20 px a frame is out
         of the affine alignment's reach (and a still one's box jitters by a pixel)."""
         ref = self.references[track.landmark_id]
+        moved = None if track.patch is None else patch_shift(track.patch, image)
         dx, dy = box_shift(last_box, track.box, self.camera.width, self.camera.height)
-        for start in (hom, shifted(hom, dx, dy)) if max(abs(dx), abs(dy)) > 2.0 else (hom,):
+        starts = ([] if moved is None else [shifted(hom, *moved)]) + [hom] + (
+            [shifted(hom, dx, dy)] if max(abs(dx), abs(dy)) > 2.0 else [])
+        for start in starts:
             aligned = align_cut(ref, image, start, self.config.ecc_iterations,
                                 TRACK_MIN_CORRELATION, self.weights(track))
             if aligned is not None:

@@ -15,6 +15,7 @@ import numpy.typing as npt
 
 from tracker import AdaptiveTracker
 from tracker.acquire import Weights
+from tracker.edge_align import Patch
 from tracker.features import colour_weights
 from tracker.types import Box
 
@@ -169,6 +170,9 @@ class Track:
     pose_rejections: int = 0
     #: appearance checks failed in a row (0: the last check found the landmark)
     verify_failures: int = 0
+    #: the last frame around a plate cut by the image's edge (None: not cut), whose shift
+    #: starts the next frame's alignment (tracker/edge_align.py)
+    patch: Patch | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -101,11 +101,12 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a finding (issue 19, open): no failsafe, the "
-                   "height from the fake's barometer (EK3_SRC1_POSZ 1: no take-off error, no "
-                   "height echo), but the longest gap is ~2.1 s and the horizontal max "
-                   "0.56-0.91 m: nothing is tracked leaving the (6, 6) hover westwards "
-                   "(docs/sitl.md, 'After the fine stage's mix and the attitude learning')")
+@pytest.mark.xfail(strict=False, reason="a finding (issue 19, open): no failsafe, but the "
+                   "longest gap is 1.5-2.6 s and the max 0.52-1.46 m (2026-11-29, load 1-2.4): "
+                   "the vehicle rolls 11 deg leaving the (6, 6) hover and the cut tracks, "
+                   "started by a shift only, lose their outline in the turn (docs/sitl.md, "
+                   "'The same code merged again'); not strict: a flight passes or not with "
+                   "the machine's load")
 @pytest.mark.parametrize("seed", SEEDS)
 def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
     with fake_thread(guided(seed)) as (fake, _loop):
