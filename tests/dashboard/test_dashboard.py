@@ -136,7 +136,9 @@ def test_page_shows_live_preview_and_the_published_counters(
         assert shot1 != shot2, "the preview did not change over time"
         shown = int(page.inner_text("td[data-key='frames']"))
         published = fake.frames
-        assert 0 < published - shown <= 15  # the page lags the publisher by < 1.5 s
+        # the page lags the publisher by < 1.5 s; 0 when it was read between the page's
+        # update and the publisher's next frame (10 a second): seen once in CI, 2026-11-29
+        assert 0 <= published - shown <= 15
         sent = int(page.inner_text("td[data-key='fixes sent']"))
         accepted = int(page.inner_text("td[data-key='fixes accepted']"))
         assert (sent - shown, accepted - shown) == (-1, -2)  # exactly the published relation
