@@ -18,7 +18,7 @@ Prints the estimate's error against the truth (median, max, and where the max is
 longest time between fused fixes, and per second the worst estimate error (``--per-second``)::
 
     PYTHONPATH=. python benchmarks/square_loop.py /tmp/sq [--attitude-offset-deg 1 -1 3]
-        [--seed 0] [--per-second] [--height baro|extnav|fixes]
+        [--seed 0] [--per-second] [--height baro|extnav|fixes] [--attitude-lag-frames 1]
         [--set fixgate.echo_correlation_s=0]
 """
 
@@ -50,6 +50,9 @@ def main() -> int:
     parser.add_argument("--per-second", action="store_true")
     parser.add_argument("--height", choices=("baro", "extnav", "fixes"), default="baro")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--attitude-lag-frames", type=int, default=0,
+                        help="the attitude of this many frames earlier (a capture time "
+                        "mapped late onto the autopilot's clock)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     folder = args.stream
@@ -64,7 +67,7 @@ def main() -> int:
     now: dict[str, int] = {}
 
     def sensors(t_us: int) -> SideSensors:
-        p = poses.get(now["index"])
+        p = poses.get(max(now["index"] - args.attitude_lag_frames, 0))
         if p is None:
             return SideSensors()
         att = AttitudeSample(t_us, p.roll_rad + off[0], p.pitch_rad + off[1],

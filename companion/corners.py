@@ -100,16 +100,22 @@ class Corners:
             self._plane_ok[key] = ok
         return w if ok else None
 
-    def follow(self, track: Track, image: npt.NDArray[np.uint8], last_box: Box) -> None:
+    def follow(self, track: Track, image: npt.NDArray[np.uint8], last_box: Box,
+               motion: FloatArray | None = None) -> None:
         """The track's corners in ``image``, its tracker's box already updated (from
-        ``last_box``): aligned from its last homography, recovered after misses."""
+        ``last_box``): aligned from its last homography, recovered after misses.
+        ``motion``: the image's move for the camera's turn since the last frame
+        (:mod:`companion.ego_motion`); the alignment then starts from the last homography
+        turned by it, and from the last one as it was if that fails."""
         track.corners = None
         if not self.config.refine_corners:
             return
         if track.homography is not None:
             predicted = track.homography  # landmarks move a few px a frame: ECC takes that up
-            aligned = self.align_cut(track, image, predicted, last_box) if self.is_cut(
-                track.landmark_id, predicted) else self.align(track, image, predicted)
+            aligned = None if motion is None else self._align_turned(track, image, motion)
+            if aligned is None:
+                aligned = self.align_cut(track, image, predicted, last_box) if self.is_cut(
+                    track.landmark_id, predicted) else self.align(track, image, predicted)
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
             if aligned is not None:
@@ -120,6 +126,19 @@ class Corners:
         track.patch = patch_around(image, track.corners) \
             if cut and track.corners is not None else None
         track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
+
+    def _align_turned(self, track: Track, image: npt.NDArray[np.uint8],
+                      motion: FloatArray) -> FloatArray | None:
+        """The alignment from the last homography moved by the camera's turn: a cut
+        plate's affine alignment from there alone (the frame's shift around it and its
+        box's move are the turn's own, already in the start), a whole one's as usual."""
+        assert track.homography is not None
+        turned = motion @ track.homography
+        turned = turned / turned[2, 2]
+        if not self.is_cut(track.landmark_id, turned):
+            return self.align(track, image, turned)
+        return align_cut(self.references[track.landmark_id], image, turned,
+                         self.config.ecc_iterations, TRACK_MIN_CORRELATION, self.weights(track))
 
     def align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
               verify: bool = False) -> FloatArray | None:

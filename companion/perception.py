@@ -50,6 +50,7 @@ from companion.acquisition import Acquisition
 from companion.app import Frame, FrameResult
 from companion.corner_noise import CornerNoise
 from companion.corners import Corners
+from companion.ego_motion import TurnPredictor
 from companion.fixgate import FixGate, FixGateConfig
 from companion.perception_types import DetectFn, PerceptionConfig, Track
 from companion.side_sensors import SensorReader, SideInputs, SideSensors, guess_of, no_sensors
@@ -148,6 +149,7 @@ class Perception:
         self.gate = FixGate(gate_config or FixGateConfig())
         self._cache = FrameCache()
         self._light_level: float | None = None  # the worker thread's
+        self._turn = TurnPredictor(self.camera, self.config.predict_turn_deg)
 
     @property
     def tracks(self) -> Mapping[str, Track]:
@@ -177,7 +179,8 @@ class Perception:
         if self._rectify is not None:
             image = self._rectify(image)
             self._cache.put_rectified(frame.index, image)  # housekeeping may skip frames
-        events += self.trackset.update(image, check_all=self._light_step(image))
+        motion = self._turn.motion(self.side.read(frame.t_us).attitude)
+        events += self.trackset.update(image, check_all=self._light_step(image), motion=motion)
         return self._solve(frame, events)
 
     def _light_step(self, image: Image) -> bool:

@@ -32,6 +32,12 @@ class PerceptionConfig:
     max_tracks: int = field(default=8, metadata={"ge": 1})
     min_track_confidence: float = field(default=0.2, metadata={"ge": 0, "le": 1})
     refine_corners: bool = True
+    #: A camera turn between two frames of this many degrees or more (the autopilot's
+    #: attitude at both) starts the corners' alignment from the last outline moved by the
+    #: turn's homography (companion/ego_motion.py; 0: never); smaller turns move a plate
+    #: by a few px, which the alignment takes up from where it was.  Off by default: it
+    #: needs the attitude on the frames' clock (config/sim.toml turns it on)
+    predict_turn_deg: float = field(default=0.0, metadata={"ge": 0})
     min_corner_agreement: float = field(default=0.5, metadata={"gt": 0, "le": 1})
     ecc_iterations: int = field(default=10, metadata={"ge": 1})
     #: Unsmoothed ECC iterations after the smoothed ones (tracker.acquire.refine_ecc).

@@ -35,6 +35,7 @@ from companion.corner_noise import CornerNoise
 from companion.corners import Corners
 from companion.perception_types import Occupancy, PerceptionConfig, Start, Track, TrackView
 from tracker.boxes import box_corners, inside
+from tracker.geometry import FloatArray
 from tracker.pose.types import Observation, PoseFix
 from tracker.types import TrackResult
 
@@ -92,18 +93,21 @@ class TrackSet:
 
     # -- the frame's update (worker thread) --------------------------------------------
 
-    def update(self, image: npt.NDArray[np.uint8], check_all: bool = False) -> Events:
+    def update(self, image: npt.NDArray[np.uint8], check_all: bool = False,
+               motion: FloatArray | None = None) -> Events:
         """Update every track on ``image``; a track its tracker lost is dropped (an event).
 
         Each track's appearance check is due every ``verify_every_frames``, the tracks'
         checks on different frames (issue 23: not every track's on one frame), and all at
         once with ``check_all`` (a light step); a track is checked right after its update,
-        on its thread."""
+        on its thread.  ``motion``: the image's move since the last frame for the camera's
+        turn (:mod:`companion.ego_motion`), where the corners' alignment starts."""
         events: Events = []
         tracks = list(self._tracks.values())
         every = self.config.verify_every_frames
         checks = [check_all or (self._frames + i) % every == 0 for i in range(len(tracks))]
-        for track, alive in zip(tracks, self._update_all(tracks, image, checks), strict=True):
+        alive_now = self._update_all(tracks, image, checks, motion)
+        for track, alive in zip(tracks, alive_now, strict=True):
             if not alive:
                 self._drop(track.landmark_id)
                 events.append({"event": "lost", "landmark": track.landmark_id})
@@ -113,19 +117,21 @@ class TrackSet:
         return events
 
     def _update_all(self, tracks: list[Track], image: npt.NDArray[np.uint8],
-                    checks: Sequence[bool]) -> list[bool]:
+                    checks: Sequence[bool], motion: FloatArray | None = None) -> list[bool]:
         """Update every track (and check those whose ``checks`` entry is true); with two
         or more, every other one on the second thread.  Each touches only its own state."""
         if self._pool is None or len(tracks) < 2:
-            return [self._update_one(t, image, c) for t, c in zip(tracks, checks, strict=True)]
-        there = [self._pool.submit(self._update_one, t, image, c)
+            return [self._update_one(t, image, c, motion)
+                    for t, c in zip(tracks, checks, strict=True)]
+        there = [self._pool.submit(self._update_one, t, image, c, motion)
                  for t, c in zip(tracks[::2], checks[::2], strict=True)]
-        here = [self._update_one(t, image, c)
+        here = [self._update_one(t, image, c, motion)
                 for t, c in zip(tracks[1::2], checks[1::2], strict=True)]
         there_ok = [f.result() for f in there]
         return [there_ok[i // 2] if i % 2 == 0 else here[i // 2] for i in range(len(tracks))]
 
-    def _update_one(self, track: Track, image: npt.NDArray[np.uint8], check: bool) -> bool:
+    def _update_one(self, track: Track, image: npt.NDArray[np.uint8], check: bool,
+                    motion: FloatArray | None = None) -> bool:
         """The tracker's update and the corners' alignment (and the appearance check when
         ``check``); False when the track is lost."""
         result: TrackResult = track.tracker.update(image)
@@ -133,7 +139,7 @@ class TrackSet:
             return False
         last_box, track.box = track.box, result.box
         track.confidence, track.features = result.confidence, result.features
-        self.corners.follow(track, image, last_box)
+        self.corners.follow(track, image, last_box, motion)
         if check:
             # one key per track: no two threads share one
             self._checked[track.landmark_id] = self.corners.check(track, image)

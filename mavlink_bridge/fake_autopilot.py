@@ -79,6 +79,13 @@ MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE = 511, 512
 MAV_CMD_NAV_TAKEOFF, MAV_CMD_DO_SET_MODE, MAV_CMD_COMPONENT_ARM_DISARM = 22, 176, 400
 
 
+def cm_s(v_m_s: float) -> int:
+    """A velocity as GLOBAL_POSITION_INT's int16 cm/s, held to its range: an estimate that
+    ran away (a coupled flight trusting its own fixes: 400 m/s seen) would otherwise stop
+    the fake's stream thread with struct.error, where ArduPilot sends a wrapped value."""
+    return max(-32768, min(32767, round(v_m_s * 100)))
+
+
 @dataclass(frozen=True)
 class FakeAutopilotConfig:
     profile: Profile = "ardupilot"
@@ -396,7 +403,7 @@ class FakeAutopilot:
         elif name == "GLOBAL_POSITION_INT":
             lat, lon, alt = self._global(n, e, d)
             mav.global_position_int_send(boot_ms, lat, lon, alt, round(-d * 1000),
-                                         round(vn * 100), round(ve * 100), round(vd * 100),
+                                         *(cm_s(v) for v in (vn, ve, vd)),
                                          round(math.degrees(y) % 360 * 100))
         elif name == "SYSTEM_TIME":
             mav.system_time_send(int(time.time() * 1e6), boot_ms)

@@ -217,7 +217,10 @@ class Renderer:
         frac = min(1.0, polygon_area(inside) / full)
         if frac <= 0.0:
             return None
-        lo, hi = inside.min(axis=0), inside.max(axis=0)
+        # clipping puts a crossing on the border up to an ulp outside (y = -1e-16, found by
+        # tests/sim's any-pose property): the box is held to the image
+        edge = (cam.width - 1.0, cam.height - 1.0)
+        lo, hi = np.maximum(inside.min(axis=0), 0.0), np.minimum(inside.max(axis=0), edge)
         corners = cam.project_camera_points(pc)
         return TruthBox(quad.landmark_id, float(lo[0]), float(lo[1]), float(hi[0] - lo[0]),
                         float(hi[1] - lo[1]), corners, frac)

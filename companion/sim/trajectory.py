@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mavlink_bridge.fake_vehicle import GuidedVehicle
 from tracker.geometry import FloatArray, rotation_from_rpy
 
 Vec3 = tuple[float, float, float]
@@ -37,10 +38,17 @@ class TrajectoryConfig:
     ``tilt_deg_per_m_s`` tilts the body into the direction of travel like a multirotor
     (pitch down when flying forward); ``sway_m``/``sway_period_s`` add a slow circular
     drift to the whole path (a hover that is not frozen).
+
+    ``guided``: the waypoints are position targets flown as the fake autopilot flies
+    ``--fly``'s setpoints (:class:`FlownPath`): each is the target for its ``hold_s``
+    (the first is the start, hovering), approached with limited speed and acceleration,
+    the body tilted by the acceleration; ``speed_m_s``, ``tilt_deg_per_m_s``, ``sway_*``
+    and ``loop`` do not apply.
     """
 
     waypoints: tuple[Waypoint, ...] = (Waypoint(),)
     loop: bool = False
+    guided: bool = False
     tilt_deg_per_m_s: float = 0.0
     sway_m: float = field(default=0.0, metadata={"ge": 0})
     sway_period_s: float = field(default=10.0, metadata={"gt": 0})
@@ -88,7 +96,10 @@ class Trajectory:
     def __init__(self, config: TrajectoryConfig) -> None:
         if not config.waypoints:
             raise ValueError("waypoints: expected at least one waypoint")
+        if config.guided and config.loop:
+            raise ValueError("trajectory: guided and loop cannot be combined")
         self.config = config
+        self.flown = FlownPath(config.waypoints) if config.guided else None
         wps = list(config.waypoints)
         if config.loop and len(wps) > 1:
             wps.append(wps[0])
@@ -101,7 +112,7 @@ class Trajectory:
             leg = self._leg(t, a, b)
             self._legs.append(leg)
             t += leg.move_s + leg.hold_s
-        self.duration_s = t
+        self.duration_s = t if self.flown is None else self.flown.duration_s
 
     @staticmethod
     def _leg(t0: float, a: Waypoint, b: Waypoint) -> _Leg:
@@ -125,6 +136,8 @@ class Trajectory:
 
     def state_at(self, t_s: float) -> KinematicState:
         """The vehicle state at ``t_s`` seconds after the start (clamped at the end)."""
+        if self.flown is not None:
+            return self.flown.state_at(t_s)
         leg, dt = self._find(t_s)
         if leg.move_s > 0 and dt < leg.move_s:
             s = dt / leg.move_s
@@ -162,3 +175,47 @@ class Trajectory:
         fwd = vel[0] * math.cos(yaw) + vel[1] * math.sin(yaw)
         right = -vel[0] * math.sin(yaw) + vel[1] * math.cos(yaw)
         return float(k * right), float(-k * fwd)  # roll into the sideways motion, nose down
+
+
+class FlownPath:
+    """Waypoints flown by the fake autopilot's guided vehicle
+    (:class:`mavlink_bridge.fake_vehicle.GuidedVehicle`, its defaults: 2 m/s, 2 m/s^2, the
+    tilt of its acceleration, up to 11.5 deg), integrated once in its own 10 ms steps and
+    interpolated: the offline twin of a ``--fly`` flight against the strict fake
+    (``TrajectoryConfig.guided``)."""
+
+    def __init__(self, waypoints: tuple[Waypoint, ...]) -> None:
+        first = waypoints[0]
+        n, e, d = first.ned_m
+        vehicle = GuidedVehicle((n, e, 0.0), math.radians(first.yaw_deg))
+        vehicle.hover(-d)
+        rows, t = [], 0.0
+        for i, wp in enumerate(waypoints):
+            if i > 0:
+                vehicle.goto(wp.ned_m, math.radians(wp.yaw_deg))
+            end = t + wp.hold_s
+            while t < end - 1e-9:
+                s = vehicle(t)
+                rows.append((t, *s.position_ned_m, *s.velocity_ned_m_s, *s.attitude_rpy_rad))
+                t = round(t + vehicle.step_s, 9)
+                vehicle.step_to(t)
+        s = vehicle(t)
+        rows.append((t, *s.position_ned_m, *s.velocity_ned_m_s, *s.attitude_rpy_rad))
+        self.samples = np.array(rows, dtype=np.float64)
+        self.samples[:, 9] = np.unwrap(self.samples[:, 9])
+        self.duration_s = t
+
+    def state_at(self, t_s: float) -> KinematicState:
+        """The state at ``t_s`` (linear between the vehicle's steps; clamped at the ends)."""
+        times = self.samples[:, 0]
+        v = np.array([np.interp(t_s, times, col) for col in self.samples[:, 1:].T])
+        i = int(np.clip(np.searchsorted(times, t_s), 1, len(times) - 1))
+        dt = times[i] - times[i - 1]
+        rates = (self.samples[i, 7:10] - self.samples[i - 1, 7:10]) / dt
+        return KinematicState(
+            t_s=float(t_s),
+            position_ned_m=(float(v[0]), float(v[1]), float(v[2])),
+            velocity_ned_m_s=(float(v[3]), float(v[4]), float(v[5])),
+            attitude_rpy_rad=(float(v[6]), float(v[7]), _wrap(float(v[8]))),
+            body_rates_rad_s=(float(rates[0]), float(rates[1]), float(rates[2])),
+        )

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from mavlink_bridge.fake_autopilot import cm_s
 from mavlink_bridge.fake_ekf import (
     EKF_FLAGS_HEALTHY,
     EKF_FLAGS_NO_HORIZ,
@@ -163,3 +164,10 @@ def test_guided_vehicle_takes_off_flies_to_a_target_and_lands() -> None:
     v.landing = True
     v.step_to(30.0)
     assert v.on_ground()
+
+
+def test_a_runaway_velocity_is_sent_held_to_its_field() -> None:
+    """GLOBAL_POSITION_INT's velocities are int16 cm/s: an estimate that ran away (400 m/s
+    in a coupled flight trusting its own fixes) is sent at the field's limit, not a
+    struct.error that stops the fake's streams."""
+    assert [cm_s(v) for v in (1.234, -0.5, 400.0, -400.0)] == [123, -50, 32767, -32768]
