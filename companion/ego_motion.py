@@ -24,15 +24,21 @@ from tracker.pose.types import AttitudeSample
 
 def camera_turn(camera: CameraModel, before: AttitudeSample, after: AttitudeSample
                 ) -> tuple[FloatArray, float]:
-    """The homography taking frame ``before``'s pixels to frame ``after``'s for the
-    camera's turn between the two attitudes (pure rotation), and the turn's angle (deg)."""
+    """The camera's rotation from attitude ``before`` to ``after`` (directions in camera
+    ``before`` -> camera ``after``) and its angle (deg)."""
     r0 = rotation_from_rpy(before.roll_rad, before.pitch_rad, before.yaw_rad) @ camera.r_body_cam
     r1 = rotation_from_rpy(after.roll_rad, after.pitch_rad, after.yaw_rad) @ camera.r_body_cam
-    turn = r1.T @ r0  # camera ``before`` -> camera ``after`` (directions)
+    turn = r1.T @ r0
     angle = math.degrees(math.acos(max(-1.0, min(1.0, (float(np.trace(turn)) - 1.0) / 2.0))))
+    return turn, angle
+
+
+def turn_homography(camera: CameraModel, turn: FloatArray) -> FloatArray:
+    """The homography taking the image before a pure rotation ``turn`` of the camera to the
+    image after it: ``K R K^-1``."""
     k = camera.matrix
     h = k @ turn @ np.linalg.inv(k)
-    return np.asarray(h / h[2, 2], np.float64), angle
+    return np.asarray(h / h[2, 2], np.float64)
 
 
 class TurnPredictor:
@@ -44,11 +50,16 @@ class TurnPredictor:
         self.min_turn_deg = min_turn_deg
         self._last: AttitudeSample | None = None
 
+    @property
+    def enabled(self) -> bool:
+        """False with ``min_turn_deg`` 0: :meth:`motion` is always None (nothing to read)."""
+        return self.min_turn_deg > 0.0
+
     def motion(self, attitude: AttitudeSample | None) -> FloatArray | None:
         """This frame's attitude in; the homography from the last frame's image, or None
         (no attitude on either frame, a turn too small, or the prediction off)."""
         last, self._last = self._last, attitude
-        if self.min_turn_deg <= 0.0 or last is None or attitude is None:
+        if not self.enabled or last is None or attitude is None:
             return None
-        h, angle = camera_turn(self.camera, last, attitude)
-        return h if angle >= self.min_turn_deg else None
+        turn, angle = camera_turn(self.camera, last, attitude)
+        return turn_homography(self.camera, turn) if angle >= self.min_turn_deg else None

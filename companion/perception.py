@@ -179,7 +179,8 @@ class Perception:
         if self._rectify is not None:
             image = self._rectify(image)
             self._cache.put_rectified(frame.index, image)  # housekeeping may skip frames
-        motion = self._turn.motion(self.side.read(frame.t_us).attitude)
+        motion = self._turn.motion(self.side.read(frame.t_us).attitude) \
+            if self._turn.enabled else None  # off: no second read of the sensors
         events += self.trackset.update(image, check_all=self._light_step(image), motion=motion)
         return self._solve(frame, events)
 

@@ -16,7 +16,7 @@ import pytest
 
 from companion.acquirers import Sighting
 from companion.demo import map_landmarks
-from companion.ego_motion import TurnPredictor, camera_turn
+from companion.ego_motion import TurnPredictor, camera_turn, turn_homography
 from companion.perception import Perception, SideSensors
 from companion.perception_types import Occupancy
 from companion.settings import SIM_LAYERS, load_settings
@@ -53,7 +53,8 @@ def rendered(index: int) -> tuple[np.ndarray, np.ndarray | None]:
 def test_the_turn_moves_every_depth_alike() -> None:
     camera = square().scenario.camera
     before, after = attitude(0.0, 0.0, 90.0), attitude(11.5, -2.0, 93.0)
-    h, angle = camera_turn(camera, before, after)
+    turn, angle = camera_turn(camera, before, after)
+    h = turn_homography(camera, turn)
     assert 11.0 < angle < 12.5
     rng = np.random.default_rng(0)
     east = rng.uniform(1.0, 50.0, 20)  # the camera looks east: points at 1-50 m ahead
