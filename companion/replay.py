@@ -307,6 +307,8 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
                             origin_alt_m=o.alt_m, set_origin=True)
         flight = CompanionFlight(settings, source, bridge, pmap, camera, attitude=attitude,
                                  prefix="replay")
+        if fast:  # the fake's clock is stepped: its time_boot_ms does not run with ours
+            flight.sensors.boot_clock = None
         scorer = ReplayScorer(truth, camera, pmap.landmarks, flight.sensors)
         flight.observe(scorer, source)  # the source last: the scoring is done when it hears
         app = await flight.run()

@@ -20,7 +20,9 @@ frame's capture time, the :class:`~companion.side_sensors.SideSensors` the solve
   ``pose.rangefinder_sigma_m``; only with ``pose.rangefinder``.  Readings outside the
   sensor's own ``min_distance .. max_distance`` are ignored.
 
-Samples are stamped with their arrival on the companion's clock (the frame's clock).
+Samples are stamped on the companion's clock (the frame's clock) from the autopilot's own
+``time_boot_ms`` (:class:`~companion.boot_clock.BootClock`: the link's delay and a stall's
+burst taken out); with :attr:`SensorHistory.boot_clock` None, with their arrival.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from collections import deque
 from collections.abc import Sequence
 from typing import Any
 
+from companion.boot_clock import BootClock
 from companion.nofix import AttitudeSource
 from companion.side_sensors import SideSensors
 from mavlink_bridge.bridge import VisionBridge
@@ -94,6 +97,9 @@ class SensorHistory:
         self.samples: dict[str, deque[Sample]] = {n: deque(maxlen=keep) for n in SENSOR_STREAMS}
         #: per stream, the messages received (for status and tests)
         self.received: dict[str, int] = dict.fromkeys(SENSOR_STREAMS, 0)
+        #: maps the messages' ``time_boot_ms`` onto the companion's clock; None: stamp
+        #: them with their arrival (a replay whose autopilot clock is stepped, not real time)
+        self.boot_clock: BootClock | None = BootClock()
         self._task: asyncio.Task[None] | None = None
 
     def start(self) -> None:
@@ -107,11 +113,14 @@ class SensorHistory:
 
     async def _follow(self) -> None:
         async for item in self.bridge.subscribe(*SENSOR_STREAMS):
-            self.add(item.name, item.received_ns // 1000, item.value)
+            t_us = item.received_ns // 1000
+            if self.boot_clock is not None:
+                t_us = self.boot_clock.stamp(int(getattr(item.value, "time_boot_ms", 0)), t_us)
+            self.add(item.name, t_us, item.value)
 
     def add(self, name: str, t_us: int, v: Any) -> None:
         """Record one message's value (``Attitude``, ``LocalPositionNed``, ``DistanceSensor``
-        of :mod:`mavlink_bridge.telemetry`) received at ``t_us``."""
+        of :mod:`mavlink_bridge.telemetry`) of time ``t_us`` (companion clock)."""
         values: tuple[float, ...]
         if name == "ATTITUDE":
             values = (float(v.roll_rad), float(v.pitch_rad), float(v.yaw_rad))
@@ -138,7 +147,7 @@ class SensorHistory:
         return self.attitude_at(t_us, max_gap_us)
 
     def last_us(self) -> int | None:
-        """When the newest attitude sample arrived (companion clock, us); None before one."""
+        """The newest attitude sample's time (companion clock, us); None before one."""
         if self.attitude_source is not None:
             return self.attitude_source.last_us()
         samples = self.samples["ATTITUDE"]
