@@ -44,7 +44,7 @@ from tracker.acquire import (
 )
 from tracker.boxes import box_corners, clip_box, in_view_share, inside
 from tracker.camera import CameraModel
-from tracker.edge_align import align_cut
+from tracker.edge_align import align_cut, search_shift, shifted
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import MapLandmark, PoseFix
 from tracker.types import Box
@@ -200,7 +200,16 @@ class PredictionAcquirer:
             return ecc(cfg, ref, image, predicted)
         if not cut or in_view_share(corners, width, height) < cfg.predict_cut_in_view:
             return None
-        return align_cut(ref, image, predicted, cfg.ecc_iterations, cfg.verify_correlation)
+        starts = [predicted]
+        moved = search_shift(ref, image, predicted, cfg.max_guess_error_px,
+                             cfg.verify_correlation)
+        if moved is not None and moved != (0.0, 0.0):
+            starts.insert(0, shifted(predicted, *moved))
+        for hom in starts:
+            aligned = align_cut(ref, image, hom, cfg.ecc_iterations, cfg.verify_correlation)
+            if aligned is not None:
+                return aligned
+        return None
 
     def project(self, lm: MapLandmark, fix: PoseFix | PoseGuess) -> FloatArray | None:
         """The landmark's corners in the image for the vehicle pose of ``fix``."""

@@ -53,7 +53,14 @@ from companion.corners import Corners
 from companion.ego_motion import TurnPredictor
 from companion.fixgate import FixGate, FixGateConfig
 from companion.perception_types import DetectFn, PerceptionConfig, Track
-from companion.side_sensors import SensorReader, SideInputs, SideSensors, guess_of, no_sensors
+from companion.side_sensors import (
+    PoseGuess,
+    SensorReader,
+    SideInputs,
+    SideSensors,
+    guess_of,
+    no_sensors,
+)
 from companion.tracks import TrackSet, observations
 from tracker import TrackerConfig
 from tracker.acquire import AcquireConfig, ReferenceMatcher
@@ -206,11 +213,18 @@ class Perception:
         if now:
             self.acquisition.due_now()
         image = self._rectified_image(frame) if rectified is None else rectified
-        guess = None if fix is not None else guess_of(self.side.read(frame.t_us))
+        guess = None if fix is not None else self.guess(frame.t_us)
         sight = Sighting(image, self.trackset.snapshot(), fix, guess)
         starts = self.acquisition.run(frame.index, frame.t_us, sight)
         if starts:
             self.trackset.hand_over(starts)
+
+    def guess(self, t_us: int) -> PoseGuess | None:
+        """Where the autopilot believes the vehicle is at ``t_us``, with its attitude
+        corrected by the error learnt from the fixes (``pose.learn_attitude_bias``): what
+        acquisition predicts plates from while no fix comes (a 3 deg yaw error alone moves a
+        plate ~27 px, past ``max_guess_error_px``)."""
+        return guess_of(self.side.at(t_us)[1])
 
     def _rectified_image(self, frame: Frame) -> Image:
         """The frame as tracking sees it: rectified for a distorted camera.  Housekeeping

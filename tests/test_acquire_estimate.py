@@ -101,3 +101,31 @@ def test_the_autopilots_position_and_attitude_make_the_guess() -> None:
     assert read.altitude is not None and read.altitude.down_m == pytest.approx(-4.0)
     assert guess_of(SideSensors(attitude=AttitudeSample(0, 0.0, 0.0, 0.0))) is None
     assert guess_of(SideSensors(position_ned_m=(1.0, 2.0, 3.0))) is None
+
+
+def test_the_guess_takes_the_attitude_error_learnt_from_the_fixes() -> None:
+    """The autopilot's attitude 0.5 / -0.5 / 3 deg off: as read until an error is learnt,
+    then corrected by it (only with ``pose.learn_attitude_bias``)."""
+    sim = survey()
+    landmarks, refs = map_landmarks(sim)
+    off = np.radians([0.5, -0.5, 3.0])
+
+    def sensors(t_us: int) -> SideSensors:
+        return SideSensors(attitude=AttitudeSample(t_us, 0.1 + off[0], -0.2 + off[1],
+                                                   1.0 + off[2]),
+                           position_ned_m=(1.0, 2.0, -4.0))
+
+    for learn in (True, False):
+        p = Perception(sim.scenario.camera, landmarks, refs, sensors=sensors,
+                       pose_config=PoseConfig(learn_attitude_bias=learn))
+        raw = p.guess(1_000_000)
+        assert raw is not None and raw.attitude_rpy_rad == pytest.approx(
+            (0.1 + off[0], -0.2 + off[1], 1.0 + off[2]))
+        if p.side.bias is not None:  # what a fix at 0.9 s taught
+            p.side.bias.error_rad, p.side.bias.t_us = off, 900_000
+            p.side.bias.var_rad2 = np.radians([0.1, 0.1, 0.2]) ** 2
+        corrected = p.guess(1_000_000)
+        assert corrected is not None and corrected.position_ned_m == (1.0, 2.0, -4.0)
+        expected = (0.1, -0.2, 1.0) if learn else raw.attitude_rpy_rad
+        assert corrected.attitude_rpy_rad == pytest.approx(expected)
+        p.close()

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.acquire import Reference, Weights, ecc_start
+from tracker.acquire import EccStart, Reference, Weights, ecc_start
 from tracker.geometry import FloatArray
 
 #: Fewest pixels of the plate in view that an alignment rests on.
@@ -93,6 +93,18 @@ def _grey(crop: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
     return np.asarray(grey, np.float32)
 
 
+def _rendered(start: EccStart) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """The reference rendered into ``start``'s window at its warp, and the mask of where it
+    lies (eroded by a pixel: its edge is interpolated with what is outside)."""
+    roi_size = start.roi.shape[1::-1]
+    rendered = cv2.warpPerspective(start.template, start.warp, roi_size,
+                                   flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    mask = cv2.erode(cv2.warpPerspective(np.ones(start.template.shape, np.uint8), start.warp,
+                                         roi_size, flags=cv2.INTER_NEAREST),
+                     np.ones((3, 3), np.uint8))
+    return np.asarray(rendered, np.float32), np.asarray(mask, np.uint8)
+
+
 def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
               iterations: int = 30, min_correlation: float = 0.6,
               weights_bgr: Weights | None = None) -> FloatArray | None:
@@ -105,16 +117,11 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     start = ecc_start(ref, frame, hom, weights_bgr)
     if start is None:
         return None
-    plane, roi, warp = start.template, start.roi, start.warp
-    roi_size = roi.shape[1::-1]
-    rendered = cv2.warpPerspective(plane, warp, roi_size, flags=cv2.INTER_LINEAR,
-                                   borderMode=cv2.BORDER_REPLICATE)
-    mask = cv2.erode(cv2.warpPerspective(np.ones(plane.shape, np.uint8), warp, roi_size,
-                                         flags=cv2.INTER_NEAREST), np.ones((3, 3), np.uint8))
+    roi = start.roi
+    rendered, mask = _rendered(start)
     if int(np.count_nonzero(mask)) < MIN_PIXELS:
         return None
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
-    rendered = np.asarray(rendered, np.float32)
     try:  # the shift first (a wide basin), then the affine map from there
         cc, affine = cv2.findTransformECC(rendered, roi, np.eye(2, 3, dtype=np.float32),
                                           cv2.MOTION_TRANSLATION, criteria, mask, 5)
@@ -130,6 +137,37 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     to_roi = np.linalg.inv(start.from_roi)
     moved = start.from_roi @ np.vstack([affine, (0.0, 0.0, 1.0)]) @ to_roi @ hom
     return np.asarray(moved / moved[2, 2], np.float64)
+
+
+def search_shift(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
+                 radius_px: float, min_correlation: float = 0.6) -> tuple[float, float] | None:
+    """Where the part in view of ``ref`` rendered at ``hom`` matches ``frame`` best within
+    ``radius_px`` of it: the shift (dx, dy px, whole pixels) of the highest normalised
+    correlation (masked to the plate's part in view; the frame's border replicated beyond the
+    image), or None when that stays under ``min_correlation`` or too little is in view.
+
+    :func:`align_cut`'s ECC holds a plate from a few pixels off, not from an autopilot's
+    estimate up to tens of pixels off: this exhaustive search over the shifts gives it a
+    start (issue 19: the square's plates entering the view while nothing is tracked)."""
+    start = ecc_start(ref, frame, hom)
+    if start is None:
+        return None
+    rendered, mask = _rendered(start)
+    ys, xs = np.nonzero(mask)
+    if len(xs) < MIN_PIXELS:
+        return None
+    bx0, bx1, by0, by1 = int(xs.min()), int(xs.max()) + 1, int(ys.min()), int(ys.max()) + 1
+    r = int(np.ceil(radius_px))
+    x0, y0 = int(start.from_roi[0, 2]) + bx0, int(start.from_roi[1, 2]) + by0  # in the frame
+    grey = cv2.copyMakeBorder(_grey(frame), r, r, r, r, cv2.BORDER_REPLICATE)
+    search = grey[y0:y0 + by1 - by0 + 2 * r, x0:x0 + bx1 - bx0 + 2 * r]
+    score = cv2.matchTemplate(search, np.ascontiguousarray(rendered[by0:by1, bx0:bx1]),
+                              cv2.TM_CCOEFF_NORMED, mask=mask[by0:by1, bx0:bx1])
+    score = np.nan_to_num(score, nan=-1.0, posinf=-1.0, neginf=-1.0)
+    iy, ix = np.unravel_index(int(np.argmax(score)), score.shape)
+    if float(score[iy, ix]) < min_correlation:
+        return None
+    return float(ix - r), float(iy - r)
 
 
 def box_shift(old: tuple[float, float, float, float], new: tuple[float, float, float, float],

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from tracker.acquire import ReferenceMatcher, homography_to, project_corners, refine_ecc
-from tracker.edge_align import align_cut, box_shift, shifted
+from tracker.edge_align import align_cut, box_shift, search_shift, shifted
 
 from .test_acquire import place, textured_poster
 
@@ -85,3 +85,35 @@ def test_a_cut_plate_sliding_fast_is_held_from_its_box_shift() -> None:
         assert moved is not None
         hom = moved
         assert np.abs(project_corners(ref, hom)[0] - truth[0]).max() < 0.5
+
+
+def test_a_cut_plate_far_from_its_prediction_is_found_by_the_shift_search() -> None:
+    """A plate a quarter in view, predicted 26 px left and 19 px up of where it is (an
+    autopilot's dead-reckoned pose): the ECC alone does not reach it, the search over
+    shifts gives a start from which it does, to within a pixel."""
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    truth = np.array([[470.0, 330.0], [770.0, 334.0], [766.0, 534.0], [474.0, 530.0]])
+    gray = cv2.cvtColor(place(poster, truth, seed=2), cv2.COLOR_BGR2GRAY)
+    predicted = shifted(homography_to(ref, truth), -26.0, -19.0)
+    alone = align_cut(ref, gray, predicted)
+    assert alone is None or np.abs(project_corners(ref, alone) - truth).max() > 5.0
+    moved = search_shift(ref, gray, predicted, 30.0)
+    assert moved is not None and np.abs(np.subtract(moved, (26.0, 19.0))).max() <= 1.0
+    found = align_cut(ref, gray, shifted(predicted, *moved))
+    assert found is not None
+    assert np.abs(project_corners(ref, found) - truth).max() < 1.0
+
+
+def test_the_shift_search_finds_nothing_where_the_plate_is_not() -> None:
+    """Out of its radius (the plate 60 px from the prediction, radius 30) or absent (a
+    flat plate where the poster was): no shift correlates well enough."""
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    truth = np.array([[470.0, 330.0], [770.0, 334.0], [766.0, 534.0], [474.0, 530.0]])
+    gray = cv2.cvtColor(place(poster, truth, seed=2), cv2.COLOR_BGR2GRAY)
+    far = shifted(homography_to(ref, truth), -60.0, 0.0)
+    assert search_shift(ref, gray, far, 30.0) is None
+    assert search_shift(ref, gray, far, 70.0) == (60.0, 0.0)  # found once within reach
+    empty = cv2.cvtColor(place(poster * 0 + 128, truth, seed=2), cv2.COLOR_BGR2GRAY)
+    assert search_shift(ref, empty, homography_to(ref, truth), 30.0) is None
