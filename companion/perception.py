@@ -186,10 +186,12 @@ class Perception:
         if self._rectify is not None:
             image = self._rectify(image)
             self._cache.put_rectified(frame.index, image)  # housekeeping may skip frames
-        motion = self._turn.motion(self.side.read(frame.t_us).attitude) \
-            if self._turn.enabled else None  # off: no second read of the sensors
+        # the side sensors are read once a frame: here when the turn needs them, else by
+        # the solve (only with something tracked)
+        sensed = self.side.at(frame.t_us) if self._turn.enabled else None
+        motion = None if sensed is None else self._turn.motion(sensed[0].attitude)
         events += self.trackset.update(image, check_all=self._light_step(image), motion=motion)
-        return self._solve(frame, events)
+        return self._solve(frame, events, sensed)
 
     def _light_step(self, image: Image) -> bool:
         """True when the frame's mean grey level jumped by ``light_step_ratio`` or more
@@ -247,13 +249,16 @@ class Perception:
         return float(np.mean([np.linalg.norm(pos - np.asarray(lm.position_ned_m))
                               for lm in used])) if used else 0.0
 
-    def _solve(self, frame: Frame, events: list[dict[str, Any]]) -> FrameResult:
+    def _solve(self, frame: Frame, events: list[dict[str, Any]],
+               sensed: tuple[SideSensors, SideSensors] | None = None) -> FrameResult:
+        """The pose from this frame's tracks; ``sensed``: the side sensors of the frame
+        (as read, as the solver takes them) when :meth:`process` has read them already."""
         tracks = self.trackset.views()
         if not tracks:
             return FrameResult(frame.index, frame.t_us, tracks, None, "nothing tracked",
                                tuple(events))
         particles = self.trackset.particles()
-        read, side = self.side.at(frame.t_us)
+        read, side = self.side.at(frame.t_us) if sensed is None else sensed
         observed = [self.noise.floor(o, self.tracks) for o in self.observations(frame.index)]
         fix = solve_pose(observed, self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
