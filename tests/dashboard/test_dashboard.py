@@ -134,13 +134,15 @@ def test_page_shows_live_preview_and_the_published_counters(
         time.sleep(1.2)
         shot2 = page.locator("#preview").screenshot()
         assert shot1 != shot2, "the preview did not change over time"
-        shown = int(page.inner_text("td[data-key='frames']"))
+        # the three counters read in one script run: the page cannot update between them
+        # (read one by one, an update between the reads gave (4, 3) in CI, 2026-11-29)
+        cells = page.eval_on_selector_all(
+            "td[data-key]", "cs => Object.fromEntries(cs.map(c => [c.dataset.key, c.innerText]))")
+        shown, sent, accepted = (int(cells[k]) for k in ("frames", "fixes sent", "fixes accepted"))
         published = fake.frames
         # the page lags the publisher by < 1.5 s; 0 when it was read between the page's
         # update and the publisher's next frame (10 a second): seen once in CI, 2026-11-29
         assert 0 <= published - shown <= 15
-        sent = int(page.inner_text("td[data-key='fixes sent']"))
-        accepted = int(page.inner_text("td[data-key='fixes accepted']"))
         assert (sent - shown, accepted - shown) == (-1, -2)  # exactly the published relation
         assert page.inner_text("td[data-key='state']") == "tracking"
         assert not page.is_visible("#stale")
