@@ -7,7 +7,9 @@ compares the four corners with the truth's (the landmark's map corners projected
 all: the number of plate sightings, the RMS corner error (px, over the eight coordinates),
 the RMS of the stated sigma, and the share of sightings whose normalised error
 ``sum(err^2) / sigma^2`` lies under the chi-square 95 % point for 8 degrees of freedom
-(0.95 when the sigma is honest and the errors Gaussian).  ``--dump`` prints each sighting.
+(0.95 when the sigma is honest and the errors Gaussian); then the error along each of the
+outline's modes (shift, rotation, scale, aspect, shear, perspective) over the stated sigma,
+which shows the errors a plate's corners share.  ``--dump`` prints each sighting.
 
     PYTHONPATH=. python benchmarks/corner_errors.py STREAM [--frames N] [--set KEY=VALUE]
 """
@@ -28,6 +30,7 @@ from companion.core.stream_format import read_meta
 from companion.core.stream_io import read_truth
 from companion.perception import Perception, SideSensors
 from companion.settings import SIM_LAYERS, load_settings
+from tracker.pose.inputs import outline_basis
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import AttitudeSample
 
@@ -37,7 +40,9 @@ BINS_PX = (0, 40, 70, 110, 180, 10_000)
 
 def sightings(folder: Path, args: argparse.Namespace) -> list[tuple[float, ...]]:
     """(width px, error RMS px, stated sigma px, size-model sigma px, fit sigma px or nan,
-    frame index, mean x error px, mean y error px) per track with corners per frame."""
+    frame index, mean x error px, mean y error px, then the error along each of the
+    outline's eight modes (``tracker.pose.inputs.outline_basis``) over the stated sigma)
+    per track with corners per frame."""
     meta = read_meta(folder)
     truth = read_truth(folder)
     landmarks, refs = load_stream_map(folder)
@@ -83,8 +88,10 @@ def sightings(folder: Path, args: argparse.Namespace) -> list[tuple[float, ...]]
             width = float(np.ptp(quad[:, 0]))
             model = perception.noise.sigma(obs.corners_px) or float("nan")
             fit = float("nan") if track.fit_sigma is None else track.fit_sigma
-            out.append((width, float(np.sqrt(np.mean(err**2))), obs.corner_sigma_px or 0.0,
-                        model, fit, frame.index, *err.mean(axis=0)))
+            stated = obs.corner_sigma_px or 0.0
+            modes = outline_basis(quad).T @ err.ravel() / max(stated, 1e-9)
+            out.append((width, float(np.sqrt(np.mean(err**2))), stated,
+                        model, fit, frame.index, *err.mean(axis=0), *modes))
             if args.dump:
                 print(f"frame {frame.index} {lid} width {width:.0f} err "
                       f"{out[-1][1]:.3f} stated {out[-1][2]:.3f} model {model:.3f} "
@@ -111,6 +118,22 @@ def report(rows: list[tuple[float, ...]]) -> None:
               f"  {np.mean(sel[:, 6]):+.3f}, {np.mean(sel[:, 7]):+.3f}")
 
 
+MODES = ("shift x", "shift y", "rotation", "scale", "aspect", "shear", "persp x", "persp y")
+
+
+def report_modes(rows: list[tuple[float, ...]]) -> None:
+    """Per bin of plate width, the robust spread (1.4826 x the median absolute value) of
+    the error along each outline mode over the stated sigma: 1 for every mode when the
+    corners' errors are independent, Gaussian and honestly stated."""
+    a = np.asarray(rows)
+    print("width px      n  " + "  ".join(f"{m:>8}" for m in MODES))
+    for lo, hi in [*itertools.pairwise(BINS_PX), (0, 10_000)]:
+        sel = a[(a[:, 0] >= lo) & (a[:, 0] < hi)]
+        if len(sel):
+            spread = 1.4826 * np.median(np.abs(sel[:, 8:16]), axis=0)
+            print(f"{lo:>4}-{hi:<5} {len(sel):>6}  " + "  ".join(f"{v:8.3f}" for v in spread))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stream", type=Path)
@@ -122,7 +145,9 @@ def main() -> int:
                         help="override a setting, as companion --set does (repeat)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
-    report(sightings(args.stream, args))
+    rows = sightings(args.stream, args)
+    report(rows)
+    report_modes(rows)
     return 0
 
 

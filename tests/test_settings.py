@@ -25,6 +25,7 @@ class Example:
     flag: bool = False
     weights: tuple[float, ...] = (1.0,)
     pair: tuple[int, int] = (1, 2)
+    gains: tuple[float, float] = field(default=(1.0, 1.0), metadata={"gt": 0})
     model: str = field(default="", metadata={"path": True})
     inner: Inner = Inner()
 
@@ -48,10 +49,12 @@ def test_build_accepts_good_values_and_converts_ints_to_floats() -> None:
         ({"flag": 1}, "flag", "expected true or false, got 1"),
         ({"weights": [1, "x"]}, "weights[1]", 'expected a number, got "x"'),
         ({"pair": [1]}, "pair", "expected a list of 2 integers, got [1]"),
+        ({"gains": [1]}, "gains", "expected a list of 2 numbers > 0, got [1]"),
+        ({"gains": [1, 0]}, "gains[1]", "expected a number > 0, got 0"),
         ({"inner": {"rate_hz": 0}}, "inner.rate_hz", "expected a number > 0 and <= 50, got 0"),
         ({"inner": 5}, "inner", "expected a table, got 5"),
-        ({"partciles": 5}, "partciles", "unknown key (expected one of: flag, inner, "
-         "mode, model, pair, particles, weights)"),
+        ({"partciles": 5}, "partciles", "unknown key (expected one of: flag, gains, "
+         "inner, mode, model, pair, particles, weights)"),
         ({"inner": {"rate": 5}}, "inner.rate", "unknown key (expected one of: rate_hz)"),
     ],
 )

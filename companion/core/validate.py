@@ -58,6 +58,9 @@ def show_value(value: object) -> str:
         return repr(value)
 
 
+_BOUNDS = ("ge", "gt", "le", "lt")
+
+
 def describe(tp: Any, meta: Mapping[str, Any] | None = None) -> str:
     """A short English description of what a field accepts, constraints included."""
     meta = meta or {}
@@ -69,9 +72,10 @@ def describe(tp: Any, meta: Mapping[str, Any] | None = None) -> str:
     if origin is tuple:
         args = typing.get_args(tp)
         length = f" of at least {meta['min_len']}" if "min_len" in meta else ""
+        each = " ".join(["", " and ".join(bounds_text(meta))]).rstrip()
         if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list{length} of {_plural(args[0])}"
-        return f"a list of {len(args)} {_plural(args[0])}"
+            return f"a list{length} of {_plural(args[0])}{each}"
+        return f"a list of {len(args)} {_plural(args[0])}{each}"
     base = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}
     if tp in base:
         text = base[tp]
@@ -197,8 +201,9 @@ def _convert_tuple(tp: Any, value: Any, key: str, meta: Mapping[str, Any],
         if len(value) != len(args):
             raise fail()
         item_types = list(args)
+    bounds = {k: v for k, v in meta.items() if k in _BOUNDS}  # on every item
     return tuple(
-        _convert(t, v, f"{key}[{i}]", {}, resolve_path)
+        _convert(t, v, f"{key}[{i}]", bounds, resolve_path)
         for i, (t, v) in enumerate(zip(item_types, value, strict=True))
     )
 

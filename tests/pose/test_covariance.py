@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from tracker.camera import CameraModel
 from tracker.pose import AttitudeSample, NoFix, Observation, PoseConfig, PoseFix, solve_pose
+from tracker.pose.inputs import outline_basis
 from tracker.pose.refine import arc_correction
 from tracker.pose.scenarios import NEES_HIGH_3DOF, NEES_LOW_3DOF
 from tracker.pose.simulate import SensorNoise
@@ -106,14 +107,10 @@ def test_a_plates_common_scale_error_is_in_its_covariance(camera: CameraModel) -
         obs = replace(clean, corners_px=tuple((float(u), float(v)) for u, v in noisy),
                       corner_sigma_px=sigma)
         for out, extra in ((told, scale), (untold, None)):
-            fix = solve_pose([replace(obs, corner_scale_sigma_px=extra)], lms, camera, 0,
-                             attitude=att)
-            assert isinstance(fix, PoseFix), getattr(fix, "reason", "")
-            e = np.asarray(fix.position_ned_m) - TRUE_P
-            out.append(float(e @ np.linalg.solve(fix.covariance[:3, :3], e)))
+            out.append(_position_nees(solve_pose(
+                [replace(obs, corner_scale_sigma_px=extra)], lms, camera, 0, attitude=att)))
     nees, naive = np.array(told), np.array(untold)
-    assert 2.4 < nees.mean() < 3.6
-    assert np.mean((nees >= NEES_LOW_3DOF) & (nees <= NEES_HIGH_3DOF)) >= 0.9
+    _assert_chi_square_3(nees)
     assert naive.mean() > 4.5  # without it the scale error is unaccounted for
     zero = solve_pose([replace(clean, corner_scale_sigma_px=0.0)], lms, camera, 0,
                       attitude=exact)
@@ -125,15 +122,71 @@ def test_a_plates_common_scale_error_is_in_its_covariance(camera: CameraModel) -
         assert isinstance(out, NoFix) and "corner_scale_sigma_px" in out.reason
 
 
+def _position_nees(fix: PoseFix | NoFix) -> float:
+    """The fix's position NEES against the truth (the fix must have come)."""
+    assert isinstance(fix, PoseFix), getattr(fix, "reason", "")
+    e = np.asarray(fix.position_ned_m) - TRUE_P
+    return float(e @ np.linalg.solve(fix.covariance[:3, :3], e))
+
+
+def _assert_chi_square_3(nees: np.ndarray) -> None:
+    """200 draws of chi-square(3): mean 3 (+-0.6 covers 3.5 sigma), 95 % inside."""
+    assert 2.4 < nees.mean() < 3.6
+    assert np.mean((nees >= NEES_LOW_3DOF) & (nees <= NEES_HIGH_3DOF)) >= 0.9
+
+
 def _outline_error(c: np.ndarray, amplitude: np.ndarray) -> np.ndarray:
-    """Corner errors along a plate's outline modes (scale, aspect, shear, keystone across
-    and along; unit 8-vectors orthonormal to each other and to shift and rotation)."""
-    x, y = (c - c.mean(axis=0)).T
-    one, zero = np.ones(4), np.zeros(4)
-    raw = [(one, zero), (zero, one), (-y, x), (x, y), (x, -y), (y, x), (x * x, x * y),
-           (x * y, y * y)]
-    q = np.linalg.qr(np.column_stack([np.column_stack(m).ravel() for m in raw]))[0][:, 3:]
+    """Corner errors along a plate's outline modes: the last ``len(amplitude)`` of
+    shift across, down, rotation, scale, aspect, shear, keystone across and along (unit
+    8-vectors orthonormal to each other, ``outline_basis``)."""
+    q = outline_basis(c)[:, 8 - len(amplitude):]
     return np.asarray((q @ amplitude).reshape(4, 2))
+
+
+def test_plates_whose_corners_err_together_are_stated_so(camera: CameraModel) -> None:
+    """Plates whose corners err along their outline's modes with other sigmas than the
+    corners' (a shift and a scale larger, rotation, aspect and shear smaller): with
+    ``corner_mode_sigma_rel`` saying so, the fixes of three plates have NEES ~
+    chi-square(3); with the corners taken as independent they do not.  One plate alone
+    keeps its corners' sigma in every mode (its own ``one_plate_*`` settings)."""
+    lms = wall()[:3]
+    clean = see(lms, camera)
+    sigma = 0.1
+    rel = np.array([1.5, 1.5, 0.3, 2.0, 0.3, 0.3, 0.5, 0.5])
+    told_cfg = PoseConfig(corner_mode_sigma_rel=tuple(float(r) for r in rel))
+    rng = np.random.default_rng(14)
+    told, untold = [], []
+    for _ in range(200):
+        att = _drawn_attitude(rng)
+        obs = []
+        for o in clean:
+            c = np.array(o.corners_px)
+            noisy = c + _outline_error(c, rng.normal(0.0, rel * sigma))
+            obs.append(replace(o, corners_px=tuple((float(u), float(v)) for u, v in noisy),
+                               corner_sigma_px=sigma))
+        for out, cfg in ((told, told_cfg), (untold, PoseConfig())):
+            out.append(_position_nees(solve_pose(obs, lms, camera, 0, attitude=att,
+                                                 config=cfg)))
+    nees, naive = np.array(told), np.array(untold)
+    _assert_chi_square_3(nees)
+    assert naive.mean() > 4.5  # the shared shift and scale unaccounted for
+    one = see(lms[:1], camera)
+    alone = [solve_pose(one, lms[:1], camera, 0, attitude=AttitudeSample(0, *TRUE_RPY),
+                        config=cfg) for cfg in (told_cfg, PoseConfig())]
+    assert isinstance(alone[0], PoseFix) and isinstance(alone[1], PoseFix)
+    np.testing.assert_array_equal(alone[0].covariance, alone[1].covariance)
+
+
+def test_outline_modes_are_orthonormal_and_named_in_order() -> None:
+    """The basis over a skewed quadrilateral's eight coordinates: orthonormal; its first
+    two columns move every corner alike, the fourth along the corners' offsets."""
+    c = np.array([[10.0, 20.0], [60.0, 25.0], [58.0, 70.0], [12.0, 64.0]])
+    q = outline_basis(c)
+    np.testing.assert_allclose(q.T @ q, np.eye(8), atol=1e-12)
+    shift = q[:, 0].reshape(4, 2)
+    np.testing.assert_allclose(shift, np.repeat(shift[:1], 4, axis=0), atol=1e-12)
+    offsets = (c - c.mean(axis=0)).ravel()
+    np.testing.assert_allclose(abs(q[:, 3] @ offsets), np.linalg.norm(offsets), rtol=1e-12)
 
 
 def test_one_plates_outline_error_is_in_its_covariance(camera: CameraModel) -> None:

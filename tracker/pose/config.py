@@ -96,6 +96,15 @@ class PoseConfig:
     #: 5.5 x on wall-04, 0.8-1.3 x on survey and street (docs/decisions.md, "A lone plate's
     #: tilt").  0: the plate's own keystone is trusted as the corners' sigma says.
     one_plate_tilt_sigma_rel: float = field(default=0.0, metadata={"ge": 0})
+    #: A plate's corner errors along its outline's eight modes (shift across, down,
+    #: rotation, scale, aspect, shear, perspective across, along:
+    #: ``tracker.pose.inputs.outline_basis``), each as a multiple of the corners' sigma.
+    #: All 1: the four corners' errors are independent (the same sigma in every mode).
+    #: An alignment moves an outline as a whole, so a camera's corners may err more in
+    #: some modes (scale, tilt) than in others (rotation); measured per camera with
+    #: ``benchmarks/corner_errors.py`` (docs/pose.md, "A plate's corners err together").
+    corner_mode_sigma_rel: tuple[float, float, float, float, float, float, float, float] = \
+        field(default=(1.0,) * 8, metadata={"gt": 0})
     #: Gauss-Newton iterations of the final refinement.
     max_iterations: int = field(default=10, metadata={"ge": 1})
     #: Largest accepted condition number of the normal matrix (degenerate geometry).

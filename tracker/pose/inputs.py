@@ -51,6 +51,9 @@ class Group:
     #: 1-sigma (px) of its keystone along the image's height (the plate's tilt towards the
     #: camera) when its corners are all the fix has, if larger (``one_plate_tilt_sigma_rel``)
     tilt_sigma_px: float = 0.0
+    #: each outline mode's 1-sigma over ``sigma_px`` when the plate's four corners are
+    #: measured and they are not all 1 (``PoseConfig.corner_mode_sigma_rel``), else None
+    mode_rel: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -121,8 +124,10 @@ def make_groups(
         scale = obs.corner_scale_sigma_px if obs.all_corners else None
         rel = (cfg.one_plate_outline_sigma_rel, cfg.one_plate_tilt_sigma_rel)
         outline, tilt = (r * sig if obs.all_corners else 0.0 for r in rel)
+        modes = np.asarray(cfg.corner_mode_sigma_rel, dtype=np.float64)
+        mode_rel = modes if obs.all_corners and np.any(modes != 1.0) else None
         groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale),
-                            outline, tilt))
+                            outline, tilt, mode_rel))
     return groups
 
 
@@ -150,44 +155,55 @@ def _undistort(ctx: Context, px: FloatArray) -> FloatArray:
     return np.asarray(out.reshape(-1, 2), dtype=np.float64)
 
 
-def _outline_modes(g: Group) -> tuple[FloatArray, FloatArray]:
-    """A lone plate's common outline errors: its corners' unit modes (k x 2 x 5) of scale
-    about its centre, aspect, shear and perspective (keystone across and along), orthonormal
-    to each other and to the outline's shift and rotation (which stay independent), and
-    their betas (5,).
-
-    The scale mode's variance is the declared width error's (``scale_beta``) plus
-    ``outline_sigma_px**2``; each other mode's is ``outline_sigma_px**2``, the keystone
-    along the height's at least ``tilt_sigma_px**2``."""
-    d = g.pixels_ideal - g.pixels_ideal.mean(axis=0)
+def outline_basis(corners: FloatArray) -> FloatArray:
+    """An outline's orthonormal modes over its 2k corner coordinates (rows x, y of each
+    corner in turn), columns: shift across, shift down, rotation, scale about its centre,
+    aspect, shear, perspective across, along (Gram-Schmidt in that order)."""
+    d = corners - corners.mean(axis=0)
     x, y = d[:, 0], d[:, 1]
     one, zero = np.ones_like(x), np.zeros_like(x)
     basis = np.column_stack([np.column_stack(pair).ravel() for pair in (
         (one, zero), (zero, one), (-y, x), (x, y), (x, -y), (y, x), (x * x, x * y),
         (x * y, y * y))])
-    q = np.linalg.qr(basis)[0][:, 3:]  # scale, aspect, shear, perspective across, along
+    return np.asarray(np.linalg.qr(basis)[0], dtype=np.float64)
+
+
+def _outline_modes(g: Group, lone: bool) -> tuple[FloatArray, FloatArray]:
+    """A plate's outline modes (k x 2 x 8, :func:`outline_basis`) and their betas (8,): each
+    mode's variance is the corners' ``(sigma * mode_rel)**2``, the scale's plus the
+    declared width error's (``scale_beta``).  A lone plate (its corners all the fix has)
+    keeps ``sigma**2`` in every mode, adds ``outline_sigma_px**2`` to each from the scale
+    on, and its keystone along the height has at least ``tilt_sigma_px**2`` there: one
+    plate cannot average them out, and with smaller modes its corners outweigh the
+    attitude prior (docs/pose.md, "A plate's corners err together")."""
+    q = outline_basis(g.pixels_ideal)
     sig = g.sigma_px
-    var = np.full(5, g.outline_sigma_px**2)
-    var[4] = max(var[4], g.tilt_sigma_px**2)
+    var = np.full(8, sig**2) if g.mode_rel is None or lone else sig**2 * g.mode_rel**2
     if g.scale_beta > 0.0:  # beta = 1 - sigma / sqrt(sigma^2 + a): a back from beta
-        var[0] += sig**2 * ((1.0 / (1.0 - g.scale_beta)) ** 2 - 1.0)
-    return q.reshape(-1, 2, 5), 1.0 - sig / np.sqrt(sig**2 + var)
+        var[3] += sig**2 * ((1.0 / (1.0 - g.scale_beta)) ** 2 - 1.0)
+    if lone:
+        var[3:] += g.outline_sigma_px**2
+        var[7] = max(var[7], sig**2 + g.tilt_sigma_px**2)
+    return q.reshape(-1, 2, 8), 1.0 - sig / np.sqrt(var)
 
 
 def point_set(groups: list[Group]) -> PointSet:
-    """Stack every landmark's points for the refinement.  One plate alone (its corners
-    all the fix has) also gets its outline's common scale and perspective errors
-    (:func:`_outline_modes`): one plate cannot average them out."""
-    if len(groups) == 1 and max(groups[0].outline_sigma_px, groups[0].tilt_sigma_px) > 0.0 \
-            and groups[0].observation.all_corners:
-        g = groups[0]
-        dirs, betas = _outline_modes(g)
-        k = g.points_ned.shape[0]
-        return PointSet(g.points_ned, g.pixels_ideal, np.full(k, g.sigma_px),
-                        np.zeros(k, dtype=np.int64), dirs, np.tile(betas, (k, 1)))
+    """Stack every landmark's points for the refinement.  A plate's four corners share the
+    errors of its outline's modes (:func:`_outline_modes`) when a mode is stated apart
+    from the corners: its width error, ``mode_rel`` when the fix has other landmarks, and
+    one plate alone its outline's."""
     counts = [g.points_ned.shape[0] for g in groups]
+    lone = len(groups) == 1 and groups[0].observation.all_corners and \
+        max(groups[0].outline_sigma_px, groups[0].tilt_sigma_px) > 0.0
     scale_dir = scale_beta = None
-    if any(g.scale_beta > 0.0 for g in groups):
+    if lone or (len(groups) > 1 and any(g.mode_rel is not None for g in groups)):
+        modes = [_outline_modes(g, lone) if g.observation.all_corners
+                 else (np.zeros((n, 2, 8)), np.zeros(8))
+                 for g, n in zip(groups, counts, strict=True)]
+        scale_dir = np.concatenate([d for d, _ in modes])
+        scale_beta = np.vstack([np.tile(b, (n, 1))
+                                for (_, b), n in zip(modes, counts, strict=True)])
+    elif any(g.scale_beta > 0.0 for g in groups):
         scale_dir = np.vstack([np.zeros((n, 2)) if g.scale_dir is None else g.scale_dir
                                for g, n in zip(groups, counts, strict=True)])
         scale_beta = np.repeat([g.scale_beta for g in groups], counts)
