@@ -26,7 +26,7 @@ from companion.app import CompanionApp
 from companion.demo_autopilot import AutopilotProcess
 from companion.landmarks.geodesy import LocalFrame
 from companion.monitoring.config import local_meeting
-from companion.observers import FixTruths
+from companion.observers import FixTruth, FixTruths
 from companion.runtime import CompanionFlight, PracticalMap, bridge_for, detector_for
 from companion.settings import Settings
 from companion.sim.scenario import load_scenario
@@ -225,6 +225,7 @@ def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, res
         # the rest: too cautious (under the lower bound) or overconfident (over the upper)
         "nees_under_95": round(float(np.mean([n < NEES_LOW_3DOF for n in nees])), 3)
         if nees else None,
+        "nees_by_landmarks": _nees_by_landmarks(result.fixes, nees),
         "attitude_prior_rejected": sum(f.attitude_prior == "rejected" for f, _, _ in
                                        result.fixes),
         "solvers": dict(Counter(f.solver for f, _, _ in result.fixes)),
@@ -232,6 +233,21 @@ def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, res
         "autopilot_rejections": fake.summary()["vision_reasons"],
         "bridge": {k: v for k, v in bridge.stats().items() if isinstance(v, int | float | str)},
     }
+
+
+def _nees_by_landmarks(fixes: list[FixTruth], nees: list[float]) -> dict[str, dict[str, Any]]:
+    """Per number of landmarks in the fix: how many fixes, the shares inside and under the
+    95 % bound and the median NEES/3 (0.79 when honest). A one-plate fix and a four-plate
+    fix err for different reasons (docs/decisions.md, "A plate's corners err together")."""
+    groups: dict[int, list[float]] = {}
+    for (fix, _, _), n in zip(fixes, nees, strict=True):
+        groups.setdefault(len(fix.landmark_ids), []).append(n)
+    return {str(k): {"fixes": len(v),
+                     "inside": round(float(np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF
+                                                    for n in v])), 3),
+                     "under": round(float(np.mean([n < NEES_LOW_3DOF for n in v])), 3),
+                     "median_nees_per_dof": round(float(np.median(v)) / 3.0, 3)}
+            for k, v in sorted(groups.items())}
 
 
 def _rmse_by_solver(result: FixTruths) -> dict[str, float]:
@@ -259,6 +275,9 @@ def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
         f"({f(s['position_rmse_pct_of_distance'], ' %')})",
         f"NEES inside 95 %  {f(s['nees_inside_95'])} of the fixes (attitude prior "
         f"rejected for {s['attitude_prior_rejected']})",
+        "  by landmarks    " + ("  ".join(
+            f"{k}: {g['fixes']} fixes, {g['inside']} inside, {g['under']} under"
+            for k, g in s["nees_by_landmarks"].items()) or "-"),
         f"latency           p50 {f(s['latency_p50_ms'], ' ms')}  p99 "
         f"{f(s['latency_p99_ms'], ' ms')} (capture -> on the wire)",
         f"cpu               {s['cpu_cores_busy']} cores busy on average by the companion "

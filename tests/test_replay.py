@@ -57,6 +57,12 @@ def test_replay_scores_a_simulated_stream_against_its_truth(
     assert s["position_rmse_pct_of_distance"] < 5.0, s
     assert s["fix_share_2plus_visible"] >= 0.8, s
     assert s["nees_inside_95_share"] >= 0.8, s
+    # the NEES by landmarks in the fix partitions the same fixes
+    by = s["nees_by_landmarks"]
+    assert sum(g["fixes"] for g in by.values()) == s["fixes_solved"]
+    inside = sum(g["fixes"] * g["inside"] for g in by.values()) / s["fixes_solved"]
+    assert inside == pytest.approx(s["nees_inside_95_share"], abs=2e-3)
+    assert all(int(k) >= 1 and 0.0 < g["median_nees_per_dof"] for k, g in by.items())
     assert s["attitude"].startswith("truth_pose.csv with an autopilot's stated noise")
     err = s["attitude_error_deg"]  # truth + the fake's stated 0.2 / 1 deg, not exact
     assert 0 < err["roll_rms"] < 1.0 and 0 < err["yaw_rms"] < 4.0, err
