@@ -299,7 +299,8 @@ class FollowCameraSource(OfSimulatedWorld):
         return (n, e, d)
 
     async def recv(self) -> Frame:
-        """The next frame, due every ``1 / fps`` s, showing the world ``delay_ms`` ago."""
+        """The next frame, due every ``1 / fps`` s, showing the world ``delay_ms`` ago;
+        the frames due while nobody asked for one are skipped (``late``)."""
         if self._closed:
             raise EOFError("source closed")
         if self._t0_ns is None:
@@ -307,8 +308,14 @@ class FollowCameraSource(OfSimulatedWorld):
             self._t0_ns = self._clock_ns()
         period_ns = 1e9 / self.fps
         while True:
+            now = self._clock_ns()
+            # a camera takes its frames on time: those nobody read while the companion was
+            # busy are gone, and the next one shows now (a frame stamped with a slot long
+            # past makes every fix stale: the coupled hover's EKF failsafe under load)
+            self._next = self.status.catch_up(self._next, int((now - self._t0_ns) // period_ns),
+                                              f"the companion fell behind at frame {self._next}")
             due = self._t0_ns + round(self._next * period_ns)
-            delay_s = (due - self._clock_ns()) / 1e9
+            delay_s = (due - now) / 1e9
             if delay_s > 0:
                 await asyncio.sleep(delay_s)
             index, self._next = self._next, self._next + 1

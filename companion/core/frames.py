@@ -64,6 +64,14 @@ class SourceStatus:
         self.skip_reasons[reason] = self.skip_reasons.get(reason, 0) + 1
         self.last_error = detail
 
+    def catch_up(self, index: int, due_now: int, detail: str) -> int:
+        """The frame to take next when frame ``index`` is next and ``due_now`` is due:
+        the ones between were not read in time and are gone, as a live camera's are
+        (each counted skipped as ``late``)."""
+        for _ in range(index, due_now):
+            self.skip("late", detail)
+        return max(index, due_now)
+
     def as_dict(self) -> dict[str, object]:
         """Plain dict for JSON status messages."""
         return {

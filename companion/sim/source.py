@@ -221,11 +221,8 @@ class SimCameraSource(OfSimulatedWorld):
             current = int((now - self.t0_us) // period_us)
             if self.status.delivered == 0 and self.status.skipped == 0:
                 return max(index, current)  # the first frame is the one due now
-            if current > index:  # behind: drop the frames whose time has passed
-                for _ in range(index, current):
-                    self.status.skip("late", f"rendering fell behind at frame {index}")
-                return current
-            return index
+            # behind: drop the frames whose time has passed
+            return self.status.catch_up(index, current, f"rendering fell behind at frame {index}")
         delay_s = (self.t0_us + index * period_us - monotonic_us()) / 1e6
         if delay_s > 0:
             await asyncio.sleep(delay_s)

@@ -266,3 +266,23 @@ async def test_stale_truth_stops_the_frames_until_it_comes_back(sim: Simulator) 
             truth = sim.state_at(flight_time_s(ap, f.t_us))
             assert state is not None
             assert math.dist(state.position_ned_m, truth.position_ned_m) < 0.02
+
+
+async def test_a_companion_that_falls_behind_gets_the_frame_due_now(sim: Simulator) -> None:
+    """A live camera keeps taking frames while the companion is busy; the ones not read are
+    gone.  Before, the follow camera handed out the missed slots one by one, each stamped
+    with its old time: under load every fix was stale and the coupled hover's EKF failed."""
+    async for _ap, bridge in _wired(sim):
+        src = FollowCameraSource(sim, bridge, ORIGIN, "ardupilot", FAST)
+        try:
+            first = await src.recv()
+            await asyncio.sleep(0.5)  # busy for 15 frames' time
+            asked_ns = time.monotonic_ns()
+            late = await src.recv()
+        finally:
+            src.close()
+    period_ns = 1e9 / src.fps
+    shown_ns = asked_ns - FAST.delay_ms * 1e6
+    assert late.t_us * 1000 > shown_ns - 1.5 * period_ns, (asked_ns, late.t_us)
+    assert late.index - first.index >= 14
+    assert src.status.skip_reasons["late"] == late.index - first.index - 1
