@@ -220,11 +220,8 @@ def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, res
         "stage_ms": {"capture_to_worker": app.stats.queue_ms.summary(),
                      "process": app.stats.process_ms.summary()},
         "no_fix_frames": app.counters.no_fix,
-        "nees_inside_95": round(float(np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF
-                                               for n in nees])), 3) if nees else None,
         # the rest: too cautious (under the lower bound) or overconfident (over the upper)
-        "nees_under_95": round(float(np.mean([n < NEES_LOW_3DOF for n in nees])), 3)
-        if nees else None,
+        **dict(zip(("nees_inside_95", "nees_under_95"), _nees_shares(nees), strict=True)),
         "nees_by_landmarks": _nees_by_landmarks(result.fixes, nees),
         "attitude_prior_rejected": sum(f.attitude_prior == "rejected" for f, _, _ in
                                        result.fixes),
@@ -243,11 +240,17 @@ def _nees_by_landmarks(fixes: list[FixTruth], nees: list[float]) -> dict[str, di
     for (fix, _, _), n in zip(fixes, nees, strict=True):
         groups.setdefault(len(fix.landmark_ids), []).append(n)
     return {str(k): {"fixes": len(v),
-                     "inside": round(float(np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF
-                                                    for n in v])), 3),
-                     "under": round(float(np.mean([n < NEES_LOW_3DOF for n in v])), 3),
+                     **dict(zip(("inside", "under"), _nees_shares(v), strict=True)),
                      "median_nees_per_dof": round(float(np.median(v)) / 3.0, 3)}
             for k, v in sorted(groups.items())}
+
+
+def _nees_shares(nees: list[float]) -> tuple[float | None, float | None]:
+    """The shares of the NEES inside the two-sided 95 % bound and under it (None: none)."""
+    if not nees:
+        return None, None
+    return (round(float(np.mean([NEES_LOW_3DOF <= n <= NEES_HIGH_3DOF for n in nees])), 3),
+            round(float(np.mean([n < NEES_LOW_3DOF for n in nees])), 3))
 
 
 def _rmse_by_solver(result: FixTruths) -> dict[str, float]:
