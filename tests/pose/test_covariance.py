@@ -187,6 +187,15 @@ def test_outline_modes_are_orthonormal_and_named_in_order() -> None:
     np.testing.assert_allclose(shift, np.repeat(shift[:1], 4, axis=0), atol=1e-12)
     offsets = (c - c.mean(axis=0)).ravel()
     np.testing.assert_allclose(abs(q[:, 3] @ offsets), np.linalg.norm(offsets), rtol=1e-12)
+    # Gram-Schmidt of the named modes in their order: q R = modes with R upper triangular
+    named = (lambda x, y: (1.0, 0.0), lambda x, y: (0.0, 1.0), lambda x, y: (-y, x),
+             lambda x, y: (x, y), lambda x, y: (x, -y), lambda x, y: (y, x),
+             lambda x, y: (x * x, x * y), lambda x, y: (x * y, y * y))
+    modes = np.column_stack([np.ravel([f(x, y) for x, y in c - c.mean(axis=0)])
+                             for f in named])
+    r = q.T @ modes
+    np.testing.assert_allclose(q @ r, modes, atol=1e-9)
+    np.testing.assert_allclose(np.tril(r, -1), 0.0, atol=1e-9)
 
 
 def test_one_plates_outline_error_is_in_its_covariance(camera: CameraModel) -> None:

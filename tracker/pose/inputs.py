@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
@@ -54,6 +54,12 @@ class Group:
     #: each outline mode's 1-sigma over ``sigma_px`` when the plate's four corners are
     #: measured and they are not all 1 (``PoseConfig.corner_mode_sigma_rel``), else None
     mode_rel: FloatArray | None = None
+
+    @cached_property
+    def outline_basis(self) -> FloatArray:
+        """:func:`outline_basis` of its ideal pixels, once: a solve stacks the same groups
+        several times (the robust solve, the attitude check, the consistency check)."""
+        return outline_basis(self.pixels_ideal)
 
 
 @dataclass(frozen=True)
@@ -162,10 +168,16 @@ def outline_basis(corners: FloatArray) -> FloatArray:
     aspect, shear, perspective across, along (Gram-Schmidt in that order)."""
     d = corners - corners.mean(axis=0)
     x, y = d[:, 0], d[:, 1]
-    one, zero = np.ones_like(x), np.zeros_like(x)
-    basis = np.column_stack([np.column_stack(pair).ravel() for pair in (
-        (one, zero), (zero, one), (-y, x), (x, y), (x, -y), (y, x), (x * x, x * y),
-        (x * y, y * y))])
+    basis = np.zeros((2 * len(d), 8))
+    across, down = basis[0::2], basis[1::2]  # each corner's x row, then its y row
+    across[:, 0] = 1.0
+    down[:, 1] = 1.0
+    across[:, 2], down[:, 2] = -y, x
+    across[:, 3], down[:, 3] = x, y
+    across[:, 4], down[:, 4] = x, -y
+    across[:, 5], down[:, 5] = y, x
+    across[:, 6], down[:, 6] = x * x, x * y
+    across[:, 7], down[:, 7] = x * y, y * y
     return np.asarray(np.linalg.qr(basis)[0], dtype=np.float64)
 
 
@@ -177,7 +189,7 @@ def _outline_modes(g: Group, lone: bool) -> tuple[FloatArray, FloatArray]:
     on, and its keystone along the height has at least ``tilt_sigma_px**2`` there: one
     plate cannot average them out, and with smaller modes its corners outweigh the
     attitude prior (docs/pose.md, "A plate's corners err together")."""
-    q = outline_basis(g.pixels_ideal)
+    q = g.outline_basis
     sig = g.sigma_px
     var = np.full(8, sig**2) if g.mode_rel is None or lone else sig**2 * g.mode_rel**2
     if g.scale_beta > 0.0:  # beta = 1 - sigma / sqrt(sigma^2 + a): a back from beta

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -48,6 +49,13 @@ class PointSet:
     landmark_index: IntArray
     scale_dir: FloatArray | None = None
     scale_beta: FloatArray | None = None
+
+    @cached_property
+    def same_landmark(self) -> FloatArray:
+        """N x N: 1 where two points belong to the same landmark (once per set: every
+        residual evaluation of a refinement uses it, :func:`_decorrelate`)."""
+        index = self.landmark_index
+        return (index[:, None] == index[None, :]).astype(np.float64)
 
 
 @dataclass(frozen=True)
@@ -182,8 +190,8 @@ def _decorrelate(rows: FloatArray, pts: PointSet) -> FloatArray:
     dirs = pts.scale_dir.reshape(n, 2, -1)  # N x 2 x M
     beta = pts.scale_beta.reshape(n, -1)  # N x M
     along = np.einsum("njm,njc->nmc", dirs, r)  # u_m^T r, point by point
-    same = (pts.landmark_index[:, None] == pts.landmark_index[None, :]).astype(np.float64)
-    back = beta[:, :, None] * np.einsum("nk,kmc->nmc", same, along)  # beta u^T r per landmark
+    # beta u^T r summed over each landmark's points
+    back = beta[:, :, None] * np.einsum("nk,kmc->nmc", pts.same_landmark, along)
     return np.asarray((r - np.einsum("njm,nmc->njc", dirs, back)).reshape(rows.shape))
 
 
