@@ -56,6 +56,7 @@ from mavlink_bridge.fake_replay import TelemetryReplay
 from mavlink_bridge.fake_report import fake_summary
 from mavlink_bridge.fake_rules import (
     FakeRules,
+    JitterCorrection,
     VisionJudge,
     VisionRecord,
     judge_landing_target,
@@ -219,6 +220,7 @@ class FakeAutopilot:
         self.origin_attempts = 0
         self.timesync_offset_ns = 0.0
         self.timesync_samples = 0
+        self.jitter = JitterCorrection()  # ArduPilot's, per link: a reboot starts it anew
         self.judge.reset()
         self.streams.reset()  # a reboot forgets every asked interval
         self.ekf = FakeEstimator(self.estimator_config, self.config.seed)
@@ -496,9 +498,12 @@ class FakeAutopilot:
         self.timesync_samples += 1
 
     def _stamp_age_ms(self, stamp_us: int) -> float:
-        """How old the sample is in our clock; ArduPilot corrects jitter (age ~ 0 + delay),
-        PX4 converts with the TIMESYNC offset once synced, else uses the arrival time."""
-        if self.config.profile == "ardupilot" or not self.timesync_synced:
+        """How old the sample is in our clock: ArduPilot's jitter correction (the stamp plus
+        the smallest transport lag seen, :class:`JitterCorrection`); PX4 converts with the
+        TIMESYNC offset once synced, else uses the arrival time."""
+        if self.config.profile == "ardupilot":
+            return self.jitter.age_ms(stamp_us, self._local_ns() // 1000)
+        if not self.timesync_synced:
             return 0.0
         local_us = stamp_us + self.timesync_offset_ns / 1000
         return (self._local_ns() / 1000 - local_us) / 1000
@@ -520,7 +525,9 @@ class FakeAutopilot:
             frame_id=int(f.get("frame_id", 1)), child_frame_id=int(f.get("child_frame_id", 0)),
             estimator_type=int(f.get("estimator_type", 0)), quality=int(f.get("quality", 0)),
             reset_counter=int(f.get("reset_counter", 0)), accepted=ok, reason=why,
-            innovation_m=innov, stamp_age_ms=age_ms if self.timesync_synced else math.nan,
+            innovation_m=innov,
+            stamp_age_ms=age_ms if self.timesync_synced or self.config.profile == "ardupilot"
+            else math.nan,
             truth_error_m=math.dist(pos, truth.position_ned_m)))
 
     def _fuse(self, name: str, f: dict[str, Any], pos: tuple[float, float, float],

@@ -7,7 +7,8 @@ samples < 20 ms apart are discarded (EKF3); VPE is blocked when VISO_QUAL_MIN > 
 below VISO_QUAL_MIN is rejected; a new ``reset_counter`` resets instead of fusing.
 PX4: ODOMETRY frame_id LOCAL_NED/ENU/FRD/FLU; estimator_type MOCAP is published to a topic EKF2
 never reads (ignored); quality below EKF2_EV_QMIN rejected; stamps are converted with the
-TIMESYNC offset once synced, else replaced by the arrival time.
+TIMESYNC offset once synced, else replaced by the arrival time.  ArduPilot's stamps go through
+its jitter correction (:class:`JitterCorrection`).
 Both: non-finite pose -> rejected.  The innovation gate is the fake's estimator's
 (:mod:`mavlink_bridge.fake_ekf`, against its own estimate); the old gate against the true
 state (:meth:`VisionJudge.judge`) stays for the permissive fake only.
@@ -39,6 +40,42 @@ class FakeRules:
     position_noise_floor_m: float = 0.1  # VISO_POS_M_NSE / EKF2_EVP_NOISE
     delay_ms: float = 10.0  # VISO_DELAY_MS / EKF2_EV_DELAY
     max_stamp_age_ms: float = 500.0  # older (after time conversion) falls out of the buffer
+
+
+class JitterCorrection:
+    """ArduPilot's time for an offboard stamp (libraries/AP_Common/JitterCorrection.cpp,
+    used for VISION_POSITION_ESTIMATE and ODOMETRY through GCS_MAVLINK's
+    ``correct_offboard_timestamp_usec_to_ms``): the stamp plus the link's offset, the
+    smallest (local - stamp) seen; that minimum is re-taken every ``convergence_loops``
+    samples (clock drift), and a stamp more than ``max_lag_ms`` behind is clamped there.
+    So a fix that took longer than the quickest one is placed that much before its arrival:
+    its age, not zero."""
+
+    def __init__(self, max_lag_ms: int = 500, convergence_loops: int = 100) -> None:
+        self.max_lag_us = max_lag_ms * 1000
+        self.convergence_loops = convergence_loops
+        self.link_offset_us: int | None = None
+        self.min_sample_us = 0
+        self.min_sample_counter = 0
+
+    def age_ms(self, offboard_us: int, local_us: int) -> float:
+        """How long before ``local_us`` ArduPilot takes the sample stamped ``offboard_us``
+        to have been made (>= 0, at most ``max_lag_ms``)."""
+        diff = local_us - offboard_us
+        if self.link_offset_us is None or diff < self.link_offset_us:
+            self.link_offset_us = diff  # "a timestamp from the future": adjust down
+        estimate = offboard_us + self.link_offset_us
+        if estimate + self.max_lag_us < local_us:  # too far in the past: assume max lag
+            estimate = local_us - self.max_lag_us
+            self.link_offset_us = estimate - offboard_us
+        if self.min_sample_counter == 0:
+            self.min_sample_us = diff
+        self.min_sample_counter += 1
+        self.min_sample_us = min(self.min_sample_us, diff)
+        if self.min_sample_counter == self.convergence_loops:
+            self.link_offset_us = self.min_sample_us
+            self.min_sample_counter = 0
+        return (local_us - estimate) / 1000.0
 
 
 @dataclass

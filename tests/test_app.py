@@ -260,7 +260,7 @@ def test_rolling_percentiles_and_rate() -> None:
     assert r.percentile(50) is None
     for v in range(1, 101):
         r.add(v)
-    assert r.summary() == {"p50": 50.5, "p99": 99.01}
+    assert r.summary() == {"min": 1.0, "p50": 50.5, "p99": 99.01}
     m = RateMeter(window_s=1.0)
     for i in range(11):
         m.tick(i * 0.1)

@@ -5,8 +5,9 @@ no other way to set them.  Shows current against wanted (mavlink_bridge/params.p
 table and where each default comes from), sets only after confirmation (or ``--yes``), reads
 each back, and says which need a reboot.  ``VISO_DELAY_MS`` / ``EKF2_EV_DELAY`` come from the
 companion's measured capture-to-wire latency: ``--delay-ms``, or the last status of a flight
-log (``--flightlog``, its p50 plus :data:`DELAY_MARGIN_MS`), else
-:data:`mavlink_bridge.params.DEFAULT_DELAY_MS`.
+log (``--flightlog``): for ArduPilot its least latency, since ArduPilot's jitter correction
+has already placed each fix by the quickest one's lag (docs/mavlink.md, "Timestamps"); for
+PX4 its p50 plus :data:`DELAY_MARGIN_MS`; else :data:`mavlink_bridge.params.DEFAULT_DELAY_MS`.
 """
 
 from __future__ import annotations
@@ -55,14 +56,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     setup.add_argument("--delay-ms", type=float, metavar="MS",
                        help="the companion's latency for VISO_DELAY_MS / EKF2_EV_DELAY")
     setup.add_argument("--flightlog", type=Path, metavar="FILE.jsonl",
-                       help="take the latency from this flight log's last status (p50 + "
-                       f"{DELAY_MARGIN_MS:g} ms)")
+                       help="take the latency from this flight log's last status (ArduPilot: "
+                       f"its least; PX4: p50 + {DELAY_MARGIN_MS:g} ms)")
     setup.add_argument("--timeout", type=float, default=10.0, metavar="S",
                        help="wait this long for the autopilot's heartbeat (default: 10)")
     setup.set_defaults(handler=run)
 
 
-def delay_from(args: argparse.Namespace) -> tuple[float, str]:
+def delay_from(args: argparse.Namespace, profile: str) -> tuple[float, str]:
     """The delay to set and where it came from."""
     if args.delay_ms is not None:
         if not 0 <= args.delay_ms <= 250:
@@ -70,11 +71,15 @@ def delay_from(args: argparse.Namespace) -> tuple[float, str]:
         return float(args.delay_ms), "--delay-ms"
     if args.flightlog is not None:
         log = read_flight_log(args.flightlog)
-        p50s = [r["latency_ms"]["p50"] for r in log.records if r.get("kind") == "status"
-                and isinstance(r.get("latency_ms", {}).get("p50"), int | float)]
-        if not p50s:
+        measured = [r["latency_ms"] for r in log.records if r.get("kind") == "status"
+                    and isinstance(r.get("latency_ms", {}).get("p50"), int | float)]
+        if not measured:
             raise InputError(f"{args.flightlog}: no measured latency in its status records")
-        return p50s[-1] + DELAY_MARGIN_MS, f"{args.flightlog} p50 {p50s[-1]:.0f} ms + margin"
+        least = measured[-1].get("min")
+        if profile == "ardupilot" and isinstance(least, int | float):
+            return min(float(least), 250.0), f"{args.flightlog} least {least:.0f} ms"
+        p50 = measured[-1]["p50"]
+        return min(p50 + DELAY_MARGIN_MS, 250.0), f"{args.flightlog} p50 {p50:.0f} ms + margin"
     return DEFAULT_DELAY_MS, "default (no latency measured: run the companion, then "\
         "use --flightlog)"
 
@@ -82,7 +87,7 @@ def delay_from(args: argparse.Namespace) -> tuple[float, str]:
 def run(args: argparse.Namespace, settings: Settings) -> int:
     """0: every parameter as wanted (or nothing to do); 1: declined, unanswered or refused."""
     profile = args.profile or settings.vehicle.profile
-    delay, source = delay_from(args)
+    delay, source = delay_from(args, profile)
     cfg = dataclasses.replace(settings.mavlink, endpoint=args.endpoint or
                               settings.mavlink.endpoint, profile=profile, streams=())
     print(f"{profile} parameters on {cfg.endpoint} (delay {delay:.0f} ms: {source})")

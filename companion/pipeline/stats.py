@@ -25,9 +25,11 @@ class Rolling:
         return float(np.percentile(np.fromiter(self._values, float), q))
 
     def summary(self) -> dict[str, float | None]:
-        """``{"p50": ..., "p99": ...}`` rounded to 0.01."""
+        """``{"min": ..., "p50": ..., "p99": ...}`` rounded to 0.01 (the least latency is what
+        ArduPilot's ``VISO_DELAY_MS`` wants: docs/mavlink.md, "Timestamps")."""
         return {k: None if v is None else round(v, 2)
-                for k, v in (("p50", self.percentile(50)), ("p99", self.percentile(99)))}
+                for k, v in (("min", self.percentile(0)), ("p50", self.percentile(50)),
+                             ("p99", self.percentile(99)))}
 
 
 class RateMeter:

@@ -3,9 +3,15 @@ autopilot's parameter defaults and answers the parameter protocol."""
 
 from __future__ import annotations
 
+import argparse
+import json
+from pathlib import Path
+
 import pytest
 
 from companion.cli import main
+from companion.cli.autopilot_cmd import DELAY_MARGIN_MS, delay_from
+from companion.flightlog import FORMAT, VERSION
 from mavlink_bridge.fake_autopilot import FakeAutopilotConfig
 from mavlink_bridge.params import autopilot_defaults, profile_parameters, same_value
 from tests.follow.test_run_follow import fake_in_thread
@@ -57,3 +63,21 @@ def test_setup_without_an_autopilot_is_one_line(capsys: pytest.CaptureFixture[st
                    "0.5"])
     err = capsys.readouterr().err
     assert status != 0 and "no autopilot heartbeat" in err and "Traceback" not in err
+
+
+def test_the_delay_from_a_flight_log_is_ardupilots_least_latency(tmp_path: Path) -> None:
+    """ArduPilot's jitter correction places each fix by the quickest fix's lag, so its
+    VISO_DELAY_MS is the least capture-to-wire latency; PX4 keeps p50 plus the margin, and
+    a log written before the least was recorded gives p50 plus the margin for both."""
+    log = tmp_path / "flight.jsonl"
+    latency = {"min": 12.4, "p50": 40.0, "p99": 90.0}
+    status = {"kind": "status", "latency_ms": latency}
+    log.write_text("\n".join(json.dumps(r) for r in (
+        {"format": FORMAT, "version": VERSION, "kind": "header"}, status)) + "\n")
+    args = argparse.Namespace(delay_ms=None, flightlog=log)
+    assert delay_from(args, "ardupilot")[0] == pytest.approx(12.4)
+    assert delay_from(args, "px4")[0] == pytest.approx(40.0 + DELAY_MARGIN_MS)
+    del latency["min"]
+    log.write_text("\n".join(json.dumps(r) for r in (
+        {"format": FORMAT, "version": VERSION, "kind": "header"}, status)) + "\n")
+    assert delay_from(args, "ardupilot")[0] == pytest.approx(40.0 + DELAY_MARGIN_MS)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mavlink_bridge.fake_autopilot import cm_s
+from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig, cm_s
 from mavlink_bridge.fake_ekf import (
     EKF_FLAGS_HEALTHY,
     EKF_FLAGS_NO_HORIZ,
@@ -16,6 +16,7 @@ from mavlink_bridge.fake_ekf import (
     FakeEstimator,
     estimator_defaults,
 )
+from mavlink_bridge.fake_rules import JitterCorrection
 from mavlink_bridge.fake_streams import MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, FakeStreams
 from mavlink_bridge.fake_vehicle import (
     ARDUCOPTER_GUIDED,
@@ -171,3 +172,38 @@ def test_a_runaway_velocity_is_sent_held_to_its_field() -> None:
     in a coupled flight trusting its own fixes) is sent at the field's limit, not a
     struct.error that stops the fake's streams."""
     assert [cm_s(v) for v in (1.234, -0.5, 400.0, -400.0)] == [123, -50, 32767, -32768]
+
+
+def test_ardupilot_places_a_late_fix_by_the_quickest_link_lag() -> None:
+    """ArduPilot's jitter correction (AP_Common/JitterCorrection.cpp): a fix that took 150 ms
+    longer than the quickest is aged 150 ms, whatever the two clocks' offset; one more than
+    500 ms behind is held at 500 ms; the smallest lag of each 100 samples becomes the
+    offset, so the link settles after a slow start."""
+    jc = JitterCorrection()
+    offset_us = 7_000_000_000  # the companion's clock is far from the autopilot's
+    ages = [jc.age_ms(t, t + offset_us + lag) for t, lag in
+            ((0, 40_000), (33_000, 190_000), (66_000, 60_000), (99_000, 40_000))]
+    assert ages == pytest.approx([0.0, 150.0, 20.0, 0.0])
+    assert jc.age_ms(132_000, 132_000 + offset_us + 900_000) == pytest.approx(500.0)
+    # a link that got slower (clock drift): the old least lag holds for the window it is
+    # in and the next one; then that window's least lag is the offset
+    drift = JitterCorrection(convergence_loops=3)
+    lags_ms = [20, 80, 80, 80, 80, 80, 80]
+    assert [drift.age_ms(k * 1000, k * 1000 + offset_us + lag * 1000)
+            for k, lag in enumerate(lags_ms)] == pytest.approx([0, 60, 60, 60, 60, 60, 0])
+
+
+def test_the_ardupilot_fake_ages_a_late_fix_and_a_reboot_forgets_the_link() -> None:
+    """The fake's ArduPilot takes a vision stamp through that correction (it used to take
+    every fix as made at its arrival); a reboot starts the link's offset anew."""
+    now_ns = [10_000_000_000]
+    ap = FakeAutopilot(FakeAutopilotConfig(profile="ardupilot"), clock_ns=lambda: now_ns[0])
+    remote_us = 123_456_789  # the companion's clock
+
+    def fix_after(lag_ms: int) -> float:
+        now_ns[0] += 33_000_000
+        return ap._stamp_age_ms(remote_us + now_ns[0] // 1000 - lag_ms * 1000)
+
+    assert [fix_after(lag) for lag in (50, 50, 200, 60)] == pytest.approx([0, 0, 150, 10])
+    ap.reboot(0.0)
+    assert fix_after(200) == pytest.approx(0.0)
