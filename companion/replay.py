@@ -267,8 +267,11 @@ def _fake(settings: Settings, clock: ReplayClock, source: ReplaySource, truth: R
           telemetry: TelemetryReplay | None) -> FakeAutopilot:
     """The fake autopilot flying the recording on its time, replaying its telemetry."""
     flight = recorded_flight(truth.poses) or (telemetry.trajectory() if telemetry else None)
+    # --fast: the fake's clock is the recording's and the stamps the companion's, two bases
+    # that drift apart; ArduPilot's jitter correction would read that drift as link lag
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                             endpoint="udpin:127.0.0.1:0"),
+                                             endpoint="udpin:127.0.0.1:0",
+                                             jitter_correction=not clock.fast),
                          truth=None if flight is None else
                          lambda t: flight(clock.recording_s(t)),
                          clock_ns=clock.fake_ns, replay=telemetry)

@@ -124,6 +124,10 @@ class FakeAutopilotConfig:
     absent: tuple[str, ...] = ()
     # "estimate": the fake's own EKF gates the fixes; "truth": the old gate against truth
     judge: Literal["estimate", "truth"] = "estimate"
+    # ArduPilot's jitter correction of vision stamps (fake_rules.JitterCorrection); off: a
+    # fix is taken as made at its arrival, for a clock that is not a link's (`replay --fast`
+    # runs the fake on the recording's time and stamps frames on the companion's)
+    jitter_correction: bool = True
     # None: the profile's real defaults (fake_ekf.estimator_defaults)
     estimator: EstimatorConfig | None = None
     # "scripted": flies ``truth``, armed from the start (the flight is under way);
@@ -502,7 +506,8 @@ class FakeAutopilot:
         the smallest transport lag seen, :class:`JitterCorrection`); PX4 converts with the
         TIMESYNC offset once synced, else uses the arrival time."""
         if self.config.profile == "ardupilot":
-            return self.jitter.age_ms(stamp_us, self._local_ns() // 1000)
+            return self.jitter.age_ms(stamp_us, self._local_ns() // 1000) \
+                if self.config.jitter_correction else 0.0
         if not self.timesync_synced:
             return 0.0
         local_us = stamp_us + self.timesync_offset_ns / 1000
