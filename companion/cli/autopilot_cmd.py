@@ -79,7 +79,7 @@ def delay_from(args: argparse.Namespace, profile: str) -> tuple[float, str]:
         if profile == "ardupilot" and isinstance(least, int | float):
             return min(float(least), 250.0), f"{args.flightlog} least {least:.0f} ms"
         p50 = measured[-1]["p50"]
-        return min(p50 + DELAY_MARGIN_MS, 250.0), f"{args.flightlog} p50 {p50:.0f} ms + margin"
+        return p50 + DELAY_MARGIN_MS, f"{args.flightlog} p50 {p50:.0f} ms + margin"
     return DEFAULT_DELAY_MS, "default (no latency measured: run the companion, then "\
         "use --flightlog)"
 

@@ -27,9 +27,10 @@ class Rolling:
     def summary(self) -> dict[str, float | None]:
         """``{"min": ..., "p50": ..., "p99": ...}`` rounded to 0.01 (the least latency is what
         ArduPilot's ``VISO_DELAY_MS`` wants: docs/mavlink.md, "Timestamps")."""
-        return {k: None if v is None else round(v, 2)
-                for k, v in (("min", self.percentile(0)), ("p50", self.percentile(50)),
-                             ("p99", self.percentile(99)))}
+        if not self._values:
+            return {"min": None, "p50": None, "p99": None}
+        values = np.percentile(np.fromiter(self._values, float), (0, 50, 99))
+        return {k: round(float(v), 2) for k, v in zip(("min", "p50", "p99"), values, strict=True)}
 
 
 class RateMeter:
