@@ -11,9 +11,9 @@ not depend on what else runs on the machine, so two checkouts compare under any 
     PYTHONPATH=. .venv/bin/python benchmarks/perception_cpu.py --scenario survey --frames 0:900
     PYTHONPATH=. .venv/bin/python benchmarks/perception_cpu.py --max-tracks 2 --particles 100
 
-``--max-tracks`` / ``--particles`` / ``--scale`` are the settings a slower board lowers
-(docs/deploy.md); ``--profile N`` adds cProfile's N costliest functions (main thread's
-CPU time).
+``--max-tracks`` / ``--particles`` / ``--scale`` / ``--track-every`` are the settings a
+slower board lowers (docs/deploy.md); ``--profile N`` adds cProfile's N costliest
+functions (main thread's CPU time).
 """
 
 from __future__ import annotations
@@ -97,6 +97,8 @@ def configs(args: argparse.Namespace) -> dict[str, Any]:
         kw["config"] = dataclasses.replace(kw["config"], parallel_tracks=False)
     if args.max_tracks is not None:
         kw["config"] = dataclasses.replace(kw["config"], max_tracks=args.max_tracks)
+    if args.track_every is not None:
+        kw["config"] = dataclasses.replace(kw["config"], track_every_frames=args.track_every)
     if args.particles is not None:
         kw["tracker_config"] = replace_tracker(kw["tracker_config"], particles=args.particles)
     return kw
@@ -108,6 +110,8 @@ def main() -> int:
     ap.add_argument("--frames", default="0:900", help="first:end")
     ap.add_argument("--max-tracks", type=int, help="perception.max_tracks (default: its own)")
     ap.add_argument("--particles", type=int, help="tracker particles (default: its own)")
+    ap.add_argument("--track-every", type=int,
+                    help="perception.track_every_frames (default: its own)")
     ap.add_argument("--scale", type=float, default=1.0,
                     help="camera resolution scale (0.5: 320x240 for 640x480)")
     ap.add_argument("--layer", choices=("flight", "sim"), default="sim",

@@ -127,6 +127,31 @@ class Corners:
             if cut and track.corners is not None else None
         track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
 
+    def coast(self, track: Track, image: npt.NDArray[np.uint8],
+              motion: FloatArray | None = None) -> bool:
+        """A whole plate's corners aligned from its last homography (turned by ``motion``)
+        without the tracker, while its box agrees with that outline: kept when the outline
+        found overlaps the one it started from by ``min_corner_agreement`` and is whole
+        too.  False (the track as it was) otherwise: the tracker runs, then :meth:`follow`."""
+        ref = self.references[track.landmark_id]
+        if track.homography is None or track.corners is None \
+                or not self._agrees(track.corners, track.corners, track.box):
+            return False  # no outline, or the tracker's box is not on it: the tracker runs
+        start = track.homography if motion is None else motion @ track.homography
+        start = start / start[2, 2]
+        if self.is_cut(track.landmark_id, start):
+            return False
+        aligned = ecc(self.config, ref, image, start, False, self.weights(track))
+        if aligned is None or self.is_cut(track.landmark_id, aligned):
+            return False
+        corners = project_corners(ref, aligned)
+        if quad_iou(corners, project_corners(ref, start)) < self.config.min_corner_agreement:
+            return False
+        track.homography, track.corners, track.misses = aligned, corners, 0
+        track.patch = None
+        track.saturated = saturated_share(image, corners)
+        return True
+
     def _align_turned(self, track: Track, image: npt.NDArray[np.uint8],
                       motion: FloatArray) -> FloatArray | None:
         """The alignment from the last homography moved by the camera's turn: a cut
@@ -155,14 +180,17 @@ class Corners:
             outline = corners.astype(np.float32).reshape(-1, 1, 2)
             on = cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) >= 0
             return aligned if on else None
-        # the outline predicted (the last one, moved with the tracker's box) against the
-        # outline found: a rotated plate's outline fills its axis-aligned box poorly, so
-        # outlines are compared, not boxes
-        predicted = project_corners(ref, hom)
-        predicted = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
-        if quad_iou(corners, predicted) < self.config.min_corner_agreement:
+        if not self._agrees(corners, project_corners(ref, hom), box):
             return None  # the alignment wandered off: keep the box, drop the corners
         return aligned
+
+    def _agrees(self, found: FloatArray, predicted: FloatArray, box: Box) -> bool:
+        """The outline ``predicted`` moved with the tracker's ``box`` (centred on it)
+        against the outline ``found``: a rotated plate's outline fills its axis-aligned
+        box poorly, so outlines are compared, not boxes."""
+        x, y, w, h = box
+        moved = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
+        return quad_iou(found, moved) >= self.config.min_corner_agreement
 
     def is_cut(self, landmark_id: str, hom: FloatArray) -> bool:
         """Is the outline ``hom`` projects cut by the image's edge below

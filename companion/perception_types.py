@@ -113,6 +113,12 @@ class PerceptionConfig:
     #: next is a light step: every track is checked at once and acquisition runs at once.
     light_step_ratio: float = field(default=1.25, metadata={"gt": 1})
     max_corner_misses: int = field(default=5, metadata={"ge": 1})
+    #: The particle tracker runs on one frame in this many while a whole plate's corners
+    #: are aligned; on the others its box follows the outline the alignment found from
+    #: the last one (which checks it against that outline, not against the tracker's box)
+    #: and the tracker looks at nothing (issue 23: the tracker was ~40 % of a frame's CPU
+    #: and the corners come from the alignment either way).  1: every frame.
+    track_every_frames: int = field(default=3, metadata={"ge": 1})
     verify_correlation: float = field(default=0.75, metadata={"gt": 0, "le": 1})
     max_prediction_error_px: float = field(default=12.0, metadata={"gt": 0})
     #: Without a fix, a plate the autopilot's estimate predicts cut by the image's edge with
@@ -176,6 +182,8 @@ class Track:
     pose_rejections: int = 0
     #: appearance checks failed in a row (0: the last check found the landmark)
     verify_failures: int = 0
+    #: frames in a row on which the tracker coasted (``track_every_frames``)
+    coasted: int = 0
     #: the last frame around a plate cut by the image's edge (None: not cut), whose shift
     #: starts the next frame's alignment (tracker/edge_align.py)
     patch: Patch | None = None

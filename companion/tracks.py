@@ -28,6 +28,7 @@ import threading
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -134,15 +135,35 @@ class TrackSet:
                     motion: FloatArray | None = None) -> bool:
         """The tracker's update and the corners' alignment (and the appearance check when
         ``check``); False when the track is lost."""
-        result: TrackResult = track.tracker.update(image)
-        if result.box is None or result.confidence < self.config.min_track_confidence:
-            return False
-        last_box, track.box = track.box, result.box
-        track.confidence, track.features = result.confidence, result.features
-        self.corners.follow(track, image, last_box, motion)
+        if not self._coasted(track, image, motion):
+            result: TrackResult = track.tracker.update(image)
+            if result.box is None or result.confidence < self.config.min_track_confidence:
+                return False
+            last_box, track.box = track.box, result.box
+            track.confidence, track.features = result.confidence, result.features
+            track.coasted = 0
+            self.corners.follow(track, image, last_box, motion)
         if check:
             # one key per track: no two threads share one
             self._checked[track.landmark_id] = self.corners.check(track, image)
+        return True
+
+    def _coasted(self, track: Track, image: npt.NDArray[np.uint8],
+                 motion: FloatArray | None) -> bool:
+        """Between the tracker's frames (``track_every_frames``): the corners aligned
+        without it, the tracker's box moved as the outline moved; False when it is the
+        tracker's turn or the alignment alone did not hold."""
+        before = track.corners
+        if track.coasted + 1 >= self.config.track_every_frames or before is None \
+                or not self.corners.coast(track, image, motion):
+            return False
+        after = track.corners
+        assert after is not None
+        shift = after.mean(axis=0) - before.mean(axis=0)
+        ratio = float(np.sqrt(cv2.contourArea(after.astype(np.float32))
+                              / cv2.contourArea(before.astype(np.float32))))
+        track.box = track.tracker.coast((float(shift[0]), float(shift[1])), ratio)
+        track.coasted += 1
         return True
 
     def verify(self, image: npt.NDArray[np.uint8] | None = None) -> Events:

@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tracker.config import TrackerConfig, check_config
-from tracker.step import TrackState, start, step
+from tracker.step import TrackState, coast, start, step
 from tracker.target_model import planes_of
 from tracker.types import Box, Cue, TrackResult
 from tracker.validation import check_box, check_image, check_same_frame
@@ -69,6 +69,14 @@ class AdaptiveTracker:
         check_same_frame(image_bgr, self._state.shape)
         self._state, result = step(self._state, image_bgr, self.config, self.rng)
         return result
+
+    def coast(self, shift: tuple[float, float], ratio: float = 1.0) -> Box:
+        """Skip a frame: the target moved by ``shift`` (x, y pixels) and its size by
+        ``ratio``, as the caller found without this tracker; returns the box moved."""
+        if self._state is None:
+            raise ValueError("coast: call init(image_bgr, box) first")
+        self._state, box = coast(self._state, shift, ratio, self.config)
+        return box
 
     def likelihood_images(
         self, image_bgr: npt.NDArray[np.uint8]

@@ -176,6 +176,28 @@ def step(
     return _track(state, frame, cfg, rng)
 
 
+def coast(
+    state: TrackState, shift: tuple[float, float], ratio: float, cfg: TrackerConfig
+) -> tuple[TrackState, Box]:
+    """A frame the tracker does not look at: its estimate and particles moved by ``shift``
+    (pixels) and scaled by ``ratio``, as something else found the target moved (the
+    companion's corner alignment, issue 23); the move enters the history (eq. 1's noise
+    and the drift), nothing learns.  Only while the target is tracked (not lost)."""
+    if state.lost_frames > 0:
+        raise ValueError("coast: the target is lost")
+    move = np.array([shift[0], shift[1]])
+    scale = min(max(state.estimate[2] * ratio, cfg.motion.min_scale), cfg.motion.max_scale)
+    estimate = _inside(state.shape, np.array([*(state.estimate[:2] + move), scale]))
+    particles = state.particles.copy()
+    particles[:, :2] += move
+    particles[:, 2] *= scale / state.estimate[2]
+    keep = cfg.motion.motion_history_frames + 1
+    history = (*state.history, (estimate[0], estimate[1]))[-keep:]
+    state = replace(state, estimate=estimate, particles=particles, history=history,
+                    frames=state.frames + 1)
+    return state, box_of(state, estimate)
+
+
 def _noise(state: TrackState, cfg: TrackerConfig) -> float:
     """Eq. 1's noise from the recent steps, in fractions of the box side."""
     m = cfg.motion
