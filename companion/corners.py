@@ -122,6 +122,8 @@ class Corners:
                 track.corners = project_corners(self.references[track.landmark_id], aligned)
         if track.homography is None or track.misses >= self.config.max_corner_misses:
             self.recover(track, image)
+        if track.corners is not None:
+            track.disputed = False
         cut = track.homography is not None and self.is_cut(track.landmark_id, track.homography)
         track.patch = patch_around(image, track.corners) \
             if cut and track.corners is not None else None
@@ -181,7 +183,8 @@ class Corners:
             on = cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) >= 0
             return aligned if on else None
         if not self._agrees(corners, project_corners(ref, hom), box):
-            return None  # the alignment wandered off: keep the box, drop the corners
+            track.disputed = True  # the alignment or the box wandered off: drop the corners
+            return None
         return aligned
 
     def _agrees(self, found: FloatArray, predicted: FloatArray, box: Box) -> bool:

@@ -182,6 +182,9 @@ class Track:
     pose_rejections: int = 0
     #: appearance checks failed in a row (0: the last check found the landmark)
     verify_failures: int = 0
+    #: the tracker's box disagreed with the outline the alignment found (which was then
+    #: dropped), and no alignment has held since: the box is not used for a box-only fix
+    disputed: bool = False
     #: frames in a row on which the tracker coasted (``track_every_frames``)
     coasted: int = 0
     #: the last frame around a plate cut by the image's edge (None: not cut), whose shift

@@ -227,7 +227,9 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
     view shrinks (:meth:`CornerNoise.cut`).  When some tracks have corners, box-only tracks
     are left out: a box centre is not the landmark's centre under perspective, and mixing
     it in costs more than it adds.  Without corners, a box that reaches out of the image is
-    left out too: its centre is off its plate's by up to half the part out of view.
+    left out too: its centre is off its plate's by up to half the part out of view; and so
+    is a ``disputed`` one (its outline found elsewhere: a tracker box 20-30 px off a plate
+    that had just come whole into view gave a fix 2.8 m off, survey frame 84).
     """
     out = []
     size = (noise.camera.width, noise.camera.height)
@@ -240,8 +242,10 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
               and (cut[0] is not None or noise.fits(tracks[lid]))}
     if usable:
         live = [t for t in live if t.landmark_id in usable]
-    else:  # boxes only: a box reaching out of the image is not centred on its plate
-        live = [t for t in live if inside(box_corners(t.box), *size, margin=1.0)]
+    else:  # boxes only: a box reaching out of the image is not centred on its plate, nor
+        # one that has disagreed with its plate's outline since the alignment last held
+        live = [t for t in live if inside(box_corners(t.box), *size, margin=1.0)
+                and not t.disputed]
     for t in live:
         x, y, w, h = t.box
         cut = usable.get(t.landmark_id)

@@ -219,3 +219,25 @@ def test_a_plate_cut_by_the_edge_gives_only_its_corners_inside_the_image() -> No
     assert cut.corners_px is not None and np.allclose(cut.corners_px, cut_corners)
     assert cut.corner_sigma_px is not None and full.corner_sigma_px is not None
     assert cut.corner_sigma_px > 1.5 * full.corner_sigma_px
+
+
+def test_a_box_that_disagreed_with_its_outline_gives_no_box_only_fix() -> None:
+    """The alignment finds the plate, the tracker's box sits 60 px off it: the corners are
+    dropped (which of the two wandered is not known), and the box is not used alone
+    either (a box 20-30 px off a plate gave a fix 2.8 m off, survey frame 84) until an
+    alignment holds again; an undisputed box without corners still is."""
+    frame, plate, corners = scene()
+    p = perception(plate)
+    track = track_at(p, corners, (115.0 + 60.0, 75.0, 90.0, 90.0))
+    assert p.trackset.corners.align(track, frame, track.homography) is None  # type: ignore[arg-type]
+    assert track.disputed
+    track.corners = None
+    p.trackset.live["p"] = track
+    assert p.observations(0) == []
+    track.disputed = False  # a box-only track that never disagreed: its box is observed
+    (obs,) = p.observations(0)
+    assert obs.corners_px is None and obs.centre_px == (175.0 + 45.0, 75.0 + 45.0)
+    track.disputed = True
+    track.box = (115.0, 75.0, 90.0, 90.0)  # back on the plate: the alignment holds again
+    p.trackset.corners.follow(track, frame, track.box)
+    assert track.corners is not None and not track.disputed
