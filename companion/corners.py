@@ -136,14 +136,16 @@ class Corners:
         found overlaps the one it started from by ``min_corner_agreement`` and is whole
         too.  False (the track as it was) otherwise: the tracker runs, then :meth:`follow`."""
         ref = self.references[track.landmark_id]
-        if track.homography is None or track.corners is None \
+        if not self.config.refine_corners or track.homography is None \
+                or track.corners is None \
                 or not self._agrees(track.corners, track.corners, track.box):
-            return False  # no outline, or the tracker's box is not on it: the tracker runs
+            return False  # box-only, no outline, or the box is not on it: the tracker runs
         start = track.homography if motion is None else motion @ track.homography
         start = start / start[2, 2]
         if self.is_cut(track.landmark_id, start):
             return False
         aligned = ecc(self.config, ref, image, start, False, self.weights(track))
+        track.tried = (start, aligned)
         if aligned is None or self.is_cut(track.landmark_id, aligned):
             return False
         corners = project_corners(ref, aligned)
@@ -170,9 +172,14 @@ class Corners:
     def align(self, track: Track, image: npt.NDArray[np.uint8], hom: FloatArray,
               verify: bool = False) -> FloatArray | None:
         """ECC alignment of the reference on the tracker's best colour feature (grey levels
-        for a grey target), kept only if it agrees with the tracker's box."""
+        for a grey target), kept only if it agrees with the tracker's box (else the track
+        is ``disputed``: its box is not used alone, see :func:`companion.tracks.observations`)."""
         ref = self.references[track.landmark_id]
-        aligned = ecc(self.config, ref, image, hom, verify, self.weights(track))
+        tried = track.tried
+        if not verify and tried is not None and np.array_equal(tried[0], hom):
+            aligned = tried[1]  # the coast's alignment from this very start, this frame
+        else:
+            aligned = ecc(self.config, ref, image, hom, verify, self.weights(track))
         box = track.box
         if aligned is None:
             return None

@@ -185,6 +185,9 @@ class Track:
     #: the tracker's box disagreed with the outline the alignment found (which was then
     #: dropped), and no alignment has held since: the box is not used for a box-only fix
     disputed: bool = False
+    #: this frame's coast alignment (its start, its result: None when ECC failed), reused by
+    #: ``Corners.align`` from the same start instead of the same ECC run again
+    tried: tuple[FloatArray, FloatArray | None] | None = None
     #: frames in a row on which the tracker coasted (``track_every_frames``)
     coasted: int = 0
     #: the last frame around a plate cut by the image's edge (None: not cut), whose shift

@@ -138,11 +138,13 @@ class TrackSet:
         if not self._coasted(track, image, motion):
             result: TrackResult = track.tracker.update(image)
             if result.box is None or result.confidence < self.config.min_track_confidence:
+                track.tried = None
                 return False
             last_box, track.box = track.box, result.box
             track.confidence, track.features = result.confidence, result.features
             track.coasted = 0
             self.corners.follow(track, image, last_box, motion)
+        track.tried = None
         if check:
             # one key per track: no two threads share one
             self._checked[track.landmark_id] = self.corners.check(track, image)
@@ -155,6 +157,7 @@ class TrackSet:
         tracker's turn or the alignment alone did not hold."""
         before = track.corners
         if track.coasted + 1 >= self.config.track_every_frames or before is None \
+                or track.tracker.state.lost_frames > 0 \
                 or not self.corners.coast(track, image, motion):
             return False
         after = track.corners

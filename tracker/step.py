@@ -182,14 +182,15 @@ def coast(
     """A frame the tracker does not look at: its estimate and particles moved by ``shift``
     (pixels) and scaled by ``ratio``, as something else found the target moved (the
     companion's corner alignment, issue 23); the move enters the history (eq. 1's noise
-    and the drift), nothing learns.  Only while the target is tracked (not lost)."""
+    and the drift), nothing learns, and ``since_rank`` stays: re-ranking counts the
+    frames the tracker looked at.  Only while the target is tracked (not lost)."""
     if state.lost_frames > 0:
         raise ValueError("coast: the target is lost")
     move = np.array([shift[0], shift[1]])
     scale = min(max(state.estimate[2] * ratio, cfg.motion.min_scale), cfg.motion.max_scale)
     estimate = _inside(state.shape, np.array([*(state.estimate[:2] + move), scale]))
     particles = state.particles.copy()
-    particles[:, :2] += move
+    particles[:, :2] += estimate[:2] - state.estimate[:2]  # as the estimate moved (clipped)
     particles[:, 2] *= scale / state.estimate[2]
     keep = cfg.motion.motion_history_frames + 1
     history = (*state.history, (estimate[0], estimate[1]))[-keep:]
