@@ -192,11 +192,18 @@ def coast(
     particles = state.particles.copy()
     particles[:, :2] += estimate[:2] - state.estimate[:2]  # as the estimate moved (clipped)
     particles[:, 2] *= scale / state.estimate[2]
-    keep = cfg.motion.motion_history_frames + 1
-    history = (*state.history, (estimate[0], estimate[1]))[-keep:]
+    history = _pushed(state.history, estimate, cfg)
     state = replace(state, estimate=estimate, particles=particles, history=history,
                     frames=state.frames + 1)
     return state, box_of(state, estimate)
+
+
+def _pushed(
+    history: tuple[tuple[float, float], ...], estimate: FloatArray, cfg: TrackerConfig
+) -> tuple[tuple[float, float], ...]:
+    """The recent centres with ``estimate``'s added, as many as eq. 1's noise uses."""
+    keep = cfg.motion.motion_history_frames + 1
+    return (*history, (float(estimate[0]), float(estimate[1])))[-keep:]
 
 
 def _noise(state: TrackState, cfg: TrackerConfig) -> float:
@@ -404,8 +411,7 @@ def _accept(
         return state, _result(state, None, confidence, cfg)
     reported = max(confidence, score) if located else confidence
     estimate = _inside(state.shape, at)
-    keep = cfg.motion.motion_history_frames + 1
-    history = (*state.history, (estimate[0], estimate[1]))[-keep:]
+    history = _pushed(state.history, estimate, cfg)
     model = state.model
     if confidence >= f.rerank_below_confidence:
         model = model.learnt(hist, f.model_update_rate)
