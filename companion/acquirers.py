@@ -24,7 +24,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from companion.corners import ecc
+from companion.corners import box_partial, ecc
 from companion.perception_types import (
     DetectFn,
     Occupancy,
@@ -42,7 +42,7 @@ from tracker.acquire import (
     project_corners,
     search_template,
 )
-from tracker.boxes import box_corners, clip_box, in_view_share, inside
+from tracker.boxes import box_corners, clip_box, in_view_share, inside, outline_box
 from tracker.camera import CameraModel
 from tracker.edge_align import align_cut, search_shift, shifted
 from tracker.pose.landmarks import landmark_corners_ned
@@ -101,7 +101,8 @@ class Starter:
         tracker = AdaptiveTracker(self.tracker_config, seed=self.seed + busy)
         tracker.init(image, box, rank_phase=RANK_PHASE_STEP * busy)
         track = Track(lid, tracker, box, hom, corners=corners,
-                      align_weights=feature_weights_bgr(tracker.features))
+                      align_weights=feature_weights_bgr(tracker.features),
+                      partial_box=box_partial(corners, image.shape[1], image.shape[0]))
         return [Start(track, {"event": "acquired", "landmark": lid, "by": by,
                               "box": [round(v, 1) for v in box],
                               "appearance_correlation": round(ncc, 3)})]
@@ -112,9 +113,7 @@ class Starter:
         box is not in the image)."""
         image = sight.image
         quad = project_corners(self.references[lid], aligned)
-        x0, y0 = quad.min(axis=0)
-        x1, y1 = quad.max(axis=0)
-        box = clip_box((x0, y0, x1 - x0, y1 - y0), image.shape[1], image.shape[0])
+        box = clip_box(outline_box(quad), image.shape[1], image.shape[0])
         if box is None:
             return []
         return self.start(lid, sight, box, aligned, quad, by, starts)

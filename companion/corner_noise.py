@@ -48,9 +48,14 @@ class CornerNoise:
         sigma; None when none is.  In view by ``min_corner_in_view`` or more: all four, as
         they are.  Less: the corners inside the image by ``EDGE_MARGIN_PX``, their sigma
         grown by ``1 / sqrt(share in view)`` (the alignment rests on that part of the plate
-        only: fewer pixels, and none around the corners outside)."""
+        only: fewer pixels, and none around the corners outside).  None too for an outline
+        with a corner more than one image size out of the image: a plate seen nearly edge-on
+        or a cut plate's alignment run away; its centre would be as far out, and the pose
+        solver refuses the whole frame for one such observation."""
         assert track.corners is not None
         size = (self.camera.width, self.camera.height)
+        if not inside(track.corners + np.array(size), 3 * size[0], 3 * size[1], margin=0.0):
+            return None  # beyond one image size out (the pose solver's bound): edge-on or run away
         share = in_view_share(track.corners, *size)
         if share >= self.config.min_corner_in_view:
             return None, 1.0

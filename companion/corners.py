@@ -32,7 +32,14 @@ from tracker.acquire import (
     reference_plane,
     refine_ecc,
 )
-from tracker.boxes import box_corners, in_view_share, saturated_share
+from tracker.boxes import (
+    box_corners,
+    clip_box,
+    in_view_share,
+    inside,
+    outline_box,
+    saturated_share,
+)
 from tracker.camera import CameraModel
 from tracker.edge_align import align_cut, box_shift, patch_around, patch_shift, shifted
 from tracker.types import Box
@@ -46,6 +53,16 @@ FloatArray = npt.NDArray[np.float64]
 #: cast the photo has not (issue 25's warm light: the reference's R - B plane was 0
 #: everywhere and every alignment on it failed, "NaN encountered").
 MIN_PLANE_CONTRAST = 0.1
+
+#: A tracker's box seated on a plate with less than this share of it in view holds the part
+#: in view, its centre off the plate's by a twentieth of the plate or more; it is re-seated
+#: on the plate once the plate is whole in the image (:meth:`Corners.follow`).
+PARTIAL_BOX_SHARE = 0.9
+
+
+def box_partial(corners: FloatArray, width: int, height: int) -> bool:
+    """Does a tracker's box seated on the outline ``corners`` hold only part of its plate?"""
+    return in_view_share(corners, width, height) < PARTIAL_BOX_SHARE
 
 
 def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
@@ -124,10 +141,29 @@ class Corners:
             self.recover(track, image)
         if track.corners is not None:
             track.disputed = False
+            self._seat(track, image)
         cut = track.homography is not None and self.is_cut(track.landmark_id, track.homography)
         track.patch = patch_around(image, track.corners) \
             if cut and track.corners is not None else None
         track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
+
+    def _seat(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
+        """A tracker whose box holds the part of a cut plate that was in view is started
+        again on the plate's box once the plate is whole in the image (its features re-ranked
+        there, its re-rank schedule kept); an outline cut now marks the box partial.  A box
+        that kept the part's size while the plate came into view was centred ever further
+        from it, until its outline was refused (the square's corners, frames perceived one
+        in three: docs/decisions.md)."""
+        assert track.corners is not None
+        width, height = self.camera.width, self.camera.height
+        if not inside(track.corners, width, height, margin=0.0):
+            track.partial_box = track.partial_box or box_partial(track.corners, width, height)
+            return
+        box = clip_box(outline_box(track.corners), width, height)
+        if not track.partial_box or box is None:
+            return
+        track.tracker.init(image, box, rank_phase=track.tracker.state.since_rank)
+        track.box, track.partial_box = box, False
 
     def coast(self, track: Track, image: npt.NDArray[np.uint8],
               motion: FloatArray | None = None) -> bool:
@@ -173,7 +209,8 @@ class Corners:
               verify: bool = False) -> FloatArray | None:
         """ECC alignment of the reference on the tracker's best colour feature (grey levels
         for a grey target), kept only if it agrees with the tracker's box (else the track
-        is ``disputed``: its box is not used alone, see :func:`companion.tracks.observations`)."""
+        is ``disputed``: its box is not used alone, see :func:`companion.tracks.observations`);
+        with a ``partial_box`` (the part of a cut plate), with the outline it started from."""
         ref = self.references[track.landmark_id]
         tried = track.tried
         if not verify and tried is not None and np.array_equal(tried[0], hom):
@@ -189,7 +226,9 @@ class Corners:
             outline = corners.astype(np.float32).reshape(-1, 1, 2)
             on = cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) >= 0
             return aligned if on else None
-        if not self._agrees(corners, project_corners(ref, hom), box):
+        predicted = project_corners(ref, hom)
+        if not (quad_iou(corners, predicted) >= self.config.min_corner_agreement
+                if track.partial_box else self._agrees(corners, predicted, box)):
             track.disputed = True  # the alignment or the box wandered off: drop the corners
             return None
         return aligned

@@ -193,6 +193,9 @@ class Track:
     #: the last frame around a plate cut by the image's edge (None: not cut), whose shift
     #: starts the next frame's alignment (tracker/edge_align.py)
     patch: Patch | None = None
+    #: the tracker's box was seated on a plate cut by the image's edge: it holds the part
+    #: that was in view, not the plate (``Corners`` re-seats it once the plate is whole)
+    partial_box: bool = False
 
 
 @dataclass(frozen=True, eq=False)

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.boxes import in_view_share
+from tracker.boxes import in_view_share, outline_box
 from tracker.validation import check_image
 
 FloatArray = npt.NDArray[np.float64]
@@ -339,10 +339,8 @@ class ReferenceMatcher:
 def _match_of(ref: Reference, corners: FloatArray, inliers: int, ratio: float,
               hom: FloatArray) -> Match:
     """The :class:`Match` of ``ref`` at ``corners`` (the box around them)."""
-    x0, y0 = corners.min(axis=0)
-    x1, y1 = corners.max(axis=0)
-    box = (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
-    return Match(ref.landmark_id, corners, box, inliers, ratio, np.asarray(hom, np.float64))
+    return Match(ref.landmark_id, corners, outline_box(corners), inliers, ratio,
+                 np.asarray(hom, np.float64))
 
 
 def search_template(ref: Reference, frame_bgr: npt.NDArray[np.uint8],

@@ -31,6 +31,13 @@ def clip_box(box: Box, width: int, height: int) -> Box | None:
     return (x0, y0, x1 - x0, y1 - y0)
 
 
+def outline_box(corners: FloatArray) -> Box:
+    """The (x, y, w, h) box around a quadrilateral's corners."""
+    x0, y0 = corners.min(axis=0)
+    x1, y1 = corners.max(axis=0)
+    return (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
+
+
 def box_corners(box: Box) -> FloatArray:
     """The corners TL, TR, BR, BL of an (x, y, w, h) box."""
     x, y, w, h = box
