@@ -51,12 +51,6 @@ class PerceptionConfig:
     #: A track's corners feed the pose only while this share of its quadrilateral is in
     #: the image: corners extrapolated from a sliver are off by pixels.
     min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
-    #: A plate cut that way makes no fix on its own until its track has followed it this
-    #: many frames: at the square's turns the first outlines of plates acquired while cut
-    #: (by their features, or from the autopilot's estimate) were tens of pixels off, their
-    #: lone fixes 0.3-0.9 m off and stated at 0.02-0.1 m (docs/decisions.md, "A young cut
-    #: plate alone"); beside other plates it is checked by them.
-    min_lone_cut_frames: int = field(default=6, metadata={"ge": 0})
     #: ... and while at most this share of its pixels is saturated: over-exposed plates
     #: (58 % of their pixels at 255) put the corners 0.4 px off, 4x the error of the same
     #: plate in normal light (docs/pose.md).  White print on a plate saturates 0-4 %.
@@ -202,8 +196,6 @@ class Track:
     #: the tracker's box was seated on a plate cut by the image's edge: it holds the part
     #: that was in view, not the plate (``Corners`` re-seats it once the plate is whole)
     partial_box: bool = False
-    #: frames this track has been followed since it was acquired
-    frames: int = 0
 
 
 @dataclass(frozen=True, eq=False)

@@ -135,7 +135,6 @@ class TrackSet:
                     motion: FloatArray | None = None) -> bool:
         """The tracker's update and the corners' alignment (and the appearance check when
         ``check``); False when the track is lost."""
-        track.frames += 1
         if not self._coasted(track, image, motion):
             result: TrackResult = track.tracker.update(image)
             if result.box is None or result.confidence < self.config.min_track_confidence:
@@ -228,14 +227,12 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
     gives the corners its outline puts inside the image by ``EDGE_MARGIN_PX``
     (:mod:`companion.corner_noise`) as measured (``Observation.corners_measured``); the
     ones outside are extrapolations, not observations.  Their sigma grows as the part in
-    view shrinks (:meth:`CornerNoise.cut`); such a plate alone makes no fix in its first
-    ``min_lone_cut_frames``.  When some tracks have corners, box-only tracks
+    view shrinks (:meth:`CornerNoise.cut`).  When some tracks have corners, box-only tracks
     are left out: a box centre is not the landmark's centre under perspective, and mixing
     it in costs more than it adds.  Without corners, a box that reaches out of the image is
     left out too: its centre is off its plate's by up to half the part out of view; and so
     is a ``disputed`` one (its outline found elsewhere: a tracker box 20-30 px off a plate
-    that had just come whole into view gave a fix 2.8 m off, survey frame 84), and a
-    ``partial_box`` one (seated on the part of a cut plate in view: not centred on it).
+    that had just come whole into view gave a fix 2.8 m off, survey frame 84).
     """
     out = []
     size = (noise.camera.width, noise.camera.height)
@@ -246,16 +243,12 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
     # not held against the size model, but stated (the larger of the two, CornerNoise.sigma)
     usable = {lid: cut for lid, cut in usable.items() if cut is not None
               and (cut[0] is not None or noise.fits(tracks[lid]))}
-    young_cut = [lid for lid, cut in usable.items() if cut is not None and cut[0] is not None
-                 and tracks[lid].frames < config.min_lone_cut_frames]
-    if len(usable) == 1 and young_cut:
-        usable = {}  # a plate cut by the edge, just acquired, alone: its outline unsettled
     if usable:
         live = [t for t in live if t.landmark_id in usable]
     else:  # boxes only: a box reaching out of the image is not centred on its plate, nor
         # one that has disagreed with its plate's outline since the alignment last held
         live = [t for t in live if inside(box_corners(t.box), *size, margin=1.0)
-                and not t.disputed and not t.partial_box]
+                and not t.disputed]
     for t in live:
         x, y, w, h = t.box
         cut = usable.get(t.landmark_id)

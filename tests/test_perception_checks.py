@@ -214,7 +214,6 @@ def test_a_plate_cut_by_the_edge_gives_only_its_corners_inside_the_image() -> No
     assert full.corners_measured is None and full.corners_px is not None
     cut_corners = corners + (np.array([320.0, 240.0]) - corners[0]) - 40.0  # TL 40 px inside
     p.trackset.live["p"] = track_at(p, cut_corners, (0.0, 0.0, 1.0, 1.0))
-    p.trackset.live["p"].frames = p.config.min_lone_cut_frames  # followed a while
     [cut] = p.observations(0)
     assert cut.corners_measured == (True, False, False, False)
     assert cut.corners_px is not None and np.allclose(cut.corners_px, cut_corners)
@@ -242,33 +241,3 @@ def test_a_box_that_disagreed_with_its_outline_gives_no_box_only_fix() -> None:
     track.box = (115.0, 75.0, 90.0, 90.0)  # back on the plate: the alignment holds again
     p.trackset.corners.follow(track, frame, track.box)
     assert track.corners is not None and not track.disputed
-
-
-def test_a_plate_cut_by_the_edge_makes_no_fix_alone_until_followed_a_few_frames() -> None:
-    """Issue 19's square: plates acquired while cut by the edge had outlines tens of px off
-    in their first frames, and their lone fixes were 0.3-0.9 m off, stated at 0.02-0.1 m.
-    Alone, a cut plate's corners wait ``min_lone_cut_frames``; beside another plate's
-    corners they are used at once (checked by them), and a whole plate never waits."""
-    _frame, plate, corners = scene()
-    cut_corners = corners + (np.array([320.0, 240.0]) - corners[0]) - 40.0  # TL 40 px inside
-    p = perception(plate)
-    young = track_at(p, cut_corners, (0.0, 0.0, 1.0, 1.0))
-    p.trackset.live["p"] = young
-    assert p.observations(0) == []
-    young.frames = p.config.min_lone_cut_frames - 1
-    assert p.observations(0) == []
-    young.frames += 1
-    [obs] = p.observations(0)
-    assert obs.corners_measured == (True, False, False, False)
-    p.trackset.live["p"] = track_at(p, corners, (0.0, 0.0, 1.0, 1.0))  # whole, new
-    [whole] = p.observations(0)
-    assert whole.corners_px is not None and whole.corners_measured is None
-    lms = [MapLandmark(lid, (10.0, y, 0.0), 1.2, 0.8, None, "other")
-           for lid, y in (("p", 0.0), ("q", 2.0))]
-    two = Perception(CameraModel(320, 240, 300.0, 300.0, 159.5, 119.5), lms,
-                     {"p": plate, "q": plate})
-    two.trackset.live["p"] = track_at(two, cut_corners, (0.0, 0.0, 1.0, 1.0))
-    ref = two.matcher.references["q"]
-    two.trackset.live["q"] = Track("q", None, (0.0, 0.0, 1.0, 1.0),  # type: ignore[arg-type]
-                                   homography_to(ref, corners), corners=corners)
-    assert sorted(o.landmark_id or "" for o in two.observations(0)) == ["p", "q"]
