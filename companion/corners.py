@@ -159,8 +159,10 @@ class Corners:
         if not inside(track.corners, width, height, margin=0.0):
             track.partial_box = track.partial_box or box_partial(track.corners, width, height)
             return
+        if not track.partial_box:
+            return  # the usual case, every frame of every whole plate: nothing to do
         box = clip_box(outline_box(track.corners), width, height)
-        if not track.partial_box or box is None:
+        if box is None:
             return
         track.tracker.init(image, box, rank_phase=track.tracker.state.since_rank)
         track.box, track.partial_box = box, False
