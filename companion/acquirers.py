@@ -42,7 +42,7 @@ from tracker.acquire import (
     project_corners,
     search_template,
 )
-from tracker.boxes import box_corners, clip_box, in_view_share, inside, outline_box
+from tracker.boxes import box_corners, clip_box, in_view_share, inside, outline_box, squashed
 from tracker.camera import CameraModel
 from tracker.edge_align import align_cut, search_shift, shifted
 from tracker.pose.landmarks import landmark_corners_ned
@@ -94,7 +94,10 @@ class Starter:
         the appearance it warps onto the frame (none when that does not match); its seed
         and re-rank phase follow how many tracks are busy (``starts``: this call's)."""
         image = sight.image
-        ncc = detail_ncc(self.references[lid], image, hom)
+        ref = self.references[lid]
+        if squashed(corners, ref.size_px):
+            return []  # a sliver is no plate in view (tracker.boxes.MIN_FORESHORTENING)
+        ncc = detail_ncc(ref, image, hom)
         if ncc < self.config.min_appearance_ncc:
             return []
         busy = sight.seen.busy(starts)

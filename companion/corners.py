@@ -39,6 +39,7 @@ from tracker.boxes import (
     inside,
     outline_box,
     saturated_share,
+    squashed,
 )
 from tracker.camera import CameraModel
 from tracker.edge_align import align_cut, box_shift, patch_around, patch_shift, shifted
@@ -133,6 +134,8 @@ class Corners:
             if aligned is None:
                 aligned = self.align_cut(track, image, predicted, last_box) if self.is_cut(
                     track.landmark_id, predicted) else self.align(track, image, predicted)
+            if aligned is not None and self.squashed(track.landmark_id, aligned):
+                aligned, track.disputed = None, True  # a sliver: neither corners nor box
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
             if aligned is not None:
@@ -184,7 +187,8 @@ class Corners:
             return False
         aligned = ecc(self.config, ref, image, start, False, self.weights(track))
         track.tried = (start, aligned)
-        if aligned is None or self.is_cut(track.landmark_id, aligned):
+        if aligned is None or self.is_cut(track.landmark_id, aligned) \
+                or self.squashed(track.landmark_id, aligned):
             return False
         corners = project_corners(ref, aligned)
         if quad_iou(corners, project_corners(ref, start)) < self.config.min_corner_agreement:
@@ -242,6 +246,14 @@ class Corners:
         x, y, w, h = box
         moved = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
         return quad_iou(found, moved) >= self.config.min_corner_agreement
+
+    def squashed(self, landmark_id: str, hom: FloatArray) -> bool:
+        """Is the outline ``hom`` projects a sliver (:func:`tracker.boxes.squashed`)?  Seen
+        once in ten real-time square flights: a plate entering at the image's edge aligned
+        onto a 7 px wide sliver, the tracker re-seated on it, and its box-only fix 2.2 m off
+        (docs/decisions.md, "A weak fix acquires as no fix")."""
+        ref = self.references[landmark_id]
+        return squashed(project_corners(ref, hom), ref.size_px)
 
     def is_cut(self, landmark_id: str, hom: FloatArray) -> bool:
         """Is the outline ``hom`` projects cut by the image's edge below

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tracker.boxes import in_view_share, outline_box
+from tracker.boxes import aspect_change, in_view_share, outline_box
 from tracker.validation import check_image
 
 FloatArray = npt.NDArray[np.float64]
@@ -579,10 +579,6 @@ def plausible_quad(corners: FloatArray, ref_size: tuple[int, int], cfg: AcquireC
         edges, -1, axis=0)[:, 0]
     if not np.all(cross > 0):  # image y points down: a clockwise-drawn quad has cross > 0
         return False
-    sides = np.linalg.norm(edges, axis=1)
-    if sides.min() < cfg.min_side_px:
+    if np.linalg.norm(edges, axis=1).min() < cfg.min_side_px:
         return False
-    aspect_ref = ref_size[0] / ref_size[1]
-    aspect = (sides[0] + sides[2]) / max(sides[1] + sides[3], 1e-9)
-    change = max(aspect / aspect_ref, aspect_ref / aspect)
-    return bool(change <= cfg.max_aspect_change)
+    return aspect_change(corners, ref_size) <= cfg.max_aspect_change

@@ -12,6 +12,11 @@ import numpy as np
 from tracker.geometry import FloatArray
 from tracker.types import Box
 
+#: An outline foreshortened along one of its plate's axes to less than this share of the
+#: other (a plate seen more than ~81 deg off its normal) is not a plate in view: an
+#: alignment run away onto a sliver, or a plate edge-on whose corners say nothing.
+MIN_FORESHORTENING = 0.15
+
 
 def box_iou(a: Box, b: Box) -> float:
     """Intersection over union of two (x, y, w, h) boxes."""
@@ -36,6 +41,22 @@ def outline_box(corners: FloatArray) -> Box:
     x0, y0 = corners.min(axis=0)
     x1, y1 = corners.max(axis=0)
     return (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
+
+
+def aspect_change(corners: FloatArray, size: tuple[float, float]) -> float:
+    """How far the outline ``corners`` (TL, TR, BR, BL) is from the aspect of its plate
+    ``size`` = (width, height), any unit: the ratio of the two aspects, the larger over the
+    smaller (1: the plate's own; a plate turned 60 deg off its normal about one axis: 2)."""
+    sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
+    aspect = (sides[0] + sides[2]) / max(float(sides[1] + sides[3]), 1e-9)
+    ref = size[0] / size[1]
+    return float(max(aspect / ref, ref / max(aspect, 1e-12)))
+
+
+def squashed(corners: FloatArray, size: tuple[float, float]) -> bool:
+    """Is the outline ``corners`` of a plate ``size`` foreshortened along one axis to under
+    ``MIN_FORESHORTENING`` of the other (:func:`aspect_change`)?"""
+    return aspect_change(corners, size) * MIN_FORESHORTENING > 1.0
 
 
 def box_corners(box: Box) -> FloatArray:
