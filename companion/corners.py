@@ -61,6 +61,13 @@ MIN_PLANE_CONTRAST = 0.1
 PARTIAL_BOX_SHARE = 0.9
 
 
+#: A plate whose outline has less than this share of it in the image has left the view: its
+#: tracker's box holds the part that was last in view, on the background (a plate leaving at
+#: the bottom edge of the real-imagery world seed 1: its box stayed 98 px tall while 10 to
+#: 1 px of the plate were in view, then followed nothing for 3 frames).
+LEFT_VIEW_SHARE = 0.1
+
+
 def box_partial(corners: FloatArray, width: int, height: int) -> bool:
     """Does a tracker's box seated on the outline ``corners`` hold only part of its plate?"""
     return in_view_share(corners, width, height) < PARTIAL_BOX_SHARE
@@ -254,6 +261,14 @@ class Corners:
         (docs/decisions.md, "A weak fix acquires as no fix")."""
         ref = self.references[landmark_id]
         return squashed(project_corners(ref, hom), ref.size_px)
+
+    def left_view(self, track: Track) -> bool:
+        """Has the track's plate left the image (its last outline under ``LEFT_VIEW_SHARE``
+        in view)?"""
+        if track.homography is None:
+            return False
+        outline = project_corners(self.references[track.landmark_id], track.homography)
+        return in_view_share(outline, self.camera.width, self.camera.height) < LEFT_VIEW_SHARE
 
     def is_cut(self, landmark_id: str, hom: FloatArray) -> bool:
         """Is the outline ``hom`` projects cut by the image's edge below

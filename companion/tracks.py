@@ -144,6 +144,9 @@ class TrackSet:
             track.confidence, track.features = result.confidence, result.features
             track.coasted = 0
             self.corners.follow(track, image, last_box, motion)
+            if self.corners.left_view(track):
+                track.tried = None
+                return False  # the plate has left the image (corners.LEFT_VIEW_SHARE)
         track.tried = None
         if check:
             # one key per track: no two threads share one
