@@ -11,7 +11,8 @@ import numpy as np
 from companion.corners import LEFT_VIEW_SHARE, Corners
 from companion.perception_types import PerceptionConfig, Start, Track
 from companion.tracks import TrackSet
-from tracker.acquire import ReferenceMatcher, project_corners
+from tests.plates import textured_plate
+from tracker.acquire import project_corners
 from tracker.adaptive import AdaptiveTracker
 from tracker.boxes import in_view_share
 from tracker.camera import CameraModel
@@ -21,12 +22,8 @@ def leaving(top_px: float) -> tuple[TrackSet, np.ndarray, float]:
     """A textured 120x80 plate on a textured wall, its top edge at ``top_px`` (rows below
     480 out of the image); its track's homography on it, its tracker's box on the part
     in view.  The track set, the frame and the plate's share in view."""
-    rng = np.random.default_rng(7)
-    blocks = rng.integers(40, 220, (8, 12)).astype(np.uint8)
-    grey = cv2.GaussianBlur(cv2.resize(blocks, (120, 80), interpolation=cv2.INTER_NEAREST),
-                            (5, 5), 1.0)
-    matcher = ReferenceMatcher()
-    ref = matcher.add("plate", cv2.merge([grey, grey, grey]))
+    grey, matcher, ref = textured_plate(7)
+    rng = np.random.default_rng(8)
     wall = cv2.resize(rng.integers(60, 200, (48, 64)).astype(np.uint8), (640, 680),
                       interpolation=cv2.INTER_NEAREST)
     top = int(top_px)

@@ -10,7 +10,8 @@ import numpy as np
 
 from companion.corners import Corners
 from companion.perception_types import PerceptionConfig, Track
-from tracker.acquire import ReferenceMatcher, project_corners
+from tests.plates import textured_plate
+from tracker.acquire import project_corners
 from tracker.adaptive import AdaptiveTracker
 from tracker.boxes import aspect_change, squashed
 from tracker.camera import CameraModel
@@ -42,12 +43,7 @@ def test_a_plate_turned_75_deg_is_a_plate_at_85_deg_a_sliver() -> None:
 def scene() -> tuple[Corners, Track, np.ndarray, np.ndarray]:
     """A textured 120x80 plate at (500, 200); a track on it whose tracker box holds the
     part that was in view when it was acquired (``partial_box``)."""
-    rng = np.random.default_rng(5)
-    blocks = rng.integers(40, 220, (8, 12)).astype(np.uint8)
-    grey = cv2.GaussianBlur(cv2.resize(blocks, (120, 80), interpolation=cv2.INTER_NEAREST),
-                            (5, 5), 1.0)
-    matcher = ReferenceMatcher()
-    ref = matcher.add("plate", cv2.merge([grey, grey, grey]))
+    grey, matcher, ref = textured_plate(5)
     image = np.full((480, 640, 3), 90, np.uint8)
     image[200:280, 500:620] = cv2.merge([grey, grey, grey])
     sx, sy = 120 / ref.size_px[0], 80 / ref.size_px[1]
