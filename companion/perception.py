@@ -116,13 +116,6 @@ class FrameCache:
         return fix, rectified, now
 
 
-def weak(fix: PoseFix, limit_m: float) -> bool:
-    """Is ``fix``'s horizontal 1-sigma (the larger axis of its north-east covariance) over
-    ``limit_m`` (``PerceptionConfig.weak_fix_sigma_m``)?"""
-    north_east = np.asarray(fix.covariance, np.float64)[:2, :2]
-    return float(np.linalg.eigvalsh(north_east)[-1]) > limit_m * limit_m
-
-
 class Perception:
     """Tracks map landmarks in each frame and solves the vehicle's pose from them."""
 
@@ -212,8 +205,7 @@ class Perception:
 
     def housekeeping(self, frame: Frame) -> None:
         """Look for untracked landmarks (feature matching now and then; prediction from
-        this frame's fix, unless it is weak: ``weak_fix_sigma_m``); what is found is
-        tracked from the next ``process`` on.
+        this frame's fix); what is found is tracked from the next ``process`` on.
 
         Safe to run while :meth:`process` works on a later frame (see the module's notes).
         """
@@ -223,8 +215,6 @@ class Perception:
         if now:
             self.acquisition.due_now()
         image = self._rectified_image(frame) if rectified is None else rectified
-        if fix is not None and weak(fix, self.config.weak_fix_sigma_m):
-            fix = None  # acquisition looks for more, as without a fix
         guess = None if fix is not None else self.guess(frame.t_us)
         sight = Sighting(image, self.trackset.snapshot(), fix, guess)
         starts = self.acquisition.run(frame.index, frame.t_us, sight)

@@ -129,13 +129,6 @@ class PerceptionConfig:
     #: Without a fix, landmarks are predicted from the autopilot's own pose estimate; an
     #: alignment found further than this from that prediction is not taken.
     max_guess_error_px: float = field(default=30.0, metadata={"gt": 0})
-    #: A fix whose horizontal 1-sigma (its covariance's larger north-east axis) exceeds
-    #: this is no fix for acquisition: landmarks are then looked for as without one (cut
-    #: plates too, predicted from the autopilot's estimate).  A lone plate seen with one
-    #: corner at the camera's height fixes its distance to metres: the autopilot then
-    #: dead-reckons, and the plates that would fix it must be acquired (issue 19, the
-    #: square's (6, 6) hover: docs/decisions.md, "A weak fix acquires as no fix").
-    weak_fix_sigma_m: float = field(default=0.25, metadata={"gt": 0})
     #: Without a fix for this long, search the whole frame for one landmark per frame.
     search_after_s: float = field(default=0.3, metadata={"ge": 0})
     search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})

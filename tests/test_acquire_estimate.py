@@ -18,10 +18,9 @@ from companion.sensors import SensorHistory
 from companion.side_sensors import PoseGuess, SideSensors, guess_of
 from companion.sim.scenario import load_scenario
 from companion.sim.simulator import Simulator
-from companion.sources.base import Frame
 from mavlink_bridge.telemetry import Attitude, LocalPositionNed
 from tracker.pose.config import PoseConfig
-from tracker.pose.types import AttitudeSample, PoseFix
+from tracker.pose.types import AttitudeSample
 
 
 @functools.cache
@@ -88,46 +87,6 @@ def test_no_fix_and_no_estimate_predicts_nothing_and_whole_plates_only_skip_it()
     assert find(PerceptionConfig(), with_guess=False)[0] == []
     events, _, lid = find(PerceptionConfig(predict_cut_in_view=1.0))
     assert not any(e["landmark"] == lid for e in events), events
-
-
-def predicted_beside_a_fix(sigma_m: float) -> tuple[list[dict[str, object]], str]:
-    """What prediction starts on the entering frame when housekeeping is given that frame's
-    fix, at the true pose, stating a horizontal 1-sigma of ``sigma_m`` (the autopilot's
-    estimate is true; feature matching, which may find the plate too, left out)."""
-    sim = survey()
-    index, lid, _ = entering()
-    image, _ = sim.render(index)
-    state = sim.state_at(index / sim.fps)
-    landmarks, refs = map_landmarks(sim)
-    position = tuple(float(v) for v in state.position_ned_m)
-    rpy = tuple(float(v) for v in state.attitude_rpy_rad)
-
-    def sensors(t_us: int) -> SideSensors:
-        return SideSensors(attitude=AttitudeSample(t_us, *rpy), position_ned_m=position)
-
-    p = Perception(sim.scenario.camera, landmarks, refs, sensors=sensors)
-    seen: list[Sighting] = []
-    p.acquisition.run = lambda _i, _t, sight: seen.append(sight) or []  # type: ignore[method-assign]
-    t_us = round(index * 1e6 / sim.fps)
-    cov = np.diag([sigma_m**2, (sigma_m / 4) ** 2, 0.01, 1e-4, 1e-4, 1e-4])
-    p._cache.put_fix(index, PoseFix(t_us, position, rpy, cov, 50,  # type: ignore[arg-type]
-                                    ("other",), "altitude_bearing"))
-    p.housekeeping(Frame(index, t_us, image))
-    starts = p.acquisition.prediction.find(seen[0])
-    p.close()
-    return [s.event for s in starts], lid
-
-
-def test_a_weak_fix_acquires_the_cut_plate_a_firm_one_leaves_it() -> None:
-    """A fix whose larger horizontal 1-sigma is over ``weak_fix_sigma_m`` (a lone plate at
-    the camera's height: its distance to metres) is no fix for acquisition: the plate cut by
-    the image's edge is predicted from the autopilot's estimate, as without a fix (issue 19,
-    the square's (6, 6) hover: the plate that would have fixed the distance was not looked
-    for while the weak fixes came).  A firm fix leaves cut plates alone."""
-    weak, lid = predicted_beside_a_fix(3.0)
-    assert [e["by"] for e in weak if e["landmark"] == lid] == ["estimate"], weak
-    firm, _ = predicted_beside_a_fix(0.05)
-    assert not any(e["landmark"] == lid for e in firm), firm
 
 
 def test_the_autopilots_position_and_attitude_make_the_guess() -> None:
