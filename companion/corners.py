@@ -258,7 +258,7 @@ class Corners:
         """Is the outline ``hom`` projects a sliver (:func:`tracker.boxes.squashed`)?  Seen
         once in ten real-time square flights: a plate entering at the image's edge aligned
         onto a 7 px wide sliver, the tracker re-seated on it, and its box-only fix 2.2 m off
-        (docs/decisions.md, "A weak fix acquires as no fix")."""
+        (docs/decisions.md, "A sliver is no plate")."""
         ref = self.references[landmark_id]
         return squashed(project_corners(ref, hom), ref.size_px)
 

@@ -4,9 +4,10 @@ Survey frames 0-299 and street frames 0-199 through :func:`tests.test_perception
 (the true attitude, housekeeping after every frame: repeatable), and a sha256 over every
 fix's frame index and position (rounded to 1e-9 m)::
 
-    .venv/bin/python -m tests.perception_fingerprint      # e.g. "fixes 494 sha256 bc7de9cf"
+    .venv/bin/python -m tests.perception_fingerprint      # e.g. "fixes 494 sha256 9ccd3dab"
 
-The same output before and after a change means the same fixes.  Not a test (pytest
+The same output before and after a change, on one machine, means the same fixes (the hash
+differs between machines: docs/testing.md).  Not a test (pytest
 collects ``test_*.py`` only); it lives here because it runs the tests' own flight.
 """
 
