@@ -141,12 +141,18 @@ class Corners:
             if aligned is None:
                 aligned = self.align_cut(track, image, predicted, last_box) if self.is_cut(
                     track.landmark_id, predicted) else self.align(track, image, predicted)
-            if aligned is not None and self.squashed(track.landmark_id, aligned):
-                aligned, track.disputed = None, True  # a sliver: neither corners nor box
+            ref = self.references[track.landmark_id]
+            corners = None if aligned is None else project_corners(ref, aligned)
+            if corners is not None and squashed(corners, ref.size_px):
+                # a sliver (tracker.boxes.squashed): neither corners nor box.  Seen once in
+                # ten real-time square flights: a plate entering at the image's edge aligned
+                # onto a 7 px wide sliver, the tracker re-seated on it, and its box-only fix
+                # 2.2 m off (docs/decisions.md, "A sliver is no plate")
+                aligned, corners = None, None
+                track.disputed = True
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
-            if aligned is not None:
-                track.corners = project_corners(self.references[track.landmark_id], aligned)
+            track.corners = corners
         if track.homography is None or track.misses >= self.config.max_corner_misses:
             self.recover(track, image)
         if track.corners is not None:
@@ -194,11 +200,12 @@ class Corners:
             return False
         aligned = ecc(self.config, ref, image, start, False, self.weights(track))
         track.tried = (start, aligned)
-        if aligned is None or self.is_cut(track.landmark_id, aligned) \
-                or self.squashed(track.landmark_id, aligned):
+        if aligned is None or self.is_cut(track.landmark_id, aligned):
             return False
         corners = project_corners(ref, aligned)
-        if quad_iou(corners, project_corners(ref, start)) < self.config.min_corner_agreement:
+        agreement = self.config.min_corner_agreement
+        if squashed(corners, ref.size_px) \
+                or quad_iou(corners, project_corners(ref, start)) < agreement:
             return False
         track.homography, track.corners, track.misses = aligned, corners, 0
         track.patch = None
@@ -254,20 +261,13 @@ class Corners:
         moved = predicted + (np.array([x + w / 2, y + h / 2]) - predicted.mean(axis=0))
         return quad_iou(found, moved) >= self.config.min_corner_agreement
 
-    def squashed(self, landmark_id: str, hom: FloatArray) -> bool:
-        """Is the outline ``hom`` projects a sliver (:func:`tracker.boxes.squashed`)?  Seen
-        once in ten real-time square flights: a plate entering at the image's edge aligned
-        onto a 7 px wide sliver, the tracker re-seated on it, and its box-only fix 2.2 m off
-        (docs/decisions.md, "A sliver is no plate")."""
-        ref = self.references[landmark_id]
-        return squashed(project_corners(ref, hom), ref.size_px)
-
     def left_view(self, track: Track) -> bool:
         """Has the track's plate left the image (its last outline under ``LEFT_VIEW_SHARE``
         in view)?"""
         if track.homography is None:
             return False
-        outline = project_corners(self.references[track.landmark_id], track.homography)
+        outline = track.corners if track.corners is not None else \
+            project_corners(self.references[track.landmark_id], track.homography)
         return in_view_share(outline, self.camera.width, self.camera.height) < LEFT_VIEW_SHARE
 
     def is_cut(self, landmark_id: str, hom: FloatArray) -> bool:
