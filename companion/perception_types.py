@@ -51,6 +51,16 @@ class PerceptionConfig:
     #: A track's corners feed the pose only while this share of its quadrilateral is in
     #: the image: corners extrapolated from a sliver are off by pixels.
     min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
+    #: A plate whose outline crosses the image's edge (cut, or mostly in view), followed
+    #: for fewer than ``young_cut_frames`` frames, states its corners no better than
+    #: ``young_cut_sigma_rel`` of its outline's size (the square root of its area): the
+    #: first outlines of a plate acquired at the edge (by its features, or aligned from the
+    #: autopilot's estimate) are unsettled. On the flown square their lone fixes were
+    #: 0.3-1.7 m off at a stated 0.02-0.14 m in their first 0.3 s, and the strict fake's
+    #: estimate followed them (docs/decisions.md, "A young cut plate states its corners
+    #: loosely").
+    young_cut_frames: int = field(default=9, metadata={"ge": 0})
+    young_cut_sigma_rel: float = field(default=0.05, metadata={"ge": 0})
     #: ... and while at most this share of its pixels is saturated: over-exposed plates
     #: (58 % of their pixels at 255) put the corners 0.4 px off, 4x the error of the same
     #: plate in normal light (docs/pose.md).  White print on a plate saturates 0-4 %.
@@ -196,6 +206,8 @@ class Track:
     #: the tracker's box was seated on a plate cut by the image's edge: it holds the part
     #: that was in view, not the plate (``Corners`` re-seats it once the plate is whole)
     partial_box: bool = False
+    #: frames this track has been followed since it was acquired
+    frames: int = 0
 
 
 @dataclass(frozen=True, eq=False)

@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.corner_noise import CornerNoise
+from companion.corner_noise import EDGE_MARGIN_PX, CornerNoise
 from companion.corners import Corners
 from companion.perception_types import Occupancy, PerceptionConfig, Start, Track, TrackView
 from tracker.boxes import box_corners, inside
@@ -135,6 +135,7 @@ class TrackSet:
                     motion: FloatArray | None = None) -> bool:
         """The tracker's update and the corners' alignment (and the appearance check when
         ``check``); False when the track is lost."""
+        track.frames += 1
         if not self._coasted(track, image, motion):
             result: TrackResult = track.tracker.update(image)
             if result.box is None or result.confidence < self.config.min_track_confidence:
@@ -230,7 +231,9 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
     gives the corners its outline puts inside the image by ``EDGE_MARGIN_PX``
     (:mod:`companion.corner_noise`) as measured (``Observation.corners_measured``); the
     ones outside are extrapolations, not observations.  Their sigma grows as the part in
-    view shrinks (:meth:`CornerNoise.cut`).  When some tracks have corners, box-only tracks
+    view shrinks (:meth:`CornerNoise.cut`).  A plate whose outline crosses the image's edge
+    at all states its corners no better than ``young_cut_sigma_rel`` of the outline's size
+    in its track's first ``young_cut_frames``.  When some tracks have corners, box-only tracks
     are left out: a box centre is not the landmark's centre under perspective, and mixing
     it in costs more than it adds.  Without corners, a box that reaches out of the image is
     left out too: its centre is off its plate's by up to half the part out of view; and so
@@ -263,10 +266,17 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
         scale = None if corners is None else config.corner_scale_sigma_px * stretch
         sigma = noise.sigma(corners, stretch, t.fit_sigma)
         measured, grow = (None, 1.0) if cut is None else cut
+        if sigma is not None:
+            sigma *= grow
+            if t.frames < config.young_cut_frames and corners is not None \
+                    and not inside(np.asarray(corners), *size, margin=EDGE_MARGIN_PX):
+                quad = np.asarray(corners, np.float32)  # its outline unsettled
+                sigma = max(sigma, config.young_cut_sigma_rel
+                            * float(np.sqrt(abs(cv2.contourArea(quad)))))
         out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                box_wh_px=(w, h), confidence=t.confidence,
                                landmark_id=t.landmark_id, corners_px=corners,
                                frame_index=frame_index,
-                               corner_sigma_px=None if sigma is None else sigma * grow,
+                               corner_sigma_px=sigma,
                                corner_scale_sigma_px=scale, corners_measured=measured))
     return out

@@ -102,13 +102,13 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=False, reason="a finding (issue 19, open): no failsafe, but on "
-                   "2026-11-30, on a machine where the companion keeps nearly every frame, "
-                   "three or four seeds of five passed per round (20 flights), never all "
-                   "five: the maxima are the autopilot dead-reckoning on one plate's weak "
-                   "fixes at (6, 6), its yaw echoed by one face-on plate, and gaps of "
-                   "0.7-1.7 s when a plate leaves at the bottom edge before the next is "
-                   "acquired (docs/sitl.md, 'On a machine twice as fast'); not strict: a "
-                   "flight passes or not with the machine's load")
+                   "a machine where the companion keeps nearly every frame, three to five "
+                   "seeds of five passed per round (2026-11-30: 20 flights; 2026-12-02: main "
+                   "9 of 10 in two rounds, 3 of 5 in a third): the maxima are the autopilot "
+                   "dead-reckoning on one plate's weak fixes at (6, 6) and through the 0.5-0.8 "
+                   "s between sign-01 and wall-01 leaving it, and one face-on plate echoing "
+                   "its yaw (docs/sitl.md); not strict: a flight passes or not with the "
+                   "machine's load")
 @pytest.mark.parametrize("seed", SEEDS)
 def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
     with fake_thread(guided(seed)) as (fake, _loop):

@@ -85,9 +85,10 @@ ON_PLATE = (115.0, 90.0, 90.0, 60.0)
 def test_a_track_coasts_two_frames_in_three_where_its_box_is_on_its_outline() -> None:
     p, track, image, calls = _one_track(PerceptionConfig(parallel_tracks=False), ON_PLATE)
     _, _, corners = scene()
-    for expected_calls, expected_coasted in ((0, 1), (0, 2), (1, 0)):
+    for n, (expected_calls, expected_coasted) in enumerate(((0, 1), (0, 2), (1, 0))):
         p.trackset.update(image)
         assert len(calls) == expected_calls and track.coasted == expected_coasted
+        assert track.frames == n + 1  # followed, coasted or not (``young_cut_frames``)
         assert track.corners is not None and np.abs(track.corners - corners).max() < 0.5
         assert track.tried is None
 
