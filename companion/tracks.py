@@ -268,9 +268,9 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
         measured, grow = (None, 1.0) if cut is None else cut
         if sigma is not None:
             sigma *= grow
-            if t.frames < config.young_cut_frames and corners is not None \
-                    and not inside(np.asarray(corners), *size, margin=EDGE_MARGIN_PX):
-                quad = np.asarray(corners, np.float32)  # its outline unsettled
+            quad = None if corners is None else np.asarray(corners, np.float32)
+            if t.frames < config.young_cut_frames and quad is not None \
+                    and not inside(quad, *size, margin=EDGE_MARGIN_PX):  # outline unsettled
                 sigma = max(sigma, config.young_cut_sigma_rel
                             * float(np.sqrt(abs(cv2.contourArea(quad)))))
         out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),

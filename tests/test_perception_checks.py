@@ -227,11 +227,10 @@ def test_a_young_cut_plate_states_its_corners_no_better_than_its_unsettled_outli
     """Issue 19's square: a plate acquired while cut by the edge had its first outlines
     pixels off; its lone fixes were 0.3-1.7 m off at a stated 0.02-0.14 m and the strict
     fake's estimate followed them.  In a cut plate's first ``young_cut_frames`` its
-    corners are stated at ``young_cut_sigma_rel`` of the outline's size at least (the
-    fix still comes), also
-    when the plate is mostly in view but crosses the edge (the square's sign-01 leaving
-    (6, 6)); a plate inside the image, however new, and an old cut plate keep their own
-    sigma."""
+    corners are stated at ``young_cut_sigma_rel`` of the outline's size at least (the fix
+    still comes), also when the plate is mostly in view but crosses the edge (the square's
+    sign-01 leaving (6, 6)); a plate inside the image, however new, and an old cut plate
+    keep their own sigma."""
     _frame, plate, corners = scene()
     config = dataclasses.replace(PerceptionConfig(), young_cut_frames=9, young_cut_sigma_rel=0.1)
     p = perception(plate, config)
