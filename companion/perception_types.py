@@ -208,6 +208,8 @@ class Track:
     partial_box: bool = False
     #: frames this track has been followed since it was acquired
     frames: int = 0
+    #: CPU (s) of its last update, to share the next frame's updates between two threads
+    cost_s: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)

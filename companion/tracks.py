@@ -24,7 +24,9 @@ between frames (tests, benchmarks, the replay's scorer); results carry frozen co
 from __future__ import annotations
 
 import concurrent.futures
+import itertools
 import threading
+import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -55,6 +57,7 @@ class TrackSet:
         self._pool = concurrent.futures.ThreadPoolExecutor(1, "companion-tracks") \
             if config.parallel_tracks else None
         self._checked: dict[str, float] = {}  # this frame's appearance checks (correlation)
+        self._early: frozenset[str] = frozenset()  # turns taken early (_spread_turns)
         self._frames = 0
 
     @property
@@ -107,6 +110,7 @@ class TrackSet:
         tracks = list(self._tracks.values())
         every = self.config.verify_every_frames
         checks = [check_all or (self._frames + i) % every == 0 for i in range(len(tracks))]
+        self._early = self._spread_turns(tracks)
         alive_now = self._update_all(tracks, image, checks, motion)
         for track, alive in zip(tracks, alive_now, strict=True):
             if not alive:
@@ -120,21 +124,46 @@ class TrackSet:
     def _update_all(self, tracks: list[Track], image: npt.NDArray[np.uint8],
                     checks: Sequence[bool], motion: FloatArray | None = None) -> list[bool]:
         """Update every track (and check those whose ``checks`` entry is true); with two
-        or more, every other one on the second thread.  Each touches only its own state."""
+        or more, this thread and the second one take the tracks from one queue, dearest
+        first (the tracker's turn due, then the last update's CPU), each the next as it
+        is free: a frame waits for the larger share, not for a fixed half (issue 23:
+        three tracks split two and one kept 12-26 ms on the second thread while this
+        one waited).  Each update touches only its own track."""
         if self._pool is None or len(tracks) < 2:
             return [self._update_one(t, image, c, motion)
                     for t, c in zip(tracks, checks, strict=True)]
-        there = [self._pool.submit(self._update_one, t, image, c, motion)
-                 for t, c in zip(tracks[::2], checks[::2], strict=True)]
-        here = [self._update_one(t, image, c, motion)
-                for t, c in zip(tracks[1::2], checks[1::2], strict=True)]
-        there_ok = [f.result() for f in there]
-        return [there_ok[i // 2] if i % 2 == 0 else here[i // 2] for i in range(len(tracks))]
+        order = iter(sorted(range(len(tracks)), key=lambda i: (
+            not self._turn_due(tracks[i]), -tracks[i].cost_s)))
+        taking = threading.Lock()
+        alive = [True] * len(tracks)
+
+        def drain() -> None:
+            while True:
+                with taking:
+                    i = next(order, None)
+                if i is None:
+                    return
+                alive[i] = self._update_one(tracks[i], image, checks[i], motion)
+
+        there = self._pool.submit(drain)
+        try:
+            drain()
+        finally:
+            there.result()  # never leave a track updating into the next frame
+        return alive
 
     def _update_one(self, track: Track, image: npt.NDArray[np.uint8], check: bool,
                     motion: FloatArray | None = None) -> bool:
         """The tracker's update and the corners' alignment (and the appearance check when
         ``check``); False when the track is lost."""
+        started = time.thread_time()
+        try:
+            return self._update_track(track, image, check, motion)
+        finally:
+            track.cost_s = time.thread_time() - started
+
+    def _update_track(self, track: Track, image: npt.NDArray[np.uint8], check: bool,
+                      motion: FloatArray | None) -> bool:
         track.frames += 1
         if not self._coasted(track, image, motion):
             result: TrackResult = track.tracker.update(image)
@@ -160,18 +189,38 @@ class TrackSet:
         without it, the tracker's box moved as the outline moved; False when it is the
         tracker's turn or the alignment alone did not hold."""
         before = track.corners
-        if track.coasted + 1 >= self.config.track_every_frames or before is None \
-                or track.tracker.state.lost_frames > 0 \
-                or not self.corners.coast(track, image, motion):
+        if self._turn_due(track) or not self.corners.coast(track, image, motion):
             return False
         after = track.corners
-        assert after is not None
+        assert before is not None and after is not None  # _turn_due: corners before
         shift = after.mean(axis=0) - before.mean(axis=0)
         ratio = float(np.sqrt(cv2.contourArea(after.astype(np.float32))
                               / cv2.contourArea(before.astype(np.float32))))
         track.box = track.tracker.coast((float(shift[0]), float(shift[1])), ratio)
         track.coasted += 1
         return True
+
+    def _turn_due(self, track: Track) -> bool:
+        """The particle tracker updates ``track`` on this frame (no coasting)."""
+        return track.coasted + 1 >= self.config.track_every_frames or track.corners is None \
+            or track.tracker.state.lost_frames > 0 or track.landmark_id in self._early
+
+    def _spread_turns(self, tracks: Sequence[Track]) -> frozenset[str]:
+        """The track that takes its tracker's turn early on this frame, if any: on a frame
+        where no turn is due, one of two tracks whose turns would fall on the same later
+        frame (issue 23: a turn costs about twice a coasting frame, and three tracks
+        with two or three turns on one frame made the latency's tail).  Turns only come
+        earlier, never later than ``track_every_frames`` apart."""
+        every = self.config.track_every_frames
+        self._early = frozenset()
+        waits = sorted((0 if self._turn_due(t) else every - 1 - t.coasted, t.landmark_id)
+                       for t in tracks)
+        if not waits or waits[0][0] == 0:
+            return frozenset()
+        for (wait, _), (later, lid) in itertools.pairwise(waits):
+            if wait == later:
+                return frozenset({lid})
+        return frozenset()
 
     def verify(self, image: npt.NDArray[np.uint8] | None = None) -> Events:
         """Check every track on ``image`` (None: :meth:`update` has, with the tracks'
