@@ -4,10 +4,10 @@ Threads -- who may touch what:
 
 * The **worker thread** (``Perception.process``) owns the tracks: it alone changes the set
   (adopts, drops) and the :class:`~companion.perception_types.Track` objects.  During
-  :meth:`TrackSet.update`, every other track is updated on the set's own second thread
-  ("companion-tracks"); each call there touches only its own track (and the corner
-  recovery's matcher, behind :class:`companion.corners.Corners`' lock), and ``update``
-  waits for them before it returns.
+  :meth:`TrackSet.update`, it and the set's own second thread ("companion-tracks") take
+  the tracks from one queue, the dearest first; each update touches only its own track
+  (and the corner recovery's matcher, behind :class:`companion.corners.Corners`' lock),
+  and ``update`` waits for both threads before it returns.
 * The **background lane** (``Perception.housekeeping``) never reads the tracks.  It takes
   :meth:`TrackSet.snapshot` -- a frozen :class:`~companion.perception_types.Occupancy`
   (which landmarks are tracked or waiting), made under the set's lock, under which the
