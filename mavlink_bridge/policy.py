@@ -112,7 +112,7 @@ class BridgePolicy(ABC):
             return gate.count(problem)
         if not await write():
             return gate.count("backend_error")
-        gate.commit(time_us, now)
+        gate.commit(time_us)
         return gate.count("sent")
 
     async def send_fix(self, fix: VisionFix) -> SendResult:

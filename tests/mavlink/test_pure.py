@@ -125,16 +125,25 @@ def test_landing_target_per_profile() -> None:
 
 
 def test_gate_keeps_samples_20ms_apart_and_at_rate() -> None:
+    """The rate is the samples' (their stamps are what the autopilot spaces and fuses):
+    a fix of the next 30 Hz frame goes out however soon after the last send it is ready."""
     gate = OutputGate(rate_hz=30.0, max_age_us=200_000)
     t0_ns = 10**12
     f0 = fix(t0_ns // 1000)
     assert gate.check_fix(f0, t0_ns) is None
-    gate.commit(f0.time_us, t0_ns)
+    gate.commit(f0.time_us)
     # 10 ms later in sample time: too close for EKF3
     f1 = fix(f0.time_us + 10_000)
     assert gate.check_fix(f1, t0_ns + 40_000_000) == "rate_limited"
-    # 25 ms later but only 10 ms of send time: over the 30 Hz rate
+    # 25 ms later in sample time: over the 30 Hz rate, however late it is sent
     f2 = fix(f0.time_us + 25_000)
-    assert gate.check_fix(f2, t0_ns + 10_000_000) == "rate_limited"
-    assert gate.check_fix(f2, t0_ns + 31_000_000) is None
+    assert gate.check_fix(f2, t0_ns + 40_000_000) == "rate_limited"
+    # the next frame (33 ms), ready only 5 ms after the last send (the last frame was slow)
+    f3 = fix(f0.time_us + 33_333)
+    assert gate.check_fix(f3, t0_ns + 38_333_000) is None
     assert gate.check_fix(fix(f0.time_us), t0_ns + 40_000_000) == "not_newer"
+    # at 50 Hz the EKF's 20 ms is the bound
+    fast = OutputGate(rate_hz=50.0, max_age_us=200_000)
+    fast.commit(f0.time_us)
+    assert fast.check_fix(fix(f0.time_us + 19_000), t0_ns + 19_000_000) == "rate_limited"
+    assert fast.check_fix(fix(f0.time_us + 20_000), t0_ns + 20_000_000) is None
