@@ -103,8 +103,8 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
 @pytest.mark.slow
 @pytest.mark.xfail(strict=False, reason="a finding (issue 19, open): no failsafe, but on "
                    "a machine where the companion keeps nearly every frame, three to five "
-                   "seeds of five passed per round (2026-11-30: 20 flights; 2026-12-02: main "
-                   "17 of 20 in four rounds, 3 to 5 a round): the maxima are the autopilot "
+                   "seeds of five passed per round (2026-11-30: 20 flights; 2026-12-02: 26 of "
+                   "33 flights of main in seven rounds): the maxima are the autopilot "
                    "dead-reckoning on one plate's weak fixes at (6, 6) and through the 0.5-0.8 "
                    "s between sign-01 and wall-01 leaving it, and one face-on plate echoing "
                    "its yaw (docs/sitl.md); not strict: a flight passes or not with the "
