@@ -110,7 +110,7 @@ class TrackSet:
         tracks = list(self._tracks.values())
         every = self.config.verify_every_frames
         checks = [check_all or (self._frames + i) % every == 0 for i in range(len(tracks))]
-        self._early = self._spread_turns(tracks)
+        self._spread_turns(tracks)
         alive_now = self._update_all(tracks, image, checks, motion)
         for track, alive in zip(tracks, alive_now, strict=True):
             if not alive:
@@ -205,22 +205,19 @@ class TrackSet:
         return track.coasted + 1 >= self.config.track_every_frames or track.corners is None \
             or track.tracker.state.lost_frames > 0 or track.landmark_id in self._early
 
-    def _spread_turns(self, tracks: Sequence[Track]) -> frozenset[str]:
-        """The track that takes its tracker's turn early on this frame, if any: on a frame
-        where no turn is due, one of two tracks whose turns would fall on the same later
-        frame (issue 23: a turn costs about twice a coasting frame, and three tracks
-        with two or three turns on one frame made the latency's tail).  Turns only come
-        earlier, never later than ``track_every_frames`` apart."""
+    def _spread_turns(self, tracks: Sequence[Track]) -> None:
+        """Set ``_early``: the track that takes its tracker's turn early on this frame, if
+        any: on a frame where no turn is due, one of two tracks whose turns would fall on
+        the same later frame (issue 23: a turn costs about twice a coasting frame, and
+        three tracks with two or three turns on one frame made the latency's tail).  Turns
+        only come earlier, never later than ``track_every_frames`` apart."""
         every = self.config.track_every_frames
-        self._early = frozenset()
+        self._early = frozenset()  # the last frame's, out of the waits below
         waits = sorted((0 if self._turn_due(t) else every - 1 - t.coasted, t.landmark_id)
                        for t in tracks)
-        if not waits or waits[0][0] == 0:
-            return frozenset()
-        for (wait, _), (later, lid) in itertools.pairwise(waits):
-            if wait == later:
-                return frozenset({lid})
-        return frozenset()
+        if waits and waits[0][0] > 0:
+            self._early = next((frozenset({lid}) for (wait, _), (later, lid)
+                                in itertools.pairwise(waits) if wait == later), frozenset())
 
     def verify(self, image: npt.NDArray[np.uint8] | None = None) -> Events:
         """Check every track on ``image`` (None: :meth:`update` has, with the tracks'
