@@ -12,7 +12,9 @@ run on that frame:
   view: issue 19);
 * without a fix for ``search_after_s``: the detector's hits, and the template search when
   they start nothing.  With tracks running these take turns with feature matching, one
-  heavy step per call (docs/benchmarks.md, "Latency tail").
+  heavy step per call (docs/benchmarks.md, "Latency tail");
+* once nothing has been tracked for ``idle_after_s``: feature matching and the search on
+  one frame in ``idle_search_every_frames`` (:meth:`Acquisition.idle_wait`).
 
 It sees the tracks only as the snapshot it is given and returns what it started; the
 caller hands that over to the worker thread (:meth:`companion.tracks.TrackSet.hand_over`).
@@ -43,10 +45,30 @@ class Acquisition:
         self.acquired_frame = LONG_AGO
         self._lost_turn = False  # features (first) and the lost search take turns
         self._search_next = False  # the template search's turn after a fruitless detector
+        self.tracked_us = LONG_AGO  # when a track was last seen running
+        self.idle_frame = LONG_AGO  # the last idle search's frame
 
     def due_now(self) -> None:
         """Feature matching is due on the next frame (a light step)."""
         self.acquired_frame = LONG_AGO
+        self.idle_frame = LONG_AGO
+
+    def idle_wait(self, index: int, t_us: int, sight: Sighting) -> bool:
+        """True when this frame skips feature matching and the search: nothing has been
+        tracked for ``idle_after_s`` (nor is waiting), no fix, and the last idle search
+        was fewer than ``idle_search_every_frames`` frames ago.  With nothing in view,
+        searching back to back kept a core busy (issue 23); a track just lost is looked
+        for at the full rate until ``idle_after_s``."""
+        cfg = self.config
+        if sight.seen.busy() or sight.fix is not None:
+            self.tracked_us = t_us
+            return False
+        if t_us - self.tracked_us <= cfg.idle_after_s * 1e6:
+            return False
+        if index - self.idle_frame < cfg.idle_search_every_frames:
+            return True
+        self.idle_frame = index
+        return False
 
     def should_acquire(self, index: int, t_us: int, sight: Sighting) -> bool:
         """Feature matching is due: nothing tracked, or ``acquire_every_frames`` since the
@@ -64,8 +86,10 @@ class Acquisition:
         starts: list[Start] = []
         if sight.fix is not None:
             self.last_fix_us = sight.fix.time_us
-        acquire = self.should_acquire(index, t_us, sight)
-        lost = sight.fix is None and t_us - self.last_fix_us > self.config.search_after_s * 1e6
+        idle = self.idle_wait(index, t_us, sight)
+        acquire = not idle and self.should_acquire(index, t_us, sight)
+        lost = not idle and sight.fix is None and \
+            t_us - self.last_fix_us > self.config.search_after_s * 1e6
         # While tracks run, one heavy step per call (they take turns, issue 23): a call that
         # runs several holds a one-core board's next frame up by their sum.  With no track
         # the frames carry no fix to delay: then all at once, for the quickest start (taking

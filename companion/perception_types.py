@@ -141,6 +141,13 @@ class PerceptionConfig:
     max_guess_error_px: float = field(default=30.0, metadata={"gt": 0})
     #: Without a fix for this long, search the whole frame for one landmark per frame.
     search_after_s: float = field(default=0.3, metadata={"ge": 0})
+    #: Once nothing has been tracked for ``idle_after_s`` (from the start: at once), feature
+    #: matching and the whole-frame search run on one frame in ``idle_search_every_frames``
+    #: instead of back to back: with nothing in view they took a core (issue 23; each
+    #: call costs 20-100 ms of CPU) for a landmark found at most that many frames later.
+    #: A track just lost is searched for at the full rate until then.  1: every frame.
+    idle_after_s: float = field(default=1.0, metadata={"ge": 0})
+    idle_search_every_frames: int = field(default=6, metadata={"ge": 1})
     search_min_score: float = field(default=0.5, metadata={"gt": 0, "le": 1})
     search_widths_px: tuple[float, ...] = (40.0, 60.0, 90.0, 135.0, 200.0, 300.0)
     #: Without a fix, acquire with the landmark detector ([detector]) first, the template
