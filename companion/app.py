@@ -37,6 +37,7 @@ import numpy.typing as npt
 from companion.perception_types import TrackView
 from companion.pipeline.background import BackgroundLane
 from companion.pipeline.health import Blocker, HealthInputs, HealthPolicy, State, health_state
+from companion.pipeline.keepup import KeepUpWatch
 from companion.pipeline.latest import LatestSlot, SlotClosedError
 from companion.pipeline.stats import RateMeter, Rolling
 from companion.reporting import pose_json, tracks_json
@@ -201,6 +202,7 @@ class CompanionApp:
         self.blocker: Blocker | None = None
         self.counters = Counters()
         self.stats = AppStats()
+        self.keep_up = KeepUpWatch()
         self.state: State = "starting"
         self._slot: LatestSlot[Frame] = LatestSlot()
         self._executor = concurrent.futures.ThreadPoolExecutor(1, "companion-worker")
@@ -367,6 +369,7 @@ class CompanionApp:
         try:
             while not self._stop.is_set():
                 self._update_health()
+                await self._watch_keep_up()
                 self.reporter.report("status", now_us(), self.status())
                 try:
                     await asyncio.wait_for(self._stop.wait(), self.status_period_s)
@@ -393,6 +396,29 @@ class CompanionApp:
             log.info("health %s -> %s", old, state)
             self._event("health", old=old, new=state)
             self.reporter.report("status", now_us(), self.status())
+
+    async def _watch_keep_up(self) -> None:
+        """Say once when the processing falls behind the camera (frames dropped), and
+        when it keeps up again (:mod:`companion.pipeline.keepup`)."""
+        change = self.keep_up.update(self.clock_s(), self.counters.frames, self.dropped_frames)
+        c = self.keep_up.last
+        if change is None or c is None:
+            return
+        fields = {"frames": c.frames, "dropped": c.dropped, "window_s": round(c.window_s, 1),
+                  "share": round(c.share, 3)}
+        if not change:
+            log.info("keeping up with the camera again: %d of %d frames dropped in the last "
+                     "%.0f s", c.dropped, c.frames + c.dropped, c.window_s)
+            self._event("keeping-up", **fields)
+            return
+        log.warning("%s, processing p99 %s ms: lower perception.max_tracks or the "
+                    "resolution, or free a core (docs/deploy.md, 'Latency on a slower "
+                    "board')", self.keep_up.warning(), self.stats.process_ms.summary()["p99"])
+        self._event("falling-behind", **fields)
+        try:
+            await self.sink.statustext(f"{100 * c.share:.0f}% of camera frames dropped (CPU)")
+        except Exception as err:  # the link may be down: the log and the status say it
+            log.warning("STATUSTEXT not sent: %s", err)
 
     def report_event(self, name: str, fields: dict[str, Any]) -> None:
         """Publish an event (monitoring and the flight log) stamped now."""
@@ -432,7 +458,8 @@ class CompanionApp:
             "dropped_frames": self.dropped_frames + int(source.get("skipped", 0)),
             "source": source,
             "autopilot_streams": streams() if callable(streams) else {},
-            "warnings": warnings() if callable(warnings) else [],
+            "warnings": [*(warnings() if callable(warnings) else []),
+                         *filter(None, [self.keep_up.warning()])],
             **self.facts,
         }
 

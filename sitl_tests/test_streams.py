@@ -127,4 +127,8 @@ async def test_the_status_carries_the_streams(tmp_path: Path) -> None:
     assert set(streams) == {"ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT",
                             "EKF_STATUS_REPORT"}
     assert all(s["state"] == "arriving" for s in streams.values()), streams
-    assert seen["warnings"] == []
+    # no stream warning; "falling behind the camera" (companion/pipeline/keepup.py) says
+    # what the machine's load did to the frames, not the streams: not judged here
+    warnings = seen["warnings"]
+    assert isinstance(warnings, list)
+    assert [w for w in warnings if not w.startswith("falling behind")] == [], warnings
