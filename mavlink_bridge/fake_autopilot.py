@@ -69,6 +69,7 @@ from mavlink_bridge.fake_vehicle import (
     FlightState,
     GuidedVehicle,
 )
+from mavlink_bridge.params import param_name
 from mavlink_bridge.telemetry import quaternion_from_rpy
 from mavlink_bridge.vehicle import TruthFn, VehicleState, hover_then_circle
 
@@ -228,6 +229,8 @@ class FakeAutopilot:
         self.judge.reset()
         self.streams.reset()  # a reboot forgets every asked interval
         self.ekf = FakeEstimator(self.estimator_config, self.config.seed)
+        for pid in dict(self.params.sets):  # stored: a reboot keeps what the user set
+            self.ekf.set_parameter(pid, self.params.values[pid])
         self._last_track_s = -1.0
         self._prev_velocity: tuple[float, np.ndarray] | None = None
 
@@ -478,6 +481,9 @@ class FakeAutopilot:
                 self.guided.goto((msg.x, msg.y, msg.z), msg.yaw)
         elif name.startswith("PARAM_"):
             self.params.handle(name, msg, self.codec.mav)
+            if name == "PARAM_SET" and param_name(msg.param_id) in self.params.values:
+                pid = param_name(msg.param_id)
+                self.ekf.set_parameter(pid, self.params.values[pid])  # read at every fix
         elif name == "SET_GPS_GLOBAL_ORIGIN":
             if self.config.profile == "px4":
                 self._set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
@@ -517,7 +523,7 @@ class FakeAutopilot:
         f = msg.to_dict()
         stamp = int(f["time_usec"] if name == "ODOMETRY" else f["usec"])
         age_ms = self._stamp_age_ms(stamp)
-        delay_s = self.estimator_config.delay_ms / 1000 if self.config.judge == "estimate" \
+        delay_s = self.ekf.delay_ms / 1000 if self.config.judge == "estimate" \
             else self.config.rules.delay_ms / 1000
         truth = self.truth(self.flight_s() - delay_s - max(age_ms, 0) / 1000)
         pos = (float(f["x"]), float(f["y"]), float(f["z"]))

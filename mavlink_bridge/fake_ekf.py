@@ -7,9 +7,14 @@ and corrected by the vision fixes it accepts.  Every rule copies the real autopi
 * Delay: a fix is compared with the estimate ``delay_ms`` before its arrival (ArduPilot
   ``VISO_DELAY_MS``, default 10, libraries/AP_VisualOdom/AP_VisualOdom.cpp; PX4
   ``EKF2_EV_DELAY``, default 0 ms, src/modules/ekf2/params_external_vision.yaml).
-* Noise: the fix's variance floored by ``noise_floor_m`` squared (ArduPilot
-  ``VISO_POS_M_NSE`` default 0.2 m; PX4 ``EKF2_EVP_NOISE`` default 0.1 m with
-  ``EKF2_EV_NOISE_MD`` 0).
+* Noise (:func:`fix_variances`): ArduPilot reduces the fix's covariance to one position
+  error for all three axes, ``posErr = cbrt(c0^2 + c6^2 + c11^2)`` (0 when ``c0`` is NaN;
+  libraries/GCS_MAVLink/GCS_Common.cpp ``handle_common_vision_position_estimate_data``),
+  floored by ``VISO_POS_M_NSE`` (default 0.2 m) and fused as ``R = sq(constrain(posErr,
+  0.01, 100))`` on north, east and down (EKF3 ``FuseVelPosNED``); PX4 keeps the three
+  variances, each floored by ``EKF2_EVP_NOISE`` squared (default 0.1 m, with
+  ``EKF2_EV_NOISE_MD`` 0; src/modules/ekf2/EKF/aid_sources/external_vision/ev_pos_control.cpp).
+  ../shared/MAVLINK.md, "Covariance and reset_counter".
 * Gate: the horizontal innovation test against **this estimate** (never the truth):
   ``nu_N^2/S_N + nu_E^2/S_E <= gate^2``, S = P + R (ArduPilot EKF3 ``FuseVelPosNED``,
   ``EK3_POS_I_GATE`` default 500 = 5 sigma; PX4 ``EKF2_EVP_GATE`` default 5).
@@ -40,10 +45,15 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
 from mavlink_bridge.fake_baro import EXTNAV_FRESH_S, BaroConfig, HeightSource, SimBarometer
+
+#: how the fused noise comes from a fix's covariance: "ardupilot" one error for all axes,
+#: "px4" one per axis (:func:`fix_variances`)
+NoiseModel = Literal["ardupilot", "px4"]
 
 GRAVITY_M_S2 = 9.80665
 EKF_FLAGS_HEALTHY = 0x33F  # attitude, velocities, positions, pred pos horiz rel/abs (ArduPilot)
@@ -69,6 +79,8 @@ class EstimatorConfig:
 
     delay_ms: float = 10.0
     noise_floor_m: float = 0.2
+    # how a fix's covariance becomes the fused noise (:func:`fix_variances`)
+    noise_model: NoiseModel = "ardupilot"
     gate_sigma: float = 5.0
     filter_accel_noise_m_s2: float = 0.35
     # the simulated IMU: bias (1-sigma per axis, constant) and white noise density
@@ -86,9 +98,25 @@ class EstimatorConfig:
 def estimator_defaults(profile: str) -> EstimatorConfig:
     """The real autopilot's defaults (module doc has the sources)."""
     if profile == "px4":
-        return EstimatorConfig(delay_ms=0.0, noise_floor_m=0.1, outage_flags_s=5.0,
-                               baro_noise_m=3.5)
+        return EstimatorConfig(delay_ms=0.0, noise_floor_m=0.1, noise_model="px4",
+                               outage_flags_s=5.0, baro_noise_m=3.5)
     return EstimatorConfig()
+
+
+def fix_variances(var_ned: tuple[float, float, float], floor_m: float,
+                  model: NoiseModel) -> np.ndarray:
+    """The N, E, D noise variances an autopilot fuses a fix with, from the fix's position
+    variances (the covariance's c0, c6, c11; NaN: unknown) and its noise floor (module
+    doc): ArduPilot one error for all axes, PX4 one per axis."""
+    floor2 = floor_m ** 2
+    if model == "px4":
+        return np.array([v if math.isfinite(v) and v > floor2 else floor2 for v in var_ned])
+    c0, c6, c11 = var_ned
+    pos_err = 0.0 if math.isnan(c0) else math.cbrt(c0 * c0 + c6 * c6 + c11 * c11)
+    if not math.isfinite(pos_err):
+        pos_err = 0.0
+    pos_err = min(max(pos_err, floor_m, 0.01), 100.0)
+    return np.full(3, pos_err * pos_err)
 
 
 @dataclass(frozen=True)
@@ -109,6 +137,10 @@ class FakeEstimator:
         self.P = np.tile(np.diag([100.0, 1.0]), (3, 1, 1))
         self.initialised = False  # horizontal: set by the first fix
         self.height_source: HeightSource = config.height_source
+        # the parameters' current values (the autopilot's VISO_POS_M_NSE / VISO_DELAY_MS or
+        # EKF2_EVP_NOISE / EKF2_EV_DELAY, set live: :meth:`set_parameter`)
+        self.noise_floor_m = config.noise_floor_m
+        self.delay_ms = config.delay_ms
         self.height_initialised = False  # vertical: by the barometer at start, or a fix
         self._height_active: HeightSource = "baro"  # what the down follows now
         self._last_down_fix_s = -math.inf
@@ -199,8 +231,7 @@ class FakeEstimator:
              var_ned: tuple[float, float, float], reset: bool = False) -> Verdict:
         """One vision position measured ``delay_ms`` before ``t_s``."""
         z = np.asarray(z_ned, float)
-        floor2 = self.config.noise_floor_m ** 2
-        r = np.array([v if math.isfinite(v) and v > floor2 else floor2 for v in var_ned])
+        r = fix_variances(var_ned, self.noise_floor_m, self.config.noise_model)
         down = self._down_from_fixes(t_s)
         if not self.initialised or reset:
             # the first fix (or a reset_counter change) sets the horizontal position, and
@@ -217,7 +248,7 @@ class FakeEstimator:
             return Verdict(True, "reset" if reset else "fused", 0.0)  # the first sets it
         if down == "reset":
             self.x[2, 0], self.P[2][0, 0], self.P[2][0, 1], self.P[2][1, 0] = z[2], r[2], 0, 0
-        nu = z - self.position_at(t_s - self.config.delay_ms / 1000.0)
+        nu = z - self.position_at(t_s - self.delay_ms / 1000.0)
         s = np.array([self.P[k][0, 0] + r[k] for k in range(3)])
         gate2 = self.config.gate_sigma ** 2
         innovation = float(np.linalg.norm(nu))
@@ -234,6 +265,14 @@ class FakeEstimator:
         self.fused += 1
         self.last_fused_s = t_s
         return Verdict(True, "fused", innovation)
+
+    def set_parameter(self, name: str, value: float) -> None:
+        """A parameter set on the autopilot that this estimator reads at every fix, as
+        ArduPilot's AP_VisualOdom and PX4's EKF2 do; other names are not its own."""
+        if name in ("VISO_POS_M_NSE", "EKF2_EVP_NOISE"):
+            self.noise_floor_m = value
+        elif name in ("VISO_DELAY_MS", "EKF2_EV_DELAY"):
+            self.delay_ms = value
 
     def _down_from_fixes(self, t_s: float) -> str:
         """Whether this fix's down is used: "" no (barometer), "fuse", or "reset" (the

@@ -33,9 +33,15 @@ def test_setup_sets_reads_back_and_says_reboot(profile: str,
         status = main(setup_args(fake.local_port, profile, "--yes", "--delay-ms", "45"))
         out = capsys.readouterr().out
         values = dict(fake.params.values)
+        # the estimator reads the noise floor and the delay at every fix, as the real ones do
+        live = (fake.ekf.noise_floor_m, fake.ekf.delay_ms)
         again = main(setup_args(fake.local_port, profile, "--delay-ms", "45"))
         out2 = capsys.readouterr().out
+        fake.reboot(0.0)  # stored parameters outlive a reboot
+        rebooted = (fake.ekf.noise_floor_m, fake.ekf.delay_ms)
     assert status == 0, out
+    noise = "VISO_POS_M_NSE" if profile == "ardupilot" else "EKF2_EVP_NOISE"
+    assert live == rebooted == pytest.approx((wanted[noise], 45.0)), (live, rebooted)
     assert all(same_value(values[k], v) for k, v in wanted.items()), values
     delay = "VISO_DELAY_MS" if profile == "ardupilot" else "EKF2_EV_DELAY"
     assert values[delay] == 45.0

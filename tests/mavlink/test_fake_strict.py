@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,6 +16,7 @@ from mavlink_bridge.fake_ekf import (
     EstimatorConfig,
     FakeEstimator,
     estimator_defaults,
+    fix_variances,
 )
 from mavlink_bridge.fake_rules import JitterCorrection
 from mavlink_bridge.fake_streams import MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, FakeStreams
@@ -101,6 +103,32 @@ def test_noise_floor_and_delay_follow_the_profile() -> None:
         ekf = hover_estimator(EstimatorConfig(accel_bias_m_s2=0.0, noise_floor_m=floor))
         ekf.P[:, 0, 0] = 1e-4
         assert ekf.fuse(2.0, (0.7, 0.0, -5.0), (1e-6, 1e-6, 1e-6)).accepted is accepted
+
+
+def test_ardupilot_fuses_one_error_on_every_axis_px4_one_per_axis() -> None:
+    """ArduPilot: posErr = cbrt(c0^2 + c6^2 + c11^2) (0 for a NaN c0), at least
+    VISO_POS_M_NSE, at most 100 m, as the noise of north, east and down alike; PX4: each
+    variance at least EKF2_EVP_NOISE^2 (../shared/MAVLINK.md)."""
+    weak_east = (0.01, 9.0, 0.01)  # 0.1 m north, 3 m east
+    assert fix_variances(weak_east, 0.2, "ardupilot") == pytest.approx(
+        [math.cbrt(1e-4 + 81.0 + 1e-4) ** 2] * 3)  # 4.33 m on every axis
+    assert fix_variances(weak_east, 0.1, "px4") == pytest.approx(list(weak_east))
+    assert fix_variances((1e-4, 1e-4, 1e-4), 0.2, "ardupilot") == pytest.approx([0.04] * 3)
+    assert fix_variances((1e-4, 1e-4, 1e-4), 0.1, "px4") == pytest.approx([0.01] * 3)
+    assert fix_variances((math.nan, 4.0, 4.0), 0.2, "ardupilot") == pytest.approx([0.04] * 3)
+    assert fix_variances((1e6, 1e6, 1e6), 0.2, "ardupilot") == pytest.approx([1e4] * 3)
+    assert estimator_defaults("ardupilot").noise_model == "ardupilot"
+    assert estimator_defaults("px4").noise_model == "px4"
+    # a fix 0.3 m north, sure of north but not of east: PX4 follows it north, ArduPilot
+    # hardly moves (its one error is the east's)
+    moved = {}
+    for profile in ("ardupilot", "px4"):
+        ekf = hover_estimator(dataclasses.replace(estimator_defaults(profile),
+                                                  accel_bias_m_s2=0.0))
+        before = ekf.position()[0]
+        assert ekf.fuse(2.0, (0.3, 0.0, -5.0), weak_east).accepted
+        moved[profile] = ekf.position()[0] - before
+    assert moved["px4"] > 0.03 and 0.0 < moved["ardupilot"] < 0.001, moved
 
 
 def test_flags_drop_6s_into_an_outage() -> None:
