@@ -219,6 +219,9 @@ def summary(app: CompanionApp, fake: AutopilotResults, bridge: VisionBridge, res
         "latency_p50_ms": lat.summary()["p50"],
         "latency_p99_ms": lat.summary()["p99"],
         "dropped_frames": app.dropped_frames + source.status.skipped,
+        # of those, the ones this machine was too slow for: the worker still busy, or the
+        # source's slot gone before it was read (not a recording's unreadable frames)
+        "frames_behind": app.dropped_frames + source.status.skip_reasons.get("late", 0),
         "cpu_cores_busy": round(cpu_cores_busy, 3),
         "cpu_cores_busy_total": round(cpu_cores_busy_total, 3),
         "stage_ms": {"capture_to_worker": app.stats.queue_ms.summary(),
@@ -292,9 +295,9 @@ def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
         + (f" and the fake autopilot's {s['cpu_cores_autopilot']}, each in its own process)"
            if "cpu_cores_autopilot" in s else ")"),
     ]
-    came = s["frames"] + s["dropped_frames"]
-    if came and s["dropped_frames"] > KEEP_UP_SHARE * came:
-        lines.append(f"note              {s['dropped_frames']} of {came} frames dropped: this "
+    came, behind = s["frames"] + s["dropped_frames"], s.get("frames_behind", s["dropped_frames"])
+    if came and behind > KEEP_UP_SHARE * came:
+        lines.append(f"note              {behind} of {came} frames dropped: this "
                      "machine did not keep up with the camera (docs/deploy.md, 'Latency on a "
                      "slower board', says what to lower)")
     print("\n".join(lines), file=out)
