@@ -104,7 +104,7 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
 @pytest.mark.xfail(strict=False, reason="a finding (issue 19, open): no failsafe, but on "
                    "a machine where the companion keeps nearly every frame, two to five "
                    "seeds of five passed per round (2026-12-02: 26 of 33 flights; 2026-12-03, "
-                   "the fake fusing ArduPilot's one error for all axes: 9 of 15): the maxima "
+                   "the fake fusing ArduPilot's one error for all axes: 13 of 20): the maxima "
                    "are a plate acquired cut at the bottom edge leaving (6, 6), the gap to the "
                    "next, and the (0, 0) hover on one face-on plate whose good axis "
                    "ArduPilot's one error cannot take (docs/sitl.md); not strict: a flight "
