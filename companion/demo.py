@@ -295,7 +295,7 @@ def print_summary(s: dict[str, Any], out: Any = sys.stdout) -> None:
         + (f" and the fake autopilot's {s['cpu_cores_autopilot']}, each in its own process)"
            if "cpu_cores_autopilot" in s else ")"),
     ]
-    came, behind = s["frames"] + s["dropped_frames"], s.get("frames_behind", s["dropped_frames"])
+    came, behind = s["frames"] + s["dropped_frames"], s["frames_behind"]
     if came and behind > KEEP_UP_SHARE * came:
         lines.append(f"note              {behind} of {came} frames dropped: this "
                      "machine did not keep up with the camera (docs/deploy.md, 'Latency on a "

@@ -481,8 +481,8 @@ class FakeAutopilot:
                 self.guided.goto((msg.x, msg.y, msg.z), msg.yaw)
         elif name.startswith("PARAM_"):
             self.params.handle(name, msg, self.codec.mav)
-            if name == "PARAM_SET" and param_name(msg.param_id) in self.params.values:
-                pid = param_name(msg.param_id)
+            pid = param_name(msg.param_id) if name == "PARAM_SET" else ""
+            if pid in self.params.values:
                 self.ekf.set_parameter(pid, self.params.values[pid])  # read at every fix
         elif name == "SET_GPS_GLOBAL_ORIGIN":
             if self.config.profile == "px4":

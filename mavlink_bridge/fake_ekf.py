@@ -10,14 +10,16 @@ and corrected by the vision fixes it accepts.  Every rule copies the real autopi
 * Noise (:func:`fix_variances`): ArduPilot reduces the fix's covariance to one position
   error for all three axes, ``posErr = cbrt(c0^2 + c6^2 + c11^2)`` (0 when ``c0`` is NaN;
   libraries/GCS_MAVLink/GCS_Common.cpp ``handle_common_vision_position_estimate_data``),
-  floored by ``VISO_POS_M_NSE`` (default 0.2 m) and fused as ``R = sq(constrain(posErr,
-  0.01, 100))`` on north, east and down (EKF3 ``FuseVelPosNED``); PX4 keeps the three
+  constrained to [``VISO_POS_M_NSE`` (default 0.2 m), 100] (AP_VisualOdom_MAV) and fused as
+  ``R = sq(constrain(posErr, 0.01, 10))`` north and east (EKF3 ``FuseVelPosNED``) and
+  ``sq(constrain(posErr, 0.1, 10))`` down (``selectHeightForFusion``); PX4 keeps the three
   variances, each floored by ``EKF2_EVP_NOISE`` squared (default 0.1 m, with
   ``EKF2_EV_NOISE_MD`` 0; src/modules/ekf2/EKF/aid_sources/external_vision/ev_pos_control.cpp).
   ../shared/MAVLINK.md, "Covariance and reset_counter".
 * Gate: the horizontal innovation test against **this estimate** (never the truth):
-  ``nu_N^2/S_N + nu_E^2/S_E <= gate^2``, S = P + R (ArduPilot EKF3 ``FuseVelPosNED``,
-  ``EK3_POS_I_GATE`` default 500 = 5 sigma; PX4 ``EKF2_EVP_GATE`` default 5).
+  ArduPilot EKF3 ``(nu_N^2 + nu_E^2) / (S_N + S_E) <= gate^2`` (``FuseVelPosNED``
+  ``posTestRatio``, ``EK3_POS_I_GATE`` default 500 = 5 sigma), PX4 ``nu_N^2/S_N + nu_E^2/S_E
+  <= gate^2`` (``EKF2_EVP_GATE`` default 5), S = P + R.
   The vertical axis has its own test.
 * Process noise of the filter: ``EK3_ACC_P_NSE`` / PX4 ``EKF2_ACC_NOISE``, both 0.35 m/s^2.
 * Height (:mod:`mavlink_bridge.fake_baro`): from the simulated barometer, fused with the
@@ -107,16 +109,22 @@ def fix_variances(var_ned: tuple[float, float, float], floor_m: float,
                   model: NoiseModel) -> np.ndarray:
     """The N, E, D noise variances an autopilot fuses a fix with, from the fix's position
     variances (the covariance's c0, c6, c11; NaN: unknown) and its noise floor (module
-    doc): ArduPilot one error for all axes, PX4 one per axis."""
+    doc).  ArduPilot: one error, ``posErr = cbrt(c0^2 + c6^2 + c11^2)`` (0 for a NaN c0),
+    constrained to [floor, 100] by AP_VisualOdom (a NaN to the middle, as AP_Math's
+    ``constrain_value`` does), then fused by EKF3 at ``sq(constrain(posErr, 0.01, 10))``
+    north and east and ``sq(constrain(posErr, 0.1, 10))`` down.  PX4: each variance at
+    least the floor squared (a non-finite one: the floor)."""
     floor2 = floor_m ** 2
     if model == "px4":
         return np.array([v if math.isfinite(v) and v > floor2 else floor2 for v in var_ned])
     c0, c6, c11 = var_ned
-    pos_err = 0.0 if math.isnan(c0) else math.cbrt(c0 * c0 + c6 * c6 + c11 * c11)
-    if not math.isfinite(pos_err):
-        pos_err = 0.0
-    pos_err = min(max(pos_err, floor_m, 0.01), 100.0)
-    return np.full(3, pos_err * pos_err)
+    try:
+        pos_err = 0.0 if math.isnan(c0) else math.cbrt(c0 * c0 + c6 * c6 + c11 * c11)
+    except OverflowError:
+        pos_err = math.inf
+    pos_err = (floor_m + 100.0) / 2 if math.isnan(pos_err) else min(max(pos_err, floor_m), 100.0)
+    horizontal, down = min(max(pos_err, 0.01), 10.0), min(max(pos_err, 0.1), 10.0)
+    return np.array([horizontal, horizontal, down]) ** 2
 
 
 @dataclass(frozen=True)
@@ -252,7 +260,7 @@ class FakeEstimator:
         s = np.array([self.P[k][0, 0] + r[k] for k in range(3)])
         gate2 = self.config.gate_sigma ** 2
         innovation = float(np.linalg.norm(nu))
-        if (nu[0] ** 2 / s[0] + nu[1] ** 2 / s[1]) > gate2:
+        if self._horizontal_ratio(nu, s) > gate2:
             self.rejected += 1
             return Verdict(False, "innovation_gate", innovation)
         fused_axes = range(3) if down == "fuse" and nu[2] ** 2 / s[2] <= gate2 else range(2)
@@ -265,6 +273,14 @@ class FakeEstimator:
         self.fused += 1
         self.last_fused_s = t_s
         return Verdict(True, "fused", innovation)
+
+    def _horizontal_ratio(self, nu: np.ndarray, s: np.ndarray) -> float:
+        """The horizontal innovation test's ratio (gate^2 rejects): EKF3 sums both axes,
+        ``(nuN^2 + nuE^2) / (S_N + S_E)`` (``FuseVelPosNED``, ``posTestRatio``); for PX4
+        the per-axis ratios are summed (not checked against EKF2: the stricter reading)."""
+        if self.config.noise_model == "ardupilot":
+            return float((nu[0] ** 2 + nu[1] ** 2) / (s[0] + s[1]))
+        return float(nu[0] ** 2 / s[0] + nu[1] ** 2 / s[1])
 
     def set_parameter(self, name: str, value: float) -> None:
         """A parameter set on the autopilot that this estimator reads at every fix, as

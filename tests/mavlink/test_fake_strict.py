@@ -98,17 +98,25 @@ def test_noise_floor_and_delay_follow_the_profile() -> None:
     assert estimator_defaults("ardupilot").noise_floor_m == 0.2  # VISO_POS_M_NSE
     assert estimator_defaults("px4").delay_ms == 0.0  # EKF2_EV_DELAY
     assert estimator_defaults("px4").noise_floor_m == 0.1  # EKF2_EVP_NOISE
-    # a 0.7 m innovation: outside 5 sigma of a 0.1 m floor with a tiny P, inside 5 x 0.2 m
+    # a 0.8 m innovation north with a tiny P: EKF3's (nuN^2 + nuE^2) / (S_N + S_E) is 31.7
+    # with a 0.1 m floor (over 5^2), 8.0 with 0.2 m
     for floor, accepted in ((0.1, False), (0.2, True)):
         ekf = hover_estimator(EstimatorConfig(accel_bias_m_s2=0.0, noise_floor_m=floor))
         ekf.P[:, 0, 0] = 1e-4
-        assert ekf.fuse(2.0, (0.7, 0.0, -5.0), (1e-6, 1e-6, 1e-6)).accepted is accepted
+        assert ekf.fuse(2.0, (0.8, 0.0, -5.0), (1e-6, 1e-6, 1e-6)).accepted is accepted
+    # EKF3 sums both axes: 0.6 m north with S 0.0101 per axis passes (17.8), where the per-axis
+    # sum PX4's reading takes (35.6) rejects it
+    for model, accepted in (("ardupilot", True), ("px4", False)):
+        ekf = hover_estimator(EstimatorConfig(accel_bias_m_s2=0.0, noise_floor_m=0.1,
+                                              noise_model=model))  # type: ignore[arg-type]
+        ekf.P[:, 0, 0] = 1e-4
+        assert ekf.fuse(2.0, (0.6, 0.0, -5.0), (1e-6, 1e-6, 1e-6)).accepted is accepted
 
 
 def test_ardupilot_fuses_one_error_on_every_axis_px4_one_per_axis() -> None:
-    """ArduPilot: posErr = cbrt(c0^2 + c6^2 + c11^2) (0 for a NaN c0), at least
-    VISO_POS_M_NSE, at most 100 m, as the noise of north, east and down alike; PX4: each
-    variance at least EKF2_EVP_NOISE^2 (../shared/MAVLINK.md)."""
+    """ArduPilot: posErr = cbrt(c0^2 + c6^2 + c11^2) (0 for a NaN c0) in [VISO_POS_M_NSE,
+    100], fused at most 10 m on north, east and down alike; PX4: each variance at least
+    EKF2_EVP_NOISE^2 (../shared/MAVLINK.md; fake_ekf.fix_variances has the sources)."""
     weak_east = (0.01, 9.0, 0.01)  # 0.1 m north, 3 m east
     assert fix_variances(weak_east, 0.2, "ardupilot") == pytest.approx(
         [math.cbrt(1e-4 + 81.0 + 1e-4) ** 2] * 3)  # 4.33 m on every axis
@@ -116,7 +124,10 @@ def test_ardupilot_fuses_one_error_on_every_axis_px4_one_per_axis() -> None:
     assert fix_variances((1e-4, 1e-4, 1e-4), 0.2, "ardupilot") == pytest.approx([0.04] * 3)
     assert fix_variances((1e-4, 1e-4, 1e-4), 0.1, "px4") == pytest.approx([0.01] * 3)
     assert fix_variances((math.nan, 4.0, 4.0), 0.2, "ardupilot") == pytest.approx([0.04] * 3)
-    assert fix_variances((1e6, 1e6, 1e6), 0.2, "ardupilot") == pytest.approx([1e4] * 3)
+    for huge in ((1e6, 1e6, 1e6), (math.inf, 1.0, 1.0), (1e200, 1.0, 1.0), (1.0, math.nan, 1.0)):
+        assert fix_variances(huge, 0.2, "ardupilot") == pytest.approx([100.0] * 3)  # 10 m
+    assert fix_variances((0.0, 0.0, 0.0), 0.001, "ardupilot") == pytest.approx(
+        [1e-4, 1e-4, 0.01])  # EKF3's own floors: 0.01 m across, 0.1 m down
     assert estimator_defaults("ardupilot").noise_model == "ardupilot"
     assert estimator_defaults("px4").noise_model == "px4"
     # a fix 0.3 m north, sure of north but not of east: PX4 follows it north, ArduPilot
