@@ -118,10 +118,8 @@ def fix_variances(var_ned: tuple[float, float, float], floor_m: float,
     if model == "px4":
         return np.array([v if math.isfinite(v) and v > floor2 else floor2 for v in var_ned])
     c0, c6, c11 = var_ned
-    try:
-        pos_err = 0.0 if math.isnan(c0) else math.cbrt(c0 * c0 + c6 * c6 + c11 * c11)
-    except OverflowError:
-        pos_err = math.inf
+    # float products overflow to inf (then 100), never raise
+    pos_err = 0.0 if math.isnan(c0) else math.cbrt(c0 * c0 + c6 * c6 + c11 * c11)
     pos_err = (floor_m + 100.0) / 2 if math.isnan(pos_err) else min(max(pos_err, floor_m), 100.0)
     horizontal, down = min(max(pos_err, 0.01), 10.0), min(max(pos_err, 0.1), 10.0)
     return np.array([horizontal, horizontal, down]) ** 2
