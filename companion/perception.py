@@ -263,13 +263,13 @@ class Perception:
         fix = solve_pose(observed, self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)
-        self.side.learn(read, fix)
+        fix, settled = self.side.settle(read, fix)
+        events += settled
         if isinstance(fix, NoFix):
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
                                particles=particles)
         self.noise.learn(observed, fix, self.tracks)
         events += self.trackset.drop_rejected(observed, fix)
-        events += self.side.rejected(fix)
         why = None if self.gate.precise(fix, self._distance(fix)) \
             else "held back: too vague for its distance"
         if why is None and not self.gate.admit(fix):

@@ -5,7 +5,11 @@ range at a frame's capture time: :class:`companion.sensors.SensorHistory` in a f
 simulator's truth in tests and benchmarks).  :class:`SideInputs` reads it for each frame,
 corrects the attitude by the error learnt from earlier fixes (``pose.learn_attitude_bias``,
 tracker/pose/attitude_bias.py), learns from each solution, and counts the fixes for which
-the solver rejected the autopilot's attitude (each an event).  Worker thread only.
+the solver rejected the autopilot's attitude (each an event).  Such a fix is held back
+(no fix that frame, nothing learnt from it) until the disagreement has repeated on
+``pose.attitude_reject_frames`` solved frames in a row: one frame's disagreement is mostly
+the landmarks' own (docs/decisions.md, "A disagreement with the autopilot's attitude must
+repeat").  Worker thread only.
 """
 
 from __future__ import annotations
@@ -69,6 +73,9 @@ class SideInputs:
         self.bias = AttitudeBias(pose_config) if pose_config.learn_attitude_bias else None
         #: fixes for which the autopilot's attitude disagreed with the landmarks' (not used)
         self.attitude_rejections = 0
+        self._confirm = pose_config.attitude_reject_frames
+        self._streak = 0  # solved frames in a row whose landmarks disagreed with it
+        self._last_rejected_us: int | None = None
 
     def at(self, t_us: int) -> tuple[SideSensors, SideSensors]:
         """The side sensors at ``t_us`` as read, and as the solver takes them (the
@@ -78,16 +85,38 @@ class SideInputs:
             return read, read
         return read, replace(read, attitude=self.bias.correct(read.attitude))
 
-    def learn(self, read: SideSensors, fix: PoseFix | NoFix) -> None:
-        """Learn the attitude error from a solution (with the attitude as read)."""
+    def settle(self, read: SideSensors, fix: PoseFix | NoFix
+               ) -> tuple[PoseFix | NoFix, list[dict[str, Any]]]:
+        """The solution as the frame gives it, and its event: a fix that rejected the
+        autopilot's attitude is counted (an event) and held back -- a :class:`NoFix` --
+        until that has happened on ``attitude_reject_frames`` solved frames in a row (each
+        within :data:`REJECT_WINDOW_US` of the last); the attitude error is then learnt from
+        what is given (with the attitude as read)."""
+        events: list[dict[str, Any]] = []
+        if isinstance(fix, PoseFix):
+            if fix.attitude_prior == "rejected":
+                events, fix = self._rejected(fix), self._held(fix)
+            else:
+                self._streak = 0
         if self.bias is not None:
             self.bias.learn(read.attitude, fix)
+        return fix, events
 
-    def rejected(self, fix: PoseFix) -> list[dict[str, Any]]:
-        """The event of a fix that rejected the autopilot's attitude (counted), else none."""
-        if fix.attitude_prior != "rejected":
-            return []
+    def _rejected(self, fix: PoseFix) -> list[dict[str, Any]]:
         self.attitude_rejections += 1
+        last, self._last_rejected_us = self._last_rejected_us, fix.time_us
+        recent = last is not None and 0 <= fix.time_us - last <= REJECT_WINDOW_US
+        self._streak = self._streak + 1 if recent else 1
         why = next(n for n in fix.notes if n.startswith("attitude prior rejected"))
         return [{"event": "attitude prior rejected", "detail": why,
                  "count": self.attitude_rejections}]
+
+    def _held(self, fix: PoseFix) -> PoseFix | NoFix:
+        if self._streak >= self._confirm:
+            return fix
+        return NoFix(fix.time_us, "held back: the landmarks disagree with the autopilot's "
+                     f"attitude ({self._streak} of {self._confirm} frames in a row)", fix.notes)
+
+
+#: Two rejections of the autopilot's attitude further apart than this are not "in a row".
+REJECT_WINDOW_US = 200_000

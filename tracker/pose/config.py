@@ -55,6 +55,13 @@ class PoseConfig:
     #: ... they disagree when adding the attitude prior raises the fix's chi-square by more
     #: than this (3 DOF, 99.9 %).
     attitude_gate_chi2: float = field(default=16.27, metadata={"gt": 0})
+    #: ... and the companion drops it only when they disagree on this many solved frames in
+    #: a row (each within 0.2 s of the last); the frames before give no fix.  One frame's
+    #: disagreement is mostly the landmarks' (a plate's corners off for a frame, a cut plate
+    #: taken for its mirror pose: 44 deg of pitch, 1.8 m off at a stated 7 cm, in the strict
+    #: square); one that lasts is the autopilot's (docs/decisions.md, "A disagreement with
+    #: the autopilot's attitude must repeat").  1: dropped at once.
+    attitude_reject_frames: int = field(default=3, metadata={"ge": 1})
     #: Learn the autopilot's attitude error from the fixes that fix the attitude and correct
     #: the next frames' attitude by it (tracker/pose/attitude_bias.py); its 1-sigma grows by
     #: a random walk of these deg/sqrt(s) (roll/pitch, yaw: an EKF's error wanders by about
