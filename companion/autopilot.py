@@ -37,13 +37,14 @@ HEARTBEAT_HEALTH: dict[State, HealthState] = {
 
 def vision_fix(fix: PoseFix, reset_counter: int) -> VisionFix:
     """The bridge's input for a pose fix (covariance as the 6x6 matrix, quality 0..100):
-    the covariance the fix gate stated for the autopilot when it stated one
-    (``PoseFix.sent_covariance``, docs/decisions.md "Fixes that echo the autopilot's own
-    error"), else the fix's own."""
+    the position and covariance the fix gate stated for the autopilot when it stated them
+    (``PoseFix.sent_position_ned_m`` / ``sent_covariance``, docs/decisions.md "Fixes that
+    echo the autopilot's own error", "A fix ArduPilot cannot weigh is sent as its pull"),
+    else the fix's own."""
     cov = np.asarray(fix.autopilot_covariance, dtype=np.float64)
     return VisionFix(
         time_us=int(fix.time_us),
-        position_ned_m=tuple(float(v) for v in fix.position_ned_m),  # type: ignore[arg-type]
+        position_ned_m=tuple(float(v) for v in fix.autopilot_position),  # type: ignore[arg-type]
         attitude_rpy_rad=tuple(float(v) for v in fix.attitude_rpy_rad),  # type: ignore[arg-type]
         covariance=tuple(float(v) for v in cov[np.triu_indices(6)]),
         quality_percent=int(max(0, min(100, fix.quality))),

@@ -18,7 +18,12 @@ the last one it let through:
   autopilot's own attitude and height carry (``PoseFix.echo_covariance``) is the
   autopilot's error coming back, the same in every fix while it lasts, so it is stated
   as one fix per ``echo_correlation_s`` would state it -- times that many fixes' intervals
-  -- and the autopilot does not take a stream of such fixes as independent (issue 19).
+  -- and the autopilot does not take a stream of such fixes as independent (issue 19);
+* an autopilot that fuses no fix as worse than ``fused_error_cap_m`` (ArduPilot's EKF3:
+  10 m) would weigh a fix stated worse as if it were that good: such a fix is sent moved
+  towards the autopilot's own estimate at its time (``PoseFix.sent_position_ned_m``) by the
+  ratio of the two variances, so that the update it makes is the stated fix's
+  (docs/decisions.md, "A fix ArduPilot cannot weigh is sent as its pull").
 """
 
 from __future__ import annotations
@@ -44,6 +49,9 @@ class FixGateConfig:
     #: how long the autopilot's attitude and height errors last (s; 0: fixes are stated
     #: as solved, each as if independent)
     echo_correlation_s: float = field(default=0.0, metadata={"ge": 0})
+    #: the largest horizontal 1-sigma (m) the autopilot fuses a fix with, whatever it is
+    #: told (ArduPilot's EKF3: 10); 0: none (PX4 takes the variances as sent)
+    fused_error_cap_m: float = field(default=0.0, metadata={"ge": 0})
 
 
 @dataclass
@@ -92,8 +100,34 @@ class FixGate:
         self.rejected += 1
         return False
 
-    def stated(self, fix: PoseFix) -> PoseFix:
-        """``fix`` with ``sent_covariance``, what the autopilot is given: its covariance plus
+    def stated(self, fix: PoseFix,
+               autopilot_ned: tuple[float, float, float] | None = None) -> PoseFix:
+        """``fix`` as the autopilot is given it: its echo stated once per correlation time
+        (:meth:`_echo`), then, when that leaves it worse than ``fused_error_cap_m`` and the
+        autopilot's own estimate at the fix's time (``autopilot_ned``) is known, moved
+        towards that estimate by ``cap^2 / variance`` (the larger horizontal variance
+        stated): an EKF that fuses it at the cap then moves by what the statement asks
+        (for a prior much tighter than the cap, ``P / (P + cap^2) * g * nu ~ P / var *
+        nu``).  The fix's own position and covariance are never changed."""
+        fix = self._echo(fix)
+        cap = self.config.fused_error_cap_m
+        if cap <= 0.0 or autopilot_ned is None:
+            return fix
+        cov = np.asarray(fix.autopilot_covariance)
+        worst = float(max(cov[0, 0], cov[1, 1]))
+        if not worst > cap * cap:  # (NaN: not moved)
+            return fix
+        gain = cap * cap / worst if math.isfinite(worst) else 0.0
+        ap = np.asarray(autopilot_ned, np.float64)
+        sent = ap + gain * (np.asarray(fix.position_ned_m, np.float64) - ap)
+        note = (f"sent at {gain:.3g} of its offset from the autopilot's estimate (stated "
+                f"{math.sqrt(worst):.0f} m; fused at {cap:g} m at most)")
+        return replace(fix, sent_position_ned_m=(float(sent[0]), float(sent[1]),
+                                                 float(sent[2])),
+                       notes=(*fix.notes, note))
+
+    def _echo(self, fix: PoseFix) -> PoseFix:
+        """``fix`` with ``sent_covariance``: its covariance plus
         ``n - 1`` times the part the autopilot's own attitude and height carry, ``n`` =
         ``echo_correlation_s`` over the time since the previous fix passed on (at least 1: a
         fix after a longer pause is sent as solved).  Over a correlation time the stream

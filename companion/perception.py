@@ -277,7 +277,7 @@ class Perception:
         if why is not None:
             return FrameResult(frame.index, frame.t_us, tracks, None, why, tuple(events),
                                particles=particles)
-        fix = self.gate.stated(fix)
+        fix = self.gate.stated(fix, read.position_ned_m)
         self._cache.put_fix(frame.index, fix)  # for this frame's housekeeping
         return FrameResult(frame.index, frame.t_us, tracks, fix, None, tuple(events),
                            particles=particles)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from companion.autopilot import vision_fix
 from companion.fixgate import FixGate, FixGateConfig
@@ -71,7 +72,10 @@ def test_an_autopilot_does_not_follow_a_biased_stream_stated_so() -> None:
     1.7-3.5 m); stated as correlated, PX4's rule (the variances as sent) stays within its
     dead reckoning's error -- but ArduPilot's does not: it fuses no fix at more than 10 m
     (EKF3 ``constrain(posErr, 0.01, 10)``), so 30 such fixes a second still drag it most of
-    the way (docs/decisions.md, "ArduPilot fuses no fix at more than 10 m")."""
+    the way (docs/decisions.md, "ArduPilot fuses no fix at more than 10 m").  Told that cap
+    (the ArduPilot profile's ``fixgate.fused_error_cap_m``), the gate sends each such fix
+    moved towards the autopilot's estimate, and ArduPilot stays as PX4 does ("A fix
+    ArduPilot cannot weigh is sent as its pull")."""
     from mavlink_bridge.fake_ekf import EstimatorConfig, FakeEstimator
 
     def hover(gate: FixGate, model: str) -> float:
@@ -86,7 +90,8 @@ def test_an_autopilot_does_not_follow_a_biased_stream_stated_so() -> None:
         for _ in range(120):
             t += 1 / 30
             ekf.predict(t, np.zeros(3))
-            sent = vision_fix(gate.stated(echoing(t, 9.0)), 0)  # what the bridge sends
+            # what the bridge sends; the autopilot's estimate as LOCAL_POSITION_NED says
+            sent = vision_fix(gate.stated(echoing(t, 9.0), ekf.position()), 0)
             cov = np.zeros((6, 6))
             cov[np.triu_indices(6)] = sent.covariance
             assert ekf.fuse(t, sent.position_ned_m, (cov[0, 0], cov[1, 1], cov[2, 2])).accepted
@@ -96,3 +101,23 @@ def test_an_autopilot_does_not_follow_a_biased_stream_stated_so() -> None:
     assert hover(FixGate(), "px4") > 2.0 and hover(FixGate(), "ardupilot") > 2.0
     assert hover(FixGate(stated), "px4") < 0.3
     assert hover(FixGate(stated), "ardupilot") > 2.0
+    capped = FixGateConfig(echo_correlation_s=20.0, fused_error_cap_m=10.0)
+    assert hover(FixGate(capped), "ardupilot") < 0.3
+    assert hover(FixGate(capped), "px4") < 0.3  # (the PX4 profile leaves the cap at 0)
+
+
+def test_a_fix_stated_worse_than_the_cap_is_sent_as_its_pull() -> None:
+    """Stated 40 m (1600 m^2) with a 10 m cap: sent at 100 / 1600 of its offset from the
+    autopilot's estimate, its own position and covariance kept; a fix within the cap, or
+    without the autopilot's estimate, is sent as it is."""
+    gate = FixGate(FixGateConfig(fused_error_cap_m=10.0))
+    vague = fix(40.0 * 3**0.5)  # 40 m on each axis
+    sent = gate.stated(vague, (1.0, 2.0, -17.0))
+    assert sent.sent_position_ned_m == pytest.approx((1.0 - 1.0 / 16, 2.0 - 2.0 / 16, -17.0))
+    assert sent.position_ned_m == vague.position_ned_m
+    np.testing.assert_array_equal(sent.covariance, vague.covariance)
+    assert vision_fix(sent, 0).position_ned_m == pytest.approx(sent.sent_position_ned_m)
+    assert "sent at 0.0625 of its offset" in sent.notes[-1]
+    assert gate.stated(fix(9.0 * 3**0.5), (1.0, 2.0, -17.0)).sent_position_ned_m is None
+    assert gate.stated(vague).sent_position_ned_m is None
+    assert FixGate().stated(vague, (1.0, 2.0, -17.0)).sent_position_ned_m is None  # off

@@ -185,6 +185,10 @@ class PoseFix:
     #: part counted once per correlation time); None: ``covariance`` itself.  ``covariance``
     #: stays this fix's own (its NEES, the reports)
     sent_covariance: FloatArray | None = None
+    #: the position the autopilot is sent when it differs from ``position_ned_m``
+    #: (companion.fixgate's ``stated``: a fix stated worse than the autopilot can fuse it,
+    #: moved towards the autopilot's own estimate so that its pull is the stated one)
+    sent_position_ned_m: tuple[float, float, float] | None = None
 
     @property
     def covariance_urt(self) -> tuple[float, ...]:
@@ -192,6 +196,13 @@ class PoseFix:
         and ODOMETRY expect them (first row 6 entries, then 5, ...; x y z roll pitch yaw)."""
         rows, cols = np.triu_indices(6)
         return tuple(float(v) for v in self.covariance[rows, cols])
+
+    @property
+    def autopilot_position(self) -> tuple[float, float, float]:
+        """The position the autopilot is sent: ``sent_position_ned_m`` when set, else
+        ``position_ned_m``."""
+        return self.position_ned_m if self.sent_position_ned_m is None \
+            else self.sent_position_ned_m
 
     @property
     def autopilot_covariance(self) -> FloatArray:
