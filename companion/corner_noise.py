@@ -65,6 +65,16 @@ class CornerNoise:
             return None
         return (flags[0], flags[1], flags[2], flags[3]), 1.0 / float(np.sqrt(share))
 
+    def unsettled(self, track: Track) -> bool:
+        """A plate whose outline crosses the image's edge (a corner within
+        ``EDGE_MARGIN_PX`` of it or beyond) in its track's first ``young_cut_frames``: its
+        outline was aligned from a guess on the part in view and has not settled
+        (``young_cut_sigma_rel``)."""
+        if track.corners is None or track.frames >= self.config.young_cut_frames:
+            return False
+        quad = np.asarray(track.corners, np.float64)
+        return not inside(quad, self.camera.width, self.camera.height, margin=EDGE_MARGIN_PX)
+
     def fits(self, track: Track) -> bool:
         """The alignment's fit sigma is within ``max_fit_sigma_ratio`` of the size model's."""
         if track.fit_sigma is None or track.corners is None:
@@ -117,11 +127,17 @@ class CornerNoise:
               tracks: Mapping[str, Track]) -> None:
         """Average each track's corner residuals against a fix from two or more plates'
         corners: mean square per coordinate times n / (n - 6), n the fix's corner
-        coordinates, 6 the pose parameters fitted to them."""
+        coordinates, 6 the pose parameters fitted to them.  Not from a fix with an
+        :meth:`unsettled` plate: its residuals are that outline's first guesses (stated
+        loosely already), and a floor learnt from them outlived them -- a lone plate's
+        corners stated at pixels for the rest of its track, so that its fixes followed the
+        autopilot's attitude (docs/decisions.md, "The corners' residual floor is learnt
+        from settled plates")."""
         used = [(o.landmark_id, o) for o in observations if o.corners_px is not None
                 and o.landmark_id in fix.landmark_ids and o.landmark_id in tracks]
         fixes = self.config.residual_sigma_fixes
-        if len(used) < 2 or fixes <= 0:
+        if len(used) < 2 or fixes <= 0 \
+                or any(self.unsettled(tracks[lid]) for lid, _ in used if lid is not None):
             return
         n = 8 * len(used)
         by_id = {lm.landmark_id: lm for lm in self.landmarks}

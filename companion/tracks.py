@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.corner_noise import EDGE_MARGIN_PX, CornerNoise
+from companion.corner_noise import CornerNoise
 from companion.corners import Corners
 from companion.perception_types import Occupancy, PerceptionConfig, Start, Track, TrackView
 from tracker.boxes import box_corners, inside
@@ -314,11 +314,10 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
         measured, grow = (None, 1.0) if cut is None else cut
         if sigma is not None:
             sigma *= grow
-            quad = None if corners is None else np.asarray(corners, np.float64)
-            if t.frames < config.young_cut_frames and quad is not None \
-                    and not inside(quad, *size, margin=EDGE_MARGIN_PX):  # outline unsettled
+            if corners is not None and noise.unsettled(t):
+                quad = np.asarray(corners, np.float32)
                 sigma = max(sigma, config.young_cut_sigma_rel
-                            * float(np.sqrt(abs(cv2.contourArea(quad.astype(np.float32))))))
+                            * float(np.sqrt(abs(cv2.contourArea(quad)))))
         out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                box_wh_px=(w, h), confidence=t.confidence,
                                landmark_id=t.landmark_id, corners_px=corners,

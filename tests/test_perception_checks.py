@@ -18,7 +18,8 @@ from companion.sources.base import Frame
 from tests.acquire.test_verify import scene
 from tracker.acquire import homography_to, project_corners
 from tracker.camera import CameraModel
-from tracker.pose.types import MapLandmark
+from tracker.pose.landmarks import landmark_corners_ned
+from tracker.pose.types import MapLandmark, Observation, PoseFix
 
 
 def perception(plate: np.ndarray, config: PerceptionConfig | None = None) -> Perception:
@@ -180,6 +181,40 @@ def test_a_track_whose_corners_miss_in_fixes_states_a_larger_sigma() -> None:
     assert p.noise.floor(obs[0], p.tracks).corner_sigma_px == 0.2  # matched: unchanged
     p.tracks["a"].saturated = 0.5  # half its pixels saturated: 1 + 5.5 x 0.5
     assert p.noise.floor(obs[0], p.tracks).corner_sigma_px == pytest.approx(0.2 * 3.75)
+
+
+def test_no_residual_floor_is_learnt_from_a_fix_with_a_young_cut_plate() -> None:
+    """Issue 19's square: wall-01, acquired at the image's edge beside sign-01, shared 6-7
+    fixes with it in its first frames; the floor learnt from their residuals then stated
+    wall-01's corners at pixels for the 15 s it was alone (range 1-sigma 0.95-2.44 m where
+    0.004 m otherwise), its fixes followed the autopilot's yaw and the flight failed, in
+    each of the six flights that had those shared fixes and none of the others.  A fix
+    with a plate still unsettled at the edge (``CornerNoise.unsettled``) teaches no track
+    a floor; once that plate has been followed ``young_cut_frames``, it does."""
+    lms = [MapLandmark("a", (10.0, -1.5, 0.0), 1.2, 0.8, None, "other"),
+           MapLandmark("b", (10.0, 1.5, 0.0), 1.2, 0.8, None, "other")]
+    cam = CameraModel(320, 240, 300.0, 300.0, 59.5, 119.5)  # a across the left edge
+    plate = np.full((80, 120, 3), 128, np.uint8)
+    plate[20:60, 30:90] = 20
+    p = Perception(cam, lms, {"a": plate, "b": plate})
+    obs = []
+    for lm in lms:
+        seen = cam.project_camera_points(cam.world_to_camera(
+            landmark_corners_ned(lm), np.zeros(3), (0.0, 0.0, 0.0))) + 1.0  # 1 px off
+        p.trackset.live[lm.landmark_id] = Track(lm.landmark_id, None,  # type: ignore[arg-type]
+                                         (0.0, 0.0, 10.0, 10.0), None, corners=seen)
+        obs.append(Observation(centre_px=(0.0, 0.0), box_wh_px=(10.0, 10.0),
+                               landmark_id=lm.landmark_id, corner_sigma_px=0.2,
+                               corners_px=tuple((float(u), float(v)) for u, v in seen)))
+    assert p.noise.unsettled(p.tracks["a"]) and not p.noise.unsettled(p.tracks["b"])
+    fix = PoseFix(0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), np.eye(6), 90, ("a", "b"), "bearing_ls")
+    for _ in range(10):
+        p.noise.learn(obs, fix, p.tracks)
+    assert p.tracks["a"].residual_var is None and p.tracks["b"].residual_var is None
+    p.tracks["a"].frames = p.config.young_cut_frames  # followed a while: settled
+    assert not p.noise.unsettled(p.tracks["a"])
+    p.noise.learn(obs, fix, p.tracks)
+    assert p.tracks["a"].residual_var is not None and p.tracks["b"].residual_var is not None
 
 
 def test_a_track_whose_corners_the_pose_keeps_leaving_out_is_dropped() -> None:
