@@ -86,8 +86,10 @@ class Reporter:
 
 
 def pose_json(fix: PoseFix) -> dict[str, Any]:
-    """The monitoring payload of a fix (docs/monitoring.md, topic ``pose``)."""
-    return {
+    """The monitoring payload of a fix (docs/monitoring.md, topic ``pose``); with
+    ``sent_position_ned_m`` when the autopilot was sent another position (companion.fixgate:
+    a fix stated worse than the autopilot can fuse, sent as its pull)."""
+    out: dict[str, Any] = {
         "position_ned_m": [round(v, 4) for v in fix.position_ned_m],
         "attitude_rpy_rad": [round(v, 5) for v in fix.attitude_rpy_rad],
         "covariance_diag": [float(f"{v:.6g}") for v in np.diag(fix.covariance)],
@@ -96,6 +98,9 @@ def pose_json(fix: PoseFix) -> dict[str, Any]:
         "solver": fix.solver,
         "attitude_prior": fix.attitude_prior,
     }
+    if fix.sent_position_ned_m is not None:
+        out["sent_position_ned_m"] = [round(v, 4) for v in fix.sent_position_ned_m]
+    return out
 
 
 def track_json(track: TrackView) -> dict[str, Any]:

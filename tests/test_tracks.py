@@ -3,6 +3,7 @@ carries, and the monitoring JSON built from them (docs/monitoring.md)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -88,3 +89,5 @@ def test_the_monitoring_json_of_a_track_and_a_fix() -> None:
         '{"position_ned_m": [1.2346, -2.0, -30.0], "attitude_rpy_rad": [0.1, 0.2, 3.12346], '
         '"covariance_diag": [0.01, 0.02, 0.03, 0.0001, 0.0002, 0.000333333], "quality": 80, '
         '"landmark_ids": ["a", "b"], "solver": "bearing_ls", "attitude_prior": "used"}')
+    sent = dataclasses.replace(fix, sent_position_ned_m=(1.0, -2.0, -30.0))
+    assert pose_json(sent)["sent_position_ned_m"] == [1.0, -2.0, -30.0]  # what went out
