@@ -56,6 +56,8 @@ Image = npt.NDArray[np.uint8]
 #: Trackers started n-th re-rank their features n x this many frames apart (a re-rank costs
 #: a few ms: several on one frame showed in the latency's tail).
 RANK_PHASE_STEP = 3
+#: A predicted outline this far inside the image is a whole plate (aligned by ECC).
+WHOLE_MARGIN_PX = 4.0
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,15 @@ class Sighting:
     seen: Occupancy
     fix: PoseFix | None = None
     guess: PoseGuess | None = None
+
+    @property
+    def cut_wanted(self) -> bool:
+        """Plates cut by the image's edge are looked for: without a fix, or with a fix
+        from one landmark alone.  Their corners are the weakest, worth it only where little
+        else is in view; a hover where one cut plate's corner gave the fixes (the strict
+        square's (6, 6): sd 1.3-3 m) took the autopilot 0.5-0.6 m off (docs/decisions.md,
+        "A cut plate is looked for beside a one-landmark fix")."""
+        return self.fix is None or len(self.fix.landmark_ids) < 2
 
 
 class Acquirer(Protocol):
@@ -135,8 +146,7 @@ class FeatureAcquirer:
                   if ref.matchable and not sight.seen.taken(lid, earlier)]
         starts: list[Start] = list(earlier)
         height, width = sight.image.shape[:2]
-        # cut plates only without a fix, as PredictionAcquirer (docs/decisions.md)
-        for match in self.matcher.find(sight.image, wanted, cut=sight.fix is None):
+        for match in self.matcher.find(sight.image, wanted, cut=sight.cut_wanted):
             box = clip_box(match.box, width, height)
             if box is None or sight.seen.busy(starts) >= self.starter.config.max_tracks:
                 continue
@@ -148,7 +158,8 @@ class FeatureAcquirer:
 class PredictionAcquirer:
     """Map landmarks the fix says are in view, confirmed by alignment: finds plain plates
     with too few keypoints for feature matching, and plates cut by the image's edge (their
-    part in view aligned: :func:`tracker.edge_align.align_cut`; only without a fix).  Needs
+    part in view aligned: :func:`tracker.edge_align.align_cut`; without a fix or beside a
+    one-landmark fix: :attr:`Sighting.cut_wanted`).  Needs
     the sighting's fix, or without one the autopilot's pose estimate (``by`` "estimate":
     its error bound ``max_guess_error_px``; what it finds is verified like any sighting)."""
 
@@ -165,8 +176,8 @@ class PredictionAcquirer:
         if pose is None:
             return []
         cfg, refs = self.starter.config, self.starter.references
-        by, bound = (("prediction", cfg.max_prediction_error_px) if sight.fix is not None
-                     else ("estimate", cfg.max_guess_error_px))
+        by = "prediction" if sight.fix is not None else "estimate"
+        height, width = sight.image.shape[:2]
         starts: list[Start] = list(earlier)
         for lm in self.landmarks:
             lid = lm.landmark_id
@@ -177,9 +188,15 @@ class PredictionAcquirer:
             corners = self.project(lm, pose)
             ref = refs[lid]
             aligned = None if corners is None else self.align(
-                ref, sight.image, corners, cut=sight.fix is None)
+                ref, sight.image, corners, cut=sight.cut_wanted)
             if corners is None or aligned is None:
                 continue
+            # a whole plate predicted by a fix: within max_prediction_error_px; from the
+            # autopilot's estimate, or cut beside a one-landmark fix (whose error along
+            # its weak axis is the estimate's size): within max_guess_error_px
+            whole = inside(corners, width, height, margin=WHOLE_MARGIN_PX)
+            bound = cfg.max_prediction_error_px if sight.fix is not None and whole \
+                else cfg.max_guess_error_px
             quad = project_corners(ref, aligned)
             if np.abs(quad - corners).max() > bound:
                 continue
@@ -198,7 +215,7 @@ class PredictionAcquirer:
         cfg = self.starter.config
         height, width = image.shape[:2]
         predicted = homography_to(ref, corners)
-        if inside(corners, width, height, margin=4.0):
+        if inside(corners, width, height, margin=WHOLE_MARGIN_PX):
             return ecc(cfg, ref, image, predicted)
         if not cut or in_view_share(corners, width, height) < cfg.predict_cut_in_view:
             return None

@@ -5,6 +5,7 @@ extrapolated corners go hundreds of pixels astray)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -67,7 +68,8 @@ def test_a_cut_plate_is_matched_on_its_part_in_view_only_when_asked() -> None:
     assert np.abs(found[0].corners_px[inside] - truth[inside]).max() < 1.0
 
 
-def test_feature_acquisition_starts_the_cut_plate_without_a_fix_only() -> None:
+def test_feature_acquisition_starts_the_cut_plate_without_a_fix_or_beside_a_weak_one(
+        ) -> None:
     image, truth, _ = frame()
     p = perception()
     features = p.acquisition.features
@@ -78,8 +80,11 @@ def test_feature_acquisition_starts_the_cut_plate_without_a_fix_only() -> None:
     corners = np.asarray(starts[0].track.corners)
     inside = measured(truth)
     assert np.abs(corners[inside] - truth[inside]).max() < 1.0
-    fix = PoseFix(0, (0.0, 0.0, -4.0), (0.0, 0.0, 0.0), np.eye(6), 1, ("wall-02",), "test")
-    assert features.find(Sighting(image, Occupancy(), fix)) == []
+    one = PoseFix(0, (0.0, 0.0, -4.0), (0.0, 0.0, 0.0), np.eye(6), 1, ("wall-02",), "test")
+    assert [s.event["landmark"] for s in features.find(Sighting(image, Occupancy(), one))] \
+        == [LANDMARK]  # a fix from one landmark: cut plates are still looked for
+    two = dataclasses.replace(one, landmark_ids=("wall-02", "sign-01"))
+    assert features.find(Sighting(image, Occupancy(), two)) == []
 
 
 def test_a_frame_without_the_plate_starts_nothing_from_its_part() -> None:
