@@ -46,7 +46,7 @@ from tracker.boxes import box_corners, clip_box, in_view_share, inside, outline_
 from tracker.camera import CameraModel
 from tracker.edge_align import align_cut, search_shift, shifted
 from tracker.pose.landmarks import landmark_corners_ned
-from tracker.pose.types import MapLandmark, PoseFix
+from tracker.pose.types import ONE_BEARING_SOLVERS, MapLandmark, PoseFix
 from tracker.types import Box
 from tracker.verify import detail_ncc
 
@@ -73,12 +73,13 @@ class Sighting:
 
     @property
     def cut_wanted(self) -> bool:
-        """Plates cut by the image's edge are looked for: without a fix, or with a fix
-        from one landmark alone.  Their corners are the weakest, worth it only where little
-        else is in view; a hover where one cut plate's corner gave the fixes (the strict
-        square's (6, 6): sd 1.3-3 m) took the autopilot 0.5-0.6 m off (docs/decisions.md,
-        "A cut plate is looked for beside a one-landmark fix")."""
-        return self.fix is None or len(self.fix.landmark_ids) < 2
+        """Plates cut by the image's edge are looked for: without a fix, or beside a fix
+        from one landmark's bearing (:data:`~tracker.pose.types.ONE_BEARING_SOLVERS`).
+        Their corners are the weakest, worth it only where little else is in view; a hover
+        where one cut plate's corner gave the fixes (the strict square's (6, 6): sd 1.3-3 m)
+        took the autopilot 0.5-0.6 m off (docs/decisions.md, "A cut plate is looked for
+        beside a one-bearing fix")."""
+        return self.fix is None or self.fix.solver in ONE_BEARING_SOLVERS
 
 
 class Acquirer(Protocol):
@@ -159,7 +160,7 @@ class PredictionAcquirer:
     """Map landmarks the fix says are in view, confirmed by alignment: finds plain plates
     with too few keypoints for feature matching, and plates cut by the image's edge (their
     part in view aligned: :func:`tracker.edge_align.align_cut`; without a fix or beside a
-    one-landmark fix: :attr:`Sighting.cut_wanted`).  Needs
+    one-bearing fix: :attr:`Sighting.cut_wanted`).  Needs
     the sighting's fix, or without one the autopilot's pose estimate (``by`` "estimate":
     its error bound ``max_guess_error_px``; what it finds is verified like any sighting)."""
 
@@ -192,7 +193,7 @@ class PredictionAcquirer:
             if corners is None or aligned is None:
                 continue
             # a whole plate predicted by a fix: within max_prediction_error_px; from the
-            # autopilot's estimate, or cut beside a one-landmark fix (whose error along
+            # autopilot's estimate, or cut beside a one-bearing fix (whose error along
             # its weak axis is the estimate's size): within max_guess_error_px
             whole = inside(corners, width, height, margin=WHOLE_MARGIN_PX)
             bound = cfg.max_prediction_error_px if sight.fix is not None and whole \

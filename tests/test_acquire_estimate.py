@@ -42,11 +42,11 @@ def entering() -> tuple[int, str, float]:
 
 
 def find(config: PerceptionConfig, guess_error_m: float = 0.0, with_guess: bool = True,
-         fix_from: tuple[str, ...] = (),
+         fix_from: tuple[str, ...] = (), solver: str = "altitude_bearing",
          ) -> tuple[list[dict[str, object]], dict[str, np.ndarray], str]:
     """Prediction's starts on the entering frame with no fix, the guess the true pose moved
-    ``guess_error_m`` north (``fix_from``: instead, a fix there from these landmarks); the
-    started tracks' corners and the predicted ones."""
+    ``guess_error_m`` north (``fix_from``: instead, a fix there from these landmarks by
+    ``solver``); the started tracks' corners and the predicted ones."""
     sim = survey()
     index, lid, _ = entering()
     image, _ = sim.render(index)
@@ -59,7 +59,7 @@ def find(config: PerceptionConfig, guess_error_m: float = 0.0, with_guess: bool 
     if fix_from:
         sight = Sighting(image, Occupancy(), PoseFix(0, guess.position_ned_m,
                                                      guess.attitude_rpy_rad, np.eye(6), 1,
-                                                     fix_from, "test"))
+                                                     fix_from, solver))
     prediction = p.acquisition.prediction
     assert isinstance(prediction, PredictionAcquirer)
     starts = prediction.find(sight)
@@ -95,17 +95,19 @@ def test_no_fix_and_no_estimate_predicts_nothing_and_whole_plates_only_skip_it()
     assert not any(e["landmark"] == lid for e in events), events
 
 
-def test_a_cut_plate_is_predicted_beside_a_one_landmark_fix_not_beside_two() -> None:
-    """A fix from one landmark (the strict square's (6, 6) hover: one cut plate's corner,
-    sd 1.3-3 m) leaves the cut plate looked for, within the estimate's bound: its fixes
-    are off by the estimate's size (0.3 m here: 14 px on this plate, past the 12 px a
-    two-landmark fix's prediction is held to); beside a fix from two it is not."""
+def test_a_cut_plate_is_predicted_beside_a_one_bearing_fix_only() -> None:
+    """A fix from one landmark's bearing (the strict square's (6, 6) hover: one cut plate's
+    corner and the height, sd 1.3-3 m) leaves the cut plate looked for, within the
+    estimate's bound: its fixes are off by the estimate's size (0.3 m here: 14 px on this
+    plate, past the 12 px a strong fix's prediction is held to); beside a plate's four
+    corners (IPPE) or two landmarks it is not."""
     one, corners, lid = find(PerceptionConfig(), guess_error_m=0.3, fix_from=("wall-02",))
     started = [e for e in one if e["landmark"] == lid]
     assert started and started[0]["by"] == "prediction", one
     assert np.abs(corners[lid] - corners["truth"]).max() < 3.0
-    two, _, _ = find(PerceptionConfig(), guess_error_m=0.3, fix_from=("wall-02", "sign-01"))
-    assert not any(e["landmark"] == lid for e in two), two
+    for ids, solver in ((("wall-02",), "ippe"), (("wall-02", "sign-01"), "bearing_ls")):
+        strong, _, _ = find(PerceptionConfig(), guess_error_m=0.3, fix_from=ids, solver=solver)
+        assert not any(e["landmark"] == lid for e in strong), (solver, strong)
 
 
 def test_the_autopilots_position_and_attitude_make_the_guess() -> None:

@@ -80,10 +80,13 @@ def test_feature_acquisition_starts_the_cut_plate_without_a_fix_or_beside_a_weak
     corners = np.asarray(starts[0].track.corners)
     inside = measured(truth)
     assert np.abs(corners[inside] - truth[inside]).max() < 1.0
-    one = PoseFix(0, (0.0, 0.0, -4.0), (0.0, 0.0, 0.0), np.eye(6), 1, ("wall-02",), "test")
+    one = PoseFix(0, (0.0, 0.0, -4.0), (0.0, 0.0, 0.0), np.eye(6), 1, ("wall-02",),
+                  "altitude_bearing")
     assert [s.event["landmark"] for s in features.find(Sighting(image, Occupancy(), one))] \
-        == [LANDMARK]  # a fix from one landmark: cut plates are still looked for
-    two = dataclasses.replace(one, landmark_ids=("wall-02", "sign-01"))
+        == [LANDMARK]  # a fix from one landmark's bearing: cut plates are still looked for
+    ippe = dataclasses.replace(one, solver="ippe")
+    two = dataclasses.replace(one, landmark_ids=("wall-02", "sign-01"), solver="bearing_ls")
+    assert features.find(Sighting(image, Occupancy(), ippe)) == []
     assert features.find(Sighting(image, Occupancy(), two)) == []
 
 

@@ -23,6 +23,9 @@ SOLVERS = (
     "altitude_bearing",
     "size_bearing",
 )
+#: The solvers of a fix from one landmark's bearing (its centre or one corner) and a
+#: distance (range finder, height, box size): weak across the bearing.
+ONE_BEARING_SOLVERS = ("range_bearing", "altitude_bearing", "size_bearing")
 
 
 @dataclass(frozen=True)
