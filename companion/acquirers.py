@@ -209,10 +209,11 @@ class PredictionAcquirer:
         """The homography that aligns ``ref`` where the pose predicts its ``corners``: the
         whole plate (ECC, held to ``verify_correlation``), or with ``cut`` a plate cut by
         the image's edge with ``predict_cut_in_view`` of it in view by its part in view;
-        None when neither holds.  Cut plates only without a fix: their corners are the
-        weakest and add little to a fix that comes anyway (real-imagery world seed 2,
-        replayed: RMSE 1.00 -> 1.11 % of distance with them), but with nothing else in view
-        they bring the fixes back (docs/decisions.md)."""
+        None when neither holds.  Cut plates only without a fix or beside a one-bearing
+        one (:attr:`Sighting.cut_wanted`): their corners are the weakest and add little to
+        a fix that comes anyway (real-imagery world seed 2, replayed: RMSE 1.00 -> 1.11 % of
+        distance with them), but with nothing else in view they bring the fixes back
+        (docs/decisions.md)."""
         cfg = self.starter.config
         height, width = image.shape[:2]
         predicted = homography_to(ref, corners)
