@@ -37,7 +37,7 @@ from companion.sensors import SensorHistory
 from companion.settings import Settings
 from mavlink_bridge.bridge import VisionBridge, create_bridge
 from mavlink_bridge.errors import BackendError
-from mavlink_bridge.streams import needed_streams
+from mavlink_bridge.streams import StreamSpec, needed_streams
 from tracker.camera import CameraModel
 from tracker.detector import Detector, DetectorConfig, DetectorError
 from tracker.pose.types import MapLandmark
@@ -182,9 +182,9 @@ class CompanionFlight:
         return app
 
 
-def stream_rates(settings: Settings) -> tuple[tuple[str, float], ...]:
-    """The messages this configuration needs from the autopilot, as (name, Hz)
-    (:func:`mavlink_bridge.streams.needed_streams` decides; docs/mavlink.md)."""
+def stream_specs(settings: Settings, profile: str | None = None) -> tuple[StreamSpec, ...]:
+    """The messages this configuration needs from the autopilot (``profile``: instead of
+    ``vehicle.profile``; :func:`mavlink_bridge.streams.needed_streams` decides)."""
     from companion.sources.factory import resolve
 
     try:
@@ -193,9 +193,13 @@ def stream_rates(settings: Settings) -> tuple[tuple[str, float], ...]:
         source = settings.source
     follow = source.kind == "follow"
     fps = (source.follow.fps or source.fps) if follow else source.fps
-    specs = needed_streams(fps, profile=settings.vehicle.profile,
-                           rangefinder=settings.pose.rangefinder, follow=follow)
-    return tuple((s.name, s.rate_hz) for s in specs)
+    return needed_streams(fps, profile=profile or settings.vehicle.profile,
+                          rangefinder=settings.pose.rangefinder, follow=follow)
+
+
+def stream_rates(settings: Settings) -> tuple[tuple[str, float], ...]:
+    """:func:`stream_specs` as (name, Hz) for ``MavlinkConfig.streams`` (docs/mavlink.md)."""
+    return tuple((s.name, s.rate_hz) for s in stream_specs(settings))
 def preview_for(mon: MonitorConfig) -> Callable[[Frame, FrameResult], bytes]:
     """Draws a frame's preview (boxes, particles, the fix or why there is none)."""
     def preview(frame: Frame, result: FrameResult) -> bytes:

@@ -18,8 +18,10 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from companion.cli.stream_check import check_streams
 from companion.errors import ConfigError, InputError, LinkError
 from companion.flightlog import read_flight_log
+from companion.runtime import stream_specs
 from companion.settings import Settings
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.errors import EndpointError, LinkOpenError
@@ -32,9 +34,12 @@ from mavlink_bridge.params import (
     parameter_specs,
     same_value,
 )
+from mavlink_bridge.streams import StreamSpec
 
 #: Added to the measured p50: the delay must cover most fixes, not half of them.
 DELAY_MARGIN_MS = 10.0
+#: How long setup watches the streams it asked for: past the 2 Hz stream's missing time.
+STREAMS_S = 3.5
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -60,6 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        f"its least; PX4: p50 + {DELAY_MARGIN_MS:g} ms)")
     setup.add_argument("--timeout", type=float, default=10.0, metavar="S",
                        help="wait this long for the autopilot's heartbeat (default: 10)")
+    setup.add_argument("--streams-s", type=float, default=STREAMS_S, metavar="S",
+                       help="ask for the streams the companion uses and watch them this "
+                       f"long (default: {STREAMS_S:g}; 0: skip)")
     setup.set_defaults(handler=run)
 
 
@@ -90,12 +98,15 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     delay, source = delay_from(args, profile)
     cfg = dataclasses.replace(settings.mavlink, endpoint=args.endpoint or
                               settings.mavlink.endpoint, profile=profile, streams=())
+    streams = stream_specs(settings, profile) if args.streams_s > 0 else ()
     print(f"{profile} parameters on {cfg.endpoint} (delay {delay:.0f} ms: {source})")
-    return asyncio.run(_setup(cfg, parameter_specs(profile, delay), args.yes, args.timeout))
+    return asyncio.run(_setup(cfg, parameter_specs(profile, delay), args.yes, args.timeout,
+                              streams, args.streams_s))
 
 
 async def _setup(cfg: MavlinkConfig, specs: tuple[ParamSpec, ...], yes: bool,
-                 timeout_s: float) -> int:
+                 timeout_s: float, streams: tuple[StreamSpec, ...] = (),
+                 streams_s: float = 0.0) -> int:
     try:
         link = MavlinkLink(cfg)
         await link.start()
@@ -106,20 +117,31 @@ async def _setup(cfg: MavlinkConfig, specs: tuple[ParamSpec, ...], yes: bool,
         if not await link.wait_link(True, timeout_s):
             raise LinkError(f"autopilot setup: no autopilot heartbeat on {cfg.endpoint} "
                             f"in {timeout_s:g} s")
-        client = ParamClient(link, bytewise=cfg.profile == "px4")
-        current = await client.read([p.name for p in specs])
-        change = _show(specs, current)
-        if not change:
-            print("every parameter is as wanted: nothing to set")
-            return 0
-        if not yes and not _confirm(len(change)):
-            print("nothing set")
+        status = await _parameters(link, cfg.profile, specs, yes)
+        missing = await check_streams(link, streams, streams_s)
+        if missing:
+            print(f"autopilot setup: not arriving as asked: {', '.join(missing)} (the "
+                  "companion will warn in flight; docs/mavlink.md, streams)", file=sys.stderr)
             return 1
-        wanted = {p.name: float(p.wanted) for p in change}
-        back = await client.set(wanted, {p.name: p.integer for p in change})
-        return _report(cfg.profile, change, back)
+        return status
     finally:
         await link.stop()
+
+
+async def _parameters(link: MavlinkLink, profile: str, specs: tuple[ParamSpec, ...],
+                      yes: bool) -> int:
+    client = ParamClient(link, bytewise=profile == "px4")
+    current = await client.read([p.name for p in specs])
+    change = _show(specs, current)
+    if not change:
+        print("every parameter is as wanted: nothing to set")
+        return 0
+    if not yes and not _confirm(len(change)):
+        print("nothing set")
+        return 1
+    wanted = {p.name: float(p.wanted) for p in change}
+    back = await client.set(wanted, {p.name: p.integer for p in change})
+    return _report(profile, change, back)
 
 
 def _show(specs: tuple[ParamSpec, ...], current: dict[str, float | None]) -> list[ParamSpec]:

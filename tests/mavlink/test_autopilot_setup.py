@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -35,7 +36,8 @@ def test_setup_sets_reads_back_and_says_reboot(profile: str,
         values = dict(fake.params.values)
         # the estimator reads the noise floor and the delay at every fix, as the real ones do
         live = (fake.ekf.noise_floor_m, fake.ekf.delay_ms)
-        again = main(setup_args(fake.local_port, profile, "--delay-ms", "45"))
+        again = main(setup_args(fake.local_port, profile, "--delay-ms", "45",
+                                "--streams-s", "0"))
         out2 = capsys.readouterr().out
         fake.reboot(0.0)  # stored parameters outlive a reboot
         rebooted = (fake.ekf.noise_floor_m, fake.ekf.delay_ms)
@@ -50,13 +52,37 @@ def test_setup_sets_reads_back_and_says_reboot(profile: str,
     else:  # PX4's EKF2_HGT_REF: @reboot_required true
         assert "reboot the autopilot: EKF2_HGT_REF" in out, out
     assert again == 0 and "nothing to set" in out2, out2
+    # the streams the companion will ask for: asked the same way, seen arriving
+    assert "no stream-rate parameter is needed" in out, out
+    assert re.search(r"ATTITUDE +asked \d+ Hz: arriving at [1-9]", out), out
+    assert "MISSING" not in out, out
+    # no EKF origin yet (none set here): no local position, said so, not an error
+    assert re.search(r"LOCAL_POSITION_NED +asked 10 Hz: none yet", out), out
+    assert "streams" not in out2
+
+
+def test_setup_says_which_needed_stream_does_not_arrive(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A range finder configured, none on the autopilot: DISTANCE_SENSOR is asked for and never
+    comes; the parameters are fine, the exit status is not."""
+    with fake_in_thread(FakeAutopilotConfig(absent=("DISTANCE_SENSOR",))) as fake:
+        first = main(setup_args(fake.local_port, "ardupilot", "--yes", "--streams-s", "0"))
+        status = main(["--set", "pose.rangefinder=true",
+                       *setup_args(fake.local_port, "ardupilot", "--streams-s", "3")])
+    captured = capsys.readouterr()
+    assert first == 0, captured.out
+    assert status == 1
+    assert re.search(r"DISTANCE_SENSOR +asked 20 Hz: MISSING", captured.out), captured.out
+    assert re.search(r"ATTITUDE +asked \d+ Hz: arriving", captured.out), captured.out
+    last = captured.err.strip().splitlines()[-1]
+    assert last.startswith("autopilot setup: not arriving as asked: DISTANCE_SENSOR"), last
 
 
 def test_setup_without_yes_and_no_answer_sets_nothing(
         capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr("builtins.input", lambda _prompt: "n")
     with fake_in_thread(FakeAutopilotConfig()) as fake:
-        status = main(setup_args(fake.local_port, "ardupilot"))
+        status = main(setup_args(fake.local_port, "ardupilot", "--streams-s", "0"))
         values, sets = dict(fake.params.values), list(fake.params.sets)
     out = capsys.readouterr().out
     assert status == 1 and "nothing set" in out
