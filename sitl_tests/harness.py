@@ -224,13 +224,15 @@ Script = Callable[["Flight"], Awaitable[None]]
 
 def sitl_settings(tmp: Path, *, profile: str = "ardupilot", monitor: bool = False,
                   deployment_prior: bool = False, stated_for_s: float = 60.0,
+                  shipped: tuple[str, ...] = SIM_LAYERS,
                   **sections: dict[str, Any]) -> Settings:
-    """The default configuration, flight logs in ``tmp``, monitoring off unless asked, and
-    ``section={key: value}`` overrides.  The attitude prior states the default fake
-    autopilot's real attitude error over a flight of ``stated_for_s`` (as ``companion demo``
-    does: 1 deg roll/pitch, 3.2 deg yaw with a minute's drift) unless ``deployment_prior``:
-    then the configured default (2.5 deg / 5 deg, docs/decisions.md)."""
-    s = load_settings(sets=[f"vehicle.profile={profile}"], shipped=SIM_LAYERS)
+    """The default configuration with the simulator's layer (``shipped=()``: the deployment
+    defaults alone, what a user flies before measuring the camera), flight logs in ``tmp``,
+    monitoring off unless asked, and ``section={key: value}`` overrides.  The attitude prior
+    states the default fake autopilot's real attitude error over a flight of ``stated_for_s``
+    (as ``companion demo`` does: 1 deg roll/pitch, 3.2 deg yaw with a minute's drift) unless
+    ``deployment_prior``: then the configured default (2.5 deg / 5 deg, docs/decisions.md)."""
+    s = load_settings(sets=[f"vehicle.profile={profile}"], shipped=shipped)
     if not deployment_prior:
         s = with_fake_attitude_sigmas(s, AttitudeErrorConfig(), stated_for_s)
     s = dataclasses.replace(s, flightlog=dataclasses.replace(s.flightlog, dir=str(tmp)),
