@@ -266,6 +266,7 @@ class Perception:
         fix, settled = self.side.settle(read, fix)
         events += settled
         if isinstance(fix, NoFix):
+            events += self.trackset.drop_rejected(observed, fix)
             return FrameResult(frame.index, frame.t_us, tracks, None, fix.reason, tuple(events),
                                particles=particles)
         self.noise.learn(observed, fix, self.tracks)

@@ -39,7 +39,7 @@ from companion.corners import Corners
 from companion.perception_types import Occupancy, PerceptionConfig, Start, Track, TrackView
 from tracker.boxes import box_corners, inside
 from tracker.geometry import FloatArray
-from tracker.pose.types import Observation, PoseFix
+from tracker.pose.types import NoFix, Observation, PoseFix
 from tracker.types import TrackResult
 
 Events = list[dict[str, Any]]
@@ -236,16 +236,25 @@ class TrackSet:
                                "why": f"appearance no longer there (correlation {ncc:.2f})"})
         return events
 
-    def drop_rejected(self, observations: Sequence[Observation], fix: PoseFix) -> Events:
-        """Count, per track, the fixes in a row that left its corners out; drop a track at
-        ``max_pose_rejections`` (housekeeping then acquires it afresh)."""
+    def drop_rejected(self, observations: Sequence[Observation], fix: PoseFix | NoFix
+                      ) -> Events:
+        """Count, per track, the solved frames in a row that left its corners out -- of the
+        fix, or named as the one of three landmarks that did not fit (no fix then: too few
+        to drop it, ``NoFix.outlier``) -- and drop a track at ``max_pose_rejections``
+        (housekeeping then acquires it afresh). A frame without a fix that names no
+        landmark changes no count."""
         limit = self.config.max_pose_rejections
         events: Events = []
+        blamed = fix.outlier if isinstance(fix, NoFix) else None
+        if isinstance(fix, NoFix) and blamed is None:
+            return events
         for o in observations:
             track = None if o.landmark_id is None else self._tracks.get(o.landmark_id)
             if track is None or o.corners_px is None:
                 continue
-            used = o.landmark_id in fix.landmark_ids
+            if blamed is not None and o.landmark_id != blamed:
+                continue  # a frame without a fix: only the named one is counted
+            used = isinstance(fix, PoseFix) and o.landmark_id in fix.landmark_ids
             track.pose_rejections = 0 if used else track.pose_rejections + 1
             if limit and track.pose_rejections >= limit:
                 self._drop(track.landmark_id)

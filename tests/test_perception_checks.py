@@ -238,6 +238,29 @@ def test_a_track_whose_corners_the_pose_keeps_leaving_out_is_dropped() -> None:
     assert "p" not in p.tracks and event["event"] == "lost" and "3 fixes" in event["why"]
 
 
+def test_a_track_named_as_the_odd_one_of_three_is_counted_without_a_fix() -> None:
+    """Of three landmarks one did not fit: no fix (too few to drop it), the solver names it
+    (``NoFix.outlier``). Before, nothing counted it and a misaligned plate blocked every fix
+    for as long as it was tracked (the coupled hover's first 7 s in CI, 2026-12-03); now it
+    is dropped at ``max_pose_rejections`` like a plate the fixes leave out. A frame without
+    a fix that names another landmark, or none, leaves its count alone."""
+    from tracker.pose.types import NoFix, Observation
+
+    _frame, plate, corners = scene()
+    p = perception(plate, PerceptionConfig(max_pose_rejections=3))
+    p.trackset.live["p"] = track_at(p, corners, (115.0, 75.0, 90.0, 90.0))
+    obs = [Observation(centre_px=(0.0, 0.0), box_wh_px=(1.0, 1.0), landmark_id="p",
+                       corners_px=tuple((float(u), float(v)) for u, v in corners))]
+    named = NoFix(0, "landmarks 'p', 'q', 'r' disagree", outlier="p")
+    drop = p.trackset.drop_rejected
+    assert drop(obs, named) == [] and drop(obs, named) == []
+    assert drop(obs, NoFix(0, "no fix")) == [] and p.tracks["p"].pose_rejections == 2
+    assert drop(obs, NoFix(0, "disagree", outlier="q")) == []
+    assert p.tracks["p"].pose_rejections == 2
+    (event,) = drop(obs, named)
+    assert "p" not in p.tracks and event["event"] == "lost"
+
+
 def test_a_plate_cut_by_the_edge_gives_only_its_corners_inside_the_image() -> None:
     """Issue 19: a plate a fifth in view was left out of the fix (the square's 6-7 s gap);
     now its corners inside the image are measured, the extrapolated ones flagged, their

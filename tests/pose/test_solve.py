@@ -403,3 +403,23 @@ def test_a_single_landmark_left_after_a_double_claim_gives_no_fix(camera: Camera
     assert any("'A' claimed by observations [0, 1]" in n for n in result.notes)
     alone = solve_pose([obs[1]], lms, camera, T_US)  # B alone, no conflict: a fix
     assert isinstance(alone, PoseFix)
+
+
+@pytest.mark.parametrize("att", [None, ATT])
+def test_of_three_landmarks_the_one_that_does_not_fit_is_named(
+    camera: CameraModel, att: AttitudeSample | None
+) -> None:
+    """Three landmarks, one plate's top edge 8 px off (an outline aligned wrong): no fix (too
+    few to outvote it), but the one that does not fit is named, so that the tracks can count
+    it (the coupled hover's 7 s without a fix in CI, 2026-12-03). Of two, none is named:
+    either may be the wrong one."""
+    lms = wall()[:3]
+    obs = [replace(o, corner_sigma_px=0.5) for o in see(lms, camera)]
+    corners = np.array(obs[1].corners_px)
+    corners[:2, 0] += 8.0
+    obs[1] = replace(obs[1], corners_px=tuple((float(u), float(v)) for u, v in corners))
+    result = solve_pose(obs, lms, camera, T_US, attitude=att)
+    assert isinstance(result, NoFix) and "disagree" in result.reason, result
+    assert result.outlier == "B"
+    pair = solve_pose(obs[:2], lms[:2], camera, T_US, attitude=att)
+    assert not isinstance(pair, NoFix) or pair.outlier is None

@@ -246,7 +246,9 @@ def _solve_robust(
         if len(active) < _MIN_TO_DROP:  # too few left to outvote a wrong one
             ids = ", ".join(repr(g.landmark.landmark_id) for g in active)
             why = why if len(active) == 1 else f"landmarks {ids} disagree ({why})"
-            return NoFix(time_us, why, tuple(notes))
+            # of three, the two that fit name the third; of two, either may be the wrong one
+            named = active[bad].landmark.landmark_id if len(active) >= 3 else None
+            return NoFix(time_us, why, tuple(notes), outlier=named)
         notes.append(f"dropped {why}")
         del active[bad]
         dropped += 1

@@ -227,3 +227,6 @@ class NoFix:
     time_us: int
     reason: str
     notes: tuple[str, ...] = field(default=())
+    #: The landmark named as not fitting when too few were in play to drop it (three), else
+    #: None: the tracks count it (``companion.tracks.TrackSet.drop_rejected``).
+    outlier: str | None = None
