@@ -200,6 +200,8 @@ def stream_specs(settings: Settings, profile: str | None = None) -> tuple[Stream
 def stream_rates(settings: Settings) -> tuple[tuple[str, float], ...]:
     """:func:`stream_specs` as (name, Hz) for ``MavlinkConfig.streams`` (docs/mavlink.md)."""
     return tuple((s.name, s.rate_hz) for s in stream_specs(settings))
+
+
 def preview_for(mon: MonitorConfig) -> Callable[[Frame, FrameResult], bytes]:
     """Draws a frame's preview (boxes, particles, the fix or why there is none)."""
     def preview(frame: Frame, result: FrameResult) -> bytes:

@@ -560,8 +560,8 @@ def _ecc(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32], warp: 
     if band > 0 and min(template.shape[:2]) >= BAND_FROM_PX:
         mask = np.zeros(template.shape[:2], np.uint8)
         mask[band:-band, band:-band] = 1
-        # no input mask (None), not an all-ones one: the same warp to the bit, ~18 % less
-        # time (OpenCV warps a given input mask on every iteration)
+        # no input mask (None), not an all-ones one: the same warp to the bit, measured
+        # ~18 % less time (docs/benchmarks.md, "The follow-mode square's CPU")
         cc, found = cv2.findTransformECCWithMask(  # type: ignore[call-overload]
             template, roi, mask, None, start, cv2.MOTION_HOMOGRAPHY, criteria, blur)
         return float(cc), np.asarray(found, np.float64)

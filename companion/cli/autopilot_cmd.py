@@ -98,6 +98,8 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     delay, source = delay_from(args, profile)
     cfg = dataclasses.replace(settings.mavlink, endpoint=args.endpoint or
                               settings.mavlink.endpoint, profile=profile, streams=())
+    if not 0 <= args.streams_s <= 60:
+        raise ConfigError(f"--streams-s: expected 0..60 (0: skip), got {args.streams_s:g}")
     streams = stream_specs(settings, profile) if args.streams_s > 0 else ()
     print(f"{profile} parameters on {cfg.endpoint} (delay {delay:.0f} ms: {source})")
     return asyncio.run(_setup(cfg, parameter_specs(profile, delay), args.yes, args.timeout,

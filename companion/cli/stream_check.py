@@ -8,9 +8,11 @@ each link-up and reboot (:mod:`mavlink_bridge.streams`). Setup asks the same way
 firmware that does not honour the request is found before the flight. Afterwards each
 interval is set back to the autopilot's default (interval 0).
 
-LOCAL_POSITION_NED is sent only once the estimator has a position (ArduPilot: an EKF origin,
-which the companion sets when it starts, ``mavlink.set_origin``; PX4: a valid local
-position), so before a flight its absence is said, not counted as missing.
+ArduPilot sends LOCAL_POSITION_NED only once its EKF has an origin, which the companion sets
+when it starts (``mavlink.set_origin``), so before a flight its absence is said, not counted
+as missing. (PX4's stream sends whenever its estimator publishes a local position, valid or
+not: there an absence means the estimator has not started. The fake applies ArduPilot's rule
+to both profiles.)
 """
 
 from __future__ import annotations
@@ -61,10 +63,13 @@ async def check_streams(link: MavlinkLink, specs: Sequence[StreamSpec], wait_s: 
     later = [n for n in watch.missing() if n in AFTER_A_POSITION and report[n]["rate_hz"] == 0]
     for s in specs:
         r = report[s.name]
-        seen = {"missing": "MISSING", "slow": f"SLOW at {r['rate_hz']:g} Hz"}.get(
+        seen = {"missing": "MISSING", "slow": f"SLOW at {r['rate_hz']:g} Hz",
+                "asked": "nothing yet (watched too briefly to tell)"}.get(
             str(r["state"]), f"arriving at {r['rate_hz']:g} Hz")
+        if seen == "arriving at 0 Hz":  # heard once: its rate needs two
+            seen = "heard (watched too briefly to measure its rate)"
         if s.name in later:
-            seen = "none yet (sent once the estimator has a position: the companion sets " \
-                "the EKF origin when it starts)"
+            seen = "none yet (ArduPilot sends it once the EKF has an origin, which the " \
+                "companion sets when it starts)"
         print(f"  {s.name:<22} asked {s.rate_hz:g} Hz: {seen}  ({s.why})")
     return [n for n in watch.missing() if n not in later]

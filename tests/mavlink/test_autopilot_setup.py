@@ -90,6 +90,26 @@ def test_setup_without_yes_and_no_answer_sets_nothing(
     assert "VISO_TYPE" in out and "-> 1" in out  # the table showed current -> wanted
 
 
+def test_a_bad_streams_time_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    status = main(["autopilot", "setup", "--endpoint", "udpout:127.0.0.1:9",
+                   "--streams-s", "-1"])
+    err = capsys.readouterr().err
+    assert status != 0 and "Traceback" not in err
+    assert err.strip().splitlines()[-1].endswith("--streams-s: expected 0..60 (0: skip), got -1")
+
+
+def test_streams_watched_too_briefly_are_not_called_arriving(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Under the 2 Hz stream's missing time, a stream not heard yet is said to be unknown,
+    not "arriving at 0 Hz"."""
+    with fake_in_thread(FakeAutopilotConfig()) as fake:
+        main(setup_args(fake.local_port, "ardupilot", "--yes", "--streams-s", "0.3"))
+    out = capsys.readouterr().out
+    assert "arriving at 0 Hz" not in out, out
+    assert re.search(r"EKF_STATUS_REPORT +asked 2 Hz: (nothing yet|heard) \(watched too "
+                     r"briefly", out), out
+
+
 def test_setup_without_an_autopilot_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     status = main(["autopilot", "setup", "--endpoint", "udpout:127.0.0.1:9", "--timeout",
                    "0.5"])
