@@ -547,8 +547,9 @@ class FakeAutopilot:
         reason, reset = self.judge.screen(name, f, age_ms)
         if reason is not None:
             return False, reason, math.nan
-        verdict = self.ekf.fuse(self.flight_s() - max(age_ms, 0) / 1000, pos,
-                                position_variances(name, f), reset)
+        now_s = self.flight_s()
+        verdict = self.ekf.fuse(now_s - max(age_ms, 0) / 1000, pos,
+                                position_variances(name, f), reset, now_s=now_s)
         return verdict.accepted, verdict.reason, verdict.innovation_m
 
     def _on_command(self, name: str, msg: MAVLinkMessage) -> None:

@@ -7,6 +7,18 @@ and corrected by the vision fixes it accepts.  Every rule copies the real autopi
 * Delay: a fix is compared with the estimate ``delay_ms`` before its arrival (ArduPilot
   ``VISO_DELAY_MS``, default 10, libraries/AP_VisualOdom/AP_VisualOdom.cpp; PX4
   ``EKF2_EV_DELAY``, default 0 ms, src/modules/ekf2/params_external_vision.yaml).
+* Fusion time horizon (ArduPilot): EKF3 fuses on a delayed horizon, ``maxTimeDelay_ms``
+  behind its newest IMU sample, and a measurement stamped older than that is moved up to it
+  (``writeExtNavData``: the stamp minus ``delay_ms`` and half the 12 ms filter step, then
+  ``MAX(timeStamp_ms, imuDataDelayed.time_ms)``), so a late fix is compared with the
+  estimate at the horizon, not at its stamp.  ``setup_core``: ``maxTimeDelay_ms`` is the
+  largest of ``EK3_HGT_DELAY`` (60), ``EK3_FLOW_DELAY`` (10), ``EK3_BCN_DELAY`` (50) and
+  ``EKF_TARGET_DT_MS`` (12), and ``min(VISO_DELAY_MS, 250)`` with visual odometry on (a
+  GNSS lag only when a source set uses GNSS, which external navigation here does not):
+  60 ms with the defaults (:attr:`EstimatorConfig.horizon_floor_ms`).  PX4's EKF2 has a
+  horizon too (``EKF2_DELAY_MAX``; a sample up to 100 ms older than it is fused at it,
+  older ones dropped, ``RingBuffer::pop_first_older_than``); its default differs between
+  versions (110 or 200 ms) and is not modelled: the PX4 profile compares at the stamp.
 * Noise (:func:`fix_variances`): ArduPilot reduces the fix's covariance to one position
   error for all three axes, ``posErr = cbrt(c0^2 + c6^2 + c11^2)`` (0 when ``c0`` is NaN;
   libraries/GCS_MAVLink/GCS_Common.cpp ``handle_common_vision_position_estimate_data``),
@@ -52,6 +64,7 @@ from typing import Literal
 import numpy as np
 
 from mavlink_bridge.fake_baro import EXTNAV_FRESH_S, BaroConfig, HeightSource, SimBarometer
+from mavlink_bridge.params import EKF3_HORIZON_FLOOR_MS
 
 #: how the fused noise comes from a fix's covariance: "ardupilot" one error for all axes,
 #: "px4" one per axis (:func:`fix_variances`)
@@ -80,6 +93,11 @@ class EstimatorConfig:
     """The fake EKF's parameters; :func:`estimator_defaults` gives each profile's."""
 
     delay_ms: float = 10.0
+    # ArduPilot EKF3's fusion time horizon behind now before VISO_DELAY_MS (module doc);
+    # None: a fix is compared at its stamp however late (PX4's horizon is not modelled)
+    horizon_floor_ms: float | None = EKF3_HORIZON_FLOOR_MS
+    # EKF3 moves a stamp back by half its filter step (localFilterTimeStep_ms / 2, 12 ms)
+    half_step_ms: float = 6.0
     noise_floor_m: float = 0.2
     # how a fix's covariance becomes the fused noise (:func:`fix_variances`)
     noise_model: NoiseModel = "ardupilot"
@@ -100,8 +118,9 @@ class EstimatorConfig:
 def estimator_defaults(profile: str) -> EstimatorConfig:
     """The real autopilot's defaults (module doc has the sources)."""
     if profile == "px4":
-        return EstimatorConfig(delay_ms=0.0, noise_floor_m=0.1, noise_model="px4",
-                               outage_flags_s=5.0, baro_noise_m=3.5)
+        return EstimatorConfig(delay_ms=0.0, horizon_floor_ms=None, half_step_ms=0.0,
+                               noise_floor_m=0.1, noise_model="px4", outage_flags_s=5.0,
+                               baro_noise_m=3.5)
     return EstimatorConfig()
 
 
@@ -233,9 +252,22 @@ class FakeEstimator:
                 return pos
         return self.x[:, 0].copy()
 
+    def measured_at(self, t_s: float, now_s: float) -> float:
+        """When the autopilot takes a fix stamped ``t_s`` (its clock) and arriving at
+        ``now_s`` to have been measured: ``delay_ms`` and half a filter step before its
+        stamp, but not before ArduPilot's fusion time horizon (module doc)."""
+        t = t_s - (self.delay_ms + self.config.half_step_ms) / 1000.0
+        floor = self.config.horizon_floor_ms
+        if floor is None:
+            return t
+        horizon_ms = max(floor, min(self.delay_ms, 250.0))
+        return max(t, now_s - horizon_ms / 1000.0)
+
     def fuse(self, t_s: float, z_ned: tuple[float, float, float],
-             var_ned: tuple[float, float, float], reset: bool = False) -> Verdict:
-        """One vision position measured ``delay_ms`` before ``t_s``."""
+             var_ned: tuple[float, float, float], reset: bool = False,
+             now_s: float | None = None) -> Verdict:
+        """One vision position stamped ``t_s`` and arriving at ``now_s`` (default: at its
+        stamp), compared with the estimate at :meth:`measured_at`."""
         z = np.asarray(z_ned, float)
         r = fix_variances(var_ned, self.noise_floor_m, self.config.noise_model)
         down = self._down_from_fixes(t_s)
@@ -254,7 +286,7 @@ class FakeEstimator:
             return Verdict(True, "reset" if reset else "fused", 0.0)  # the first sets it
         if down == "reset":
             self.x[2, 0], self.P[2][0, 0], self.P[2][0, 1], self.P[2][1, 0] = z[2], r[2], 0, 0
-        nu = z - self.position_at(t_s - self.delay_ms / 1000.0)
+        nu = z - self.position_at(self.measured_at(t_s, t_s if now_s is None else now_s))
         s = np.array([self.P[k][0, 0] + r[k] for k in range(3)])
         gate2 = self.config.gate_sigma ** 2
         innovation = float(np.linalg.norm(nu))

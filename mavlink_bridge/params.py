@@ -35,6 +35,12 @@ MAV_PARAM_TYPE_INT32, MAV_PARAM_TYPE_REAL32 = 6, 9
 #: VISO_DELAY_MS / EKF2_EV_DELAY when the companion's latency was never measured: the
 #: capture-to-wire p50 seen on a loaded laptop (docs/sitl.md) plus a margin.
 DEFAULT_DELAY_MS = 60.0
+#: How far ArduPilot's EKF3 fuses behind now at least: its fusion time horizon with the
+#: default sensor delays, max(EK3_HGT_DELAY 60, EK3_FLOW_DELAY 10, EK3_BCN_DELAY 50,
+#: EKF_TARGET_DT_MS 12) ms; with external navigation on, max(this, min(VISO_DELAY_MS, 250))
+#: (NavEKF3_core::setup_core).  A fix stamped older is taken as made at the horizon
+#: (writeExtNavData): mavlink_bridge/fake_ekf.py, docs/mavlink.md "Timestamps".
+EKF3_HORIZON_FLOOR_MS = 60.0
 
 
 @dataclass(frozen=True)

@@ -5,9 +5,11 @@ no other way to set them.  Shows current against wanted (mavlink_bridge/params.p
 table and where each default comes from), sets only after confirmation (or ``--yes``), reads
 each back, and says which need a reboot.  ``VISO_DELAY_MS`` / ``EKF2_EV_DELAY`` come from the
 companion's measured capture-to-wire latency: ``--delay-ms``, or the last status of a flight
-log (``--flightlog``): for ArduPilot its least latency, since ArduPilot's jitter correction
-has already placed each fix by the quickest one's lag (docs/mavlink.md, "Timestamps"); for
-PX4 its p50 plus :data:`DELAY_MARGIN_MS`; else :data:`mavlink_bridge.params.DEFAULT_DELAY_MS`.
+log (``--flightlog``): for ArduPilot its least latency while its p50 is inside EKF3's
+fusion horizon (60 ms), since ArduPilot's jitter correction has already placed each fix by
+the quickest one's lag, and its p50 beyond, where EKF3 takes every fix at its arrival less
+``VISO_DELAY_MS`` (docs/mavlink.md, "Timestamps"); for PX4 its p50 plus
+:data:`DELAY_MARGIN_MS`; else :data:`mavlink_bridge.params.DEFAULT_DELAY_MS`.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from mavlink_bridge.errors import EndpointError, LinkOpenError
 from mavlink_bridge.link import MavlinkLink
 from mavlink_bridge.params import (
     DEFAULT_DELAY_MS,
+    EKF3_HORIZON_FLOOR_MS,
     ParamClient,
     ParamSpec,
     needs_reboot,
@@ -83,10 +86,12 @@ def delay_from(args: argparse.Namespace, profile: str) -> tuple[float, str]:
                     and isinstance(r.get("latency_ms", {}).get("p50"), int | float)]
         if not measured:
             raise InputError(f"{args.flightlog}: no measured latency in its status records")
-        least = measured[-1].get("min")
+        least, p50 = measured[-1].get("min"), measured[-1]["p50"]
         if profile == "ardupilot" and isinstance(least, int | float):
-            return min(float(least), 250.0), f"{args.flightlog} least {least:.0f} ms"
-        p50 = measured[-1]["p50"]
+            if p50 <= EKF3_HORIZON_FLOOR_MS:
+                return float(least), f"{args.flightlog} least {least:.0f} ms"
+            return min(float(p50), 250.0), (f"{args.flightlog} p50 {p50:.0f} ms (beyond "
+                                            f"EKF3's {EKF3_HORIZON_FLOOR_MS:.0f} ms horizon)")
         return p50 + DELAY_MARGIN_MS, f"{args.flightlog} p50 {p50:.0f} ms + margin"
     return DEFAULT_DELAY_MS, "default (no latency measured: run the companion, then "\
         "use --flightlog)"

@@ -246,3 +246,37 @@ def test_the_ardupilot_fake_ages_a_late_fix_and_a_reboot_forgets_the_link() -> N
     assert [fix_after(lag) for lag in (50, 50, 200, 60)] == pytest.approx([0, 0, 150, 10])
     ap.reboot(0.0)
     assert fix_after(200) == pytest.approx(0.0)
+
+
+def flying_estimator(config: EstimatorConfig) -> FakeEstimator:
+    """Flying north at a steady 2 m/s from (0, 0, -5), its fixes at the truth."""
+    ekf = FakeEstimator(config)
+    ekf.initialised = ekf.height_initialised = True
+    ekf.x[:] = ((0.0, 2.0), (0.0, 0.0), (-5.0, 0.0))
+    for k in range(301):
+        ekf.predict(k * 0.01, np.zeros(3))
+    return ekf
+
+
+def test_ardupilot_compares_a_late_fix_at_its_fusion_horizon_not_at_its_stamp() -> None:
+    """EKF3's writeExtNavData moves a stamp older than its delayed horizon (60 ms behind
+    with the default delays) up to it: a fix made 200 ms before it arrives, at the truth of
+    its stamp, is compared with where the estimate was 60 ms ago, 2 m/s x (200 - 60) ms off.
+    With VISO_DELAY_MS at the fix's latency, 200 ms, the horizon is 200 ms behind and the
+    stamp less 206 ms is moved up to it: the fix is compared at its stamp (what `autopilot
+    setup`'s VISO_DELAY_MS from the measured latency is for).  PX4's horizon is not
+    modelled: compared at the stamp less EKF2_EV_DELAY (0)."""
+    stamp_s, arrival_s = 2.8, 3.0  # the estimate moves 2 m/s x 10 ms between samples
+    for config, at_s in ((estimator_defaults("ardupilot"), 2.94),
+                         (dataclasses.replace(estimator_defaults("ardupilot"),
+                                              delay_ms=200.0), 2.8),
+                         (estimator_defaults("px4"), 2.8)):
+        ekf = flying_estimator(dataclasses.replace(config, accel_bias_m_s2=0.0,
+                                                   accel_noise_m_s2_rthz=0.0))
+        assert ekf.measured_at(stamp_s, arrival_s) == pytest.approx(at_s)
+        truth_north = 2.0 * stamp_s
+        verdict = ekf.fuse(stamp_s, (truth_north, 0.0, -5.0), (0.01,) * 3, now_s=arrival_s)
+        assert verdict.innovation_m == pytest.approx(2.0 * abs(stamp_s - at_s), abs=0.021)
+    # a fix younger than the horizon keeps its stamp (less VISO_DELAY_MS and 6 ms)
+    ekf = flying_estimator(dataclasses.replace(estimator_defaults("ardupilot")))
+    assert ekf.measured_at(2.98, 3.0) == pytest.approx(2.964)
