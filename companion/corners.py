@@ -143,11 +143,13 @@ class Corners:
                     track.landmark_id, predicted) else self.align(track, image, predicted)
             ref = self.references[track.landmark_id]
             corners = None if aligned is None else project_corners(ref, aligned)
-            if corners is not None and squashed(corners, ref.size_px):
+            if corners is not None and (squashed(corners, ref.size_px)
+                                        or self._off_its_box(track, corners)):
                 # a sliver (tracker.boxes.squashed): neither corners nor box.  Seen once in
                 # ten real-time square flights: a plate entering at the image's edge aligned
                 # onto a 7 px wide sliver, the tracker re-seated on it, and its box-only fix
-                # 2.2 m off (docs/decisions.md, "A sliver is no plate")
+                # 2.2 m off (docs/decisions.md, "A sliver is no plate"); or a cut outline
+                # beside its tracker's box ("A cut outline must hold its tracker's box")
                 aligned, corners = None, None
                 track.disputed = True
             track.homography = predicted if aligned is None else aligned
@@ -162,6 +164,19 @@ class Corners:
         track.patch = patch_around(image, track.corners) \
             if cut and track.corners is not None else None
         track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
+
+    def _off_its_box(self, track: Track, corners: FloatArray) -> bool:
+        """Does a cut plate's outline (one reaching out of the image) leave its tracker's
+        box centre outside?  A whole plate's alignment is held to the box already
+        (:meth:`_agrees`); a cut one's affine alignment on the part in view was not, and
+        leaving (6, 6) on the strict square sign-01's ran 120-150 px beside its box for half
+        a second, its fixes 1.1-1.8 m off (docs/decisions.md).  The box holds the part of
+        the plate in view, so its centre lies on the plate when both are right."""
+        if inside(corners, self.camera.width, self.camera.height, margin=0.0):
+            return False
+        x, y, w, h = track.box
+        outline = np.asarray(corners, np.float32).reshape(-1, 1, 2)
+        return cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) < 0
 
     def _seat(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """A tracker whose box holds the part of a cut plate that was in view is started
