@@ -10,11 +10,8 @@ import cv2
 import numpy as np
 
 from companion.corners import Corners
-from companion.perception_types import PerceptionConfig, Track
-from tests.plates import textured_plate
-from tracker.acquire import project_corners
-from tracker.adaptive import AdaptiveTracker
-from tracker.camera import CameraModel
+from companion.perception_types import Track
+from tests.plates import plate_track, textured_plate
 
 
 def scene() -> tuple[Corners, Track, np.ndarray, np.ndarray]:
@@ -24,15 +21,9 @@ def scene() -> tuple[Corners, Track, np.ndarray, np.ndarray]:
     image = np.full((480, 640, 3), 90, np.uint8)
     plate = cv2.resize(grey, (240, 160))
     image[400:480, 200:440] = cv2.merge([plate, plate, plate])[:80]
-    sx, sy = 240 / ref.size_px[0], 160 / ref.size_px[1]
-    truth = np.array([[sx, 0.0, 200.0], [0.0, sy, 400.0], [0.0, 0.0, 1.0]])
-    box = (200.0, 400.0, 240.0, 80.0)
-    tracker = AdaptiveTracker()
-    tracker.init(image, box)
-    track = Track("plate", tracker, box, truth, corners=project_corners(ref, truth),
-                  partial_box=True)
-    return Corners(CameraModel(), PerceptionConfig(), {"plate": ref}, matcher), track, \
-        image, truth
+    corners, track, truth = plate_track(image, matcher, ref, (200.0, 400.0, 240.0, 160.0),
+                                        (200.0, 400.0, 240.0, 80.0))
+    return corners, track, image, truth
 
 
 def test_a_cut_outline_beside_its_box_gives_no_corners() -> None:

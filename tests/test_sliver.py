@@ -9,12 +9,9 @@ import cv2
 import numpy as np
 
 from companion.corners import Corners
-from companion.perception_types import PerceptionConfig, Track
-from tests.plates import textured_plate
-from tracker.acquire import project_corners
-from tracker.adaptive import AdaptiveTracker
+from companion.perception_types import Track
+from tests.plates import plate_track, textured_plate
 from tracker.boxes import aspect_change, squashed
-from tracker.camera import CameraModel
 
 
 def seen_turned(angle_deg: float, width_m: float = 1.2, height_m: float = 0.9) -> np.ndarray:
@@ -46,15 +43,9 @@ def scene() -> tuple[Corners, Track, np.ndarray, np.ndarray]:
     grey, matcher, ref = textured_plate(5)
     image = np.full((480, 640, 3), 90, np.uint8)
     image[200:280, 500:620] = cv2.merge([grey, grey, grey])
-    sx, sy = 120 / ref.size_px[0], 80 / ref.size_px[1]
-    truth = np.array([[sx, 0.0, 500.0], [0.0, sy, 200.0], [0.0, 0.0, 1.0]])
-    box = (560.0, 200.0, 60.0, 80.0)
-    tracker = AdaptiveTracker()
-    tracker.init(image, box)
-    track = Track("plate", tracker, box, truth, corners=project_corners(ref, truth),
-                  partial_box=True)
-    return Corners(CameraModel(), PerceptionConfig(), {"plate": ref}, matcher), track, \
-        image, truth
+    corners, track, truth = plate_track(image, matcher, ref, (500.0, 200.0, 120.0, 80.0),
+                                        (560.0, 200.0, 60.0, 80.0))
+    return corners, track, image, truth
 
 
 def test_an_alignment_onto_a_sliver_gives_no_corners_and_no_box() -> None:
