@@ -67,8 +67,9 @@ def main() -> int:
     meta, truth = read_meta(folder), read_truth(folder)
     landmarks, refs = load_stream_map(folder)
     settings = load_settings(sets=args.set, shipped=SIM_LAYERS)
-    ekf = FakeEstimator(EstimatorConfig(delay_ms=0.0, height_source=args.height),
-                        seed=args.seed)
+    # the fix comes with its frame: no delay, no half filter step (one clock, no latency)
+    ekf = FakeEstimator(EstimatorConfig(delay_ms=0.0, half_step_ms=0.0,
+                                        height_source=args.height), seed=args.seed)
     poses = {i: ft.pose for i, ft in truth.items() if ft.pose is not None}
     off = np.deg2rad(args.attitude_offset_deg)
     sig = np.deg2rad(args.attitude_sigma_deg)

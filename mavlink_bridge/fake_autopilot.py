@@ -230,7 +230,7 @@ class FakeAutopilot:
         self.streams.reset()  # a reboot forgets every asked interval
         self.ekf = FakeEstimator(self.estimator_config, self.config.seed)
         for pid in dict(self.params.sets):  # stored: a reboot keeps what the user set
-            self.ekf.set_parameter(pid, self.params.values[pid])
+            self.ekf.set_parameter(pid, self.params.values[pid], at_boot=True)
         self._last_track_s = -1.0
         self._prev_velocity: tuple[float, np.ndarray] | None = None
 

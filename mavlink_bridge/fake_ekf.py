@@ -4,7 +4,7 @@ Per axis (north, east, down) a two-state Kalman filter, position and velocity, i
 with the simulated IMU -- the true acceleration plus an accelerometer bias and white noise --
 and corrected by the vision fixes it accepts.  Every rule copies the real autopilots:
 
-* Delay: a fix is compared with the estimate ``delay_ms`` before its arrival (ArduPilot
+* Delay: a fix is compared with the estimate ``delay_ms`` before its stamp (ArduPilot
   ``VISO_DELAY_MS``, default 10, libraries/AP_VisualOdom/AP_VisualOdom.cpp; PX4
   ``EKF2_EV_DELAY``, default 0 ms, src/modules/ekf2/params_external_vision.yaml).
 * Fusion time horizon (ArduPilot): EKF3 fuses on a delayed horizon, ``maxTimeDelay_ms``
@@ -15,7 +15,9 @@ and corrected by the vision fixes it accepts.  Every rule copies the real autopi
   largest of ``EK3_HGT_DELAY`` (60), ``EK3_FLOW_DELAY`` (10), ``EK3_BCN_DELAY`` (50) and
   ``EKF_TARGET_DT_MS`` (12), and ``min(VISO_DELAY_MS, 250)`` with visual odometry on (a
   GNSS lag only when a source set uses GNSS, which external navigation here does not):
-  60 ms with the defaults (:attr:`EstimatorConfig.horizon_floor_ms`).  PX4's EKF2 has a
+  60 ms with the defaults (:attr:`EstimatorConfig.horizon_floor_ms`).  ``setup_core`` runs
+  when the EKF starts: a ``VISO_DELAY_MS`` set later widens the horizon only from the next
+  boot (:meth:`FakeEstimator.set_parameter`'s ``at_boot``).  PX4's EKF2 has a
   horizon too (``EKF2_DELAY_MAX``; a sample up to 100 ms older than it is fused at it,
   older ones dropped, ``RingBuffer::pop_first_older_than``); its default differs between
   versions (110 or 200 ms) and is not modelled: the PX4 profile compares at the stamp.
@@ -166,6 +168,7 @@ class FakeEstimator:
         # EKF2_EVP_NOISE / EKF2_EV_DELAY, set live: :meth:`set_parameter`)
         self.noise_floor_m = config.noise_floor_m
         self.delay_ms = config.delay_ms
+        self.horizon_delay_ms = config.delay_ms  # VISO_DELAY_MS as EKF3's setup_core read it
         self.height_initialised = False  # vertical: by the barometer at start, or a fix
         self._height_active: HeightSource = "baro"  # what the down follows now
         self._last_down_fix_s = -math.inf
@@ -260,7 +263,7 @@ class FakeEstimator:
         floor = self.config.horizon_floor_ms
         if floor is None:
             return t
-        horizon_ms = max(floor, min(self.delay_ms, 250.0))
+        horizon_ms = max(floor, min(self.horizon_delay_ms, 250.0))
         return max(t, now_s - horizon_ms / 1000.0)
 
     def fuse(self, t_s: float, z_ned: tuple[float, float, float],
@@ -312,13 +315,16 @@ class FakeEstimator:
             return float((nu[0] ** 2 + nu[1] ** 2) / (s[0] + s[1]))
         return float(nu[0] ** 2 / s[0] + nu[1] ** 2 / s[1])
 
-    def set_parameter(self, name: str, value: float) -> None:
+    def set_parameter(self, name: str, value: float, at_boot: bool = False) -> None:
         """A parameter set on the autopilot that this estimator reads at every fix, as
-        ArduPilot's AP_VisualOdom and PX4's EKF2 do; other names are not its own."""
+        ArduPilot's AP_VisualOdom and PX4's EKF2 do; other names are not its own.  The
+        fusion horizon takes ``VISO_DELAY_MS`` only ``at_boot`` (EKF3's ``setup_core``)."""
         if name in ("VISO_POS_M_NSE", "EKF2_EVP_NOISE"):
             self.noise_floor_m = value
         elif name in ("VISO_DELAY_MS", "EKF2_EV_DELAY"):
             self.delay_ms = value
+            if at_boot:
+                self.horizon_delay_ms = value
 
     def _down_from_fixes(self, t_s: float) -> str:
         """Whether this fix's down is used: "" no (barometer), "fuse", or "reset" (the

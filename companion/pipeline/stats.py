@@ -25,8 +25,9 @@ class Rolling:
         return float(np.percentile(np.fromiter(self._values, float), q))
 
     def summary(self) -> dict[str, float | None]:
-        """``{"min": ..., "p50": ..., "p99": ...}`` rounded to 0.01 (the least latency is what
-        ArduPilot's ``VISO_DELAY_MS`` wants: docs/mavlink.md, "Timestamps")."""
+        """``{"min": ..., "p50": ..., "p99": ...}`` rounded to 0.01 (ArduPilot's
+        ``VISO_DELAY_MS`` is the least while the p50 is inside EKF3's 60 ms fusion horizon,
+        the p50 beyond: docs/mavlink.md, "Timestamps")."""
         if not self._values:
             return {"min": None, "p50": None, "p99": None}
         values = np.percentile(np.fromiter(self._values, float), (0, 50, 99))

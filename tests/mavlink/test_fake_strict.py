@@ -280,3 +280,21 @@ def test_ardupilot_compares_a_late_fix_at_its_fusion_horizon_not_at_its_stamp() 
     # a fix younger than the horizon keeps its stamp (less VISO_DELAY_MS and 6 ms)
     ekf = flying_estimator(dataclasses.replace(estimator_defaults("ardupilot")))
     assert ekf.measured_at(2.98, 3.0) == pytest.approx(2.964)
+
+
+def test_a_new_viso_delay_widens_ekf3s_horizon_only_from_the_next_boot() -> None:
+    """setup_core sizes the horizon when the EKF starts: VISO_DELAY_MS 200 set in flight
+    moves the stamp back at once but the horizon stays 60 ms until a reboot."""
+    ekf = FakeEstimator(estimator_defaults("ardupilot"))
+    ekf.set_parameter("VISO_DELAY_MS", 200.0)
+    assert ekf.measured_at(2.8, 3.0) == pytest.approx(2.94)  # the horizon, 60 ms back
+    ekf.set_parameter("VISO_DELAY_MS", 200.0, at_boot=True)
+    assert ekf.measured_at(2.8, 3.0) == pytest.approx(2.8)
+    now_ns = [10_000_000_000]
+    ap = FakeAutopilot(FakeAutopilotConfig(profile="ardupilot"), clock_ns=lambda: now_ns[0])
+    ap.ekf.set_parameter("VISO_DELAY_MS", 200.0)
+    ap.params.sets.append(("VISO_DELAY_MS", 200.0))  # as a PARAM_SET stores it
+    ap.params.values["VISO_DELAY_MS"] = 200.0
+    assert ap.ekf.horizon_delay_ms == 10.0
+    ap.reboot(0.0)
+    assert ap.ekf.horizon_delay_ms == 200.0
