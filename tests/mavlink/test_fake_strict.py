@@ -298,3 +298,21 @@ def test_a_new_viso_delay_widens_ekf3s_horizon_only_from_the_next_boot() -> None
     assert ap.ekf.horizon_delay_ms == 10.0
     ap.reboot(0.0)
     assert ap.ekf.horizon_delay_ms == 200.0
+
+
+def test_the_fake_hands_its_estimator_a_fixs_stamp_and_its_arrival() -> None:
+    """The horizon needs both: ``_fuse`` gives the estimator the stamp's time (arrival less
+    the jitter-corrected age) and the arrival itself (``now_s``)."""
+    now_ns = [10_000_000_000]
+    ap = FakeAutopilot(FakeAutopilotConfig(profile="ardupilot"), clock_ns=lambda: now_ns[0])
+    seen: dict[str, object] = {}
+
+    def fuse(t_s: float, *_args: object, now_s: float | None = None) -> object:
+        seen.update(t_s=t_s, now_s=now_s)
+        return ap.ekf.__class__.fuse(ap.ekf, t_s, *_args, now_s=now_s)  # type: ignore[arg-type]
+
+    ap.judge.screen = lambda *_a: (None, False)  # type: ignore[method-assign]
+    ap.ekf.fuse = fuse  # type: ignore[method-assign]
+    ap._fuse("VISION_POSITION_ESTIMATE", {"covariance": [0.01] * 21}, (0.0, 0.0, -4.0), 150.0)
+    assert seen["now_s"] == pytest.approx(ap.flight_s())
+    assert seen["t_s"] == pytest.approx(ap.flight_s() - 0.150)
