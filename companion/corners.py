@@ -18,7 +18,6 @@ from __future__ import annotations
 import threading
 from collections.abc import Mapping
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -34,6 +33,7 @@ from tracker.acquire import (
 )
 from tracker.boxes import (
     box_corners,
+    centre_on,
     clip_box,
     in_view_share,
     inside,
@@ -172,11 +172,8 @@ class Corners:
         leaving (6, 6) on the strict square sign-01's ran 120-150 px beside its box for half
         a second, its fixes 1.1-1.8 m off (docs/decisions.md).  The box holds the part of
         the plate in view, so its centre lies on the plate when both are right."""
-        if inside(corners, self.camera.width, self.camera.height, margin=0.0):
-            return False
-        x, y, w, h = track.box
-        outline = np.asarray(corners, np.float32).reshape(-1, 1, 2)
-        return cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) < 0
+        return not inside(corners, self.camera.width, self.camera.height, margin=0.0) \
+            and not centre_on(corners, track.box)
 
     def _seat(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """A tracker whose box holds the part of a cut plate that was in view is started
@@ -256,11 +253,8 @@ class Corners:
         if aligned is None:
             return None
         corners = project_corners(ref, aligned)
-        x, y, w, h = box
         if verify:  # from the box itself: its centre must lie on the plate found
-            outline = corners.astype(np.float32).reshape(-1, 1, 2)
-            on = cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) >= 0
-            return aligned if on else None
+            return aligned if centre_on(corners, box) else None
         predicted = project_corners(ref, hom)
         if not (quad_iou(corners, predicted) >= self.config.min_corner_agreement
                 if track.partial_box else self._agrees(corners, predicted, box)):

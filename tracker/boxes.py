@@ -36,6 +36,13 @@ def clip_box(box: Box, width: int, height: int) -> Box | None:
     return (x0, y0, x1 - x0, y1 - y0)
 
 
+def centre_on(corners: FloatArray, box: Box) -> bool:
+    """Does ``box``'s centre lie on the quadrilateral ``corners`` (its edge included)?"""
+    x, y, w, h = box
+    outline = np.asarray(corners, np.float32).reshape(-1, 1, 2)
+    return cv2.pointPolygonTest(outline, (x + w / 2, y + h / 2), False) >= 0
+
+
 def outline_box(corners: FloatArray) -> Box:
     """The (x, y, w, h) box around a quadrilateral's corners."""
     x0, y0 = corners.min(axis=0)
