@@ -18,6 +18,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Mapping
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -66,6 +67,13 @@ PARTIAL_BOX_SHARE = 0.9
 #: the bottom edge of the real-imagery world seed 1: its box stayed 98 px tall while 10 to
 #: 1 px of the plate were in view, then followed nothing for 3 frames).
 LEFT_VIEW_SHARE = 0.1
+
+
+#: Largest change of a cut plate's outline size (the square root of its area) from one frame
+#: to the next that keeps its part out of view held (``Track.outline_held``): wall-02 leaving
+#: the flown square's view changed 1-2 % a frame; the survey's wall-04, 25 % when its
+#: alignment jumped (its corners out of view 15-20 px off).
+HELD_SIZE_STEP = 0.1
 
 
 def box_partial(corners: FloatArray, width: int, height: int) -> bool:
@@ -132,7 +140,7 @@ class Corners:
         ``motion``: the image's move for the camera's turn since the last frame
         (:mod:`companion.ego_motion`); the alignment then starts from the last homography
         turned by it, and from the last one as it was if that fails."""
-        track.corners = None
+        track.corners, was, before = None, track.outline_held, track.homography
         if not self.config.refine_corners:
             return
         if track.homography is not None:
@@ -155,15 +163,35 @@ class Corners:
             track.homography = predicted if aligned is None else aligned
             track.misses = 0 if aligned is not None else track.misses + 1
             track.corners = corners
-        if track.homography is None or track.misses >= self.config.max_corner_misses:
+        recovered = track.homography is None or track.misses >= self.config.max_corner_misses
+        if recovered:
             self.recover(track, image)
         if track.corners is not None:
             track.disputed = False
             self._seat(track, image)
         cut = track.homography is not None and self.is_cut(track.landmark_id, track.homography)
+        # no corners: the homography kept is the one it had; found afresh: held if mostly
+        # in view; aligned (whole or carried by the cut plate's alignment): held if mostly
+        # in view, else if it was and its size did not jump
+        track.outline_held = was if track.corners is None else not cut or (
+            not recovered and was
+            and self._same_size(track.landmark_id, before, track.homography))
         track.patch = patch_around(image, track.corners) \
             if cut and track.corners is not None else None
         track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
+
+    def _same_size(self, landmark_id: str, before: FloatArray | None,
+                   now: FloatArray | None) -> bool:
+        """Do the two homographies' outlines differ in size (the square root of their
+        areas) by at most ``HELD_SIZE_STEP``?  An alignment that moved a cut plate's
+        outline by more jumped (a wrong start, a camera turn misread): its part out of
+        view is no longer the shape it had."""
+        if before is None or now is None:
+            return False
+        ref = self.references[landmark_id]
+        a, b = (abs(float(cv2.contourArea(project_corners(ref, h).astype(np.float32))))
+                for h in (before, now))
+        return a > 0.0 and abs(float(np.sqrt(b / a)) - 1.0) <= HELD_SIZE_STEP
 
     def _off_its_box(self, track: Track, corners: FloatArray) -> bool:
         """Does a cut plate's outline (one reaching out of the image) leave its tracker's
@@ -220,7 +248,7 @@ class Corners:
                 or quad_iou(corners, project_corners(ref, start)) < agreement:
             return False
         track.homography, track.corners, track.misses = aligned, corners, 0
-        track.patch = None
+        track.patch, track.outline_held = None, True  # whole and mostly in view
         track.saturated = saturated_share(image, corners)
         return True
 

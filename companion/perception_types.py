@@ -61,6 +61,14 @@ class PerceptionConfig:
     #: loosely").
     young_cut_frames: int = field(default=9, metadata={"ge": 0})
     young_cut_sigma_rel: float = field(default=0.05, metadata={"ge": 0})
+    #: A plate under ``min_corner_in_view`` in view states the corners its outline puts
+    #: outside the image as weak points, at this share of the outline's size (the square
+    #: root of its area; 0: left out).  Its alignment on the part in view carries the
+    #: outline out of the image, and those corners hold the plate's scale and turn: with
+    #: one corner inside, the fix rested on that corner's bearing alone, 1.6-3.9 m stated,
+    #: and the strict fake drifted 0.3-0.6 m on its IMU while hovering at the square's
+    #: (6, 6) (docs/decisions.md, "A cut plate's extrapolated corners are weak points").
+    cut_extrapolated_sigma_rel: float = field(default=0.05, metadata={"ge": 0})
     #: ... and while at most this share of its pixels is saturated: over-exposed plates
     #: (58 % of their pixels at 255) put the corners 0.4 px off, 4x the error of the same
     #: plate in normal light (docs/pose.md).  White print on a plate saturates 0-4 %.
@@ -213,6 +221,11 @@ class Track:
     #: the tracker's box was seated on a plate cut by the image's edge: it holds the part
     #: that was in view, not the plate (``Corners`` re-seats it once the plate is whole)
     partial_box: bool = False
+    #: the outline's part out of the image keeps the shape it had when the plate was last
+    #: mostly in view: aligned frame to frame since (``Corners.align_cut`` or whole), its
+    #: size never jumping (``companion.corners.HELD_SIZE_STEP``); not after an outline found
+    #: afresh on a cut plate (``Corners.recover``), which the part in view does not hold
+    outline_held: bool = False
     #: frames this track has been followed since it was acquired
     frames: int = 0
     #: CPU (s) of its last update, to share the next frame's updates between two threads

@@ -297,19 +297,24 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
     """
     out = []
     size = (noise.camera.width, noise.camera.height)
+
+    def crossing(t: Track) -> bool:
+        return t.corners is not None and not inside(t.corners, *size, margin=0.0)
     live = [t for t in tracks.values() if t.verify_failures == 0]
     usable = {t.landmark_id: noise.cut(t) for t in live
               if t.corners is not None and t.saturated <= config.max_corner_saturated}
-    # a cut plate's fit sigma is its whole outline's (the extrapolated corners' too):
-    # not held against the size model, but stated (the larger of the two, CornerNoise.sigma)
+    # a plate crossing the image's edge has its fit sigma from its whole outline (what is
+    # out of view too): not held against the size model, but stated (the larger of the
+    # two, CornerNoise.sigma)
     usable = {lid: cut for lid, cut in usable.items() if cut is not None
-              and (cut[0] is not None or noise.fits(tracks[lid]))}
+              and (crossing(tracks[lid]) or noise.fits(tracks[lid]))}
     if usable:
         live = [t for t in live if t.landmark_id in usable]
     else:  # boxes only: a box reaching out of the image is not centred on its plate, nor
-        # one that has disagreed with its plate's outline since the alignment last held
+        # one that has disagreed with its plate's outline since the alignment last held,
+        # nor one holding the part of its plate that was in view when it was seated
         live = [t for t in live if inside(box_corners(t.box), *size, margin=1.0)
-                and not t.disputed]
+                and not t.disputed and not t.partial_box]
     for t in live:
         x, y, w, h = t.box
         cut = usable.get(t.landmark_id)
@@ -321,16 +326,19 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
         scale = None if corners is None else config.corner_scale_sigma_px * stretch
         sigma = noise.sigma(corners, stretch, t.fit_sigma)
         measured, grow = (None, 1.0) if cut is None else cut
+        outside = None
         if sigma is not None:
             sigma *= grow
-            if corners is not None and noise.unsettled(t):
-                quad = np.asarray(corners, np.float32)
-                sigma = max(sigma, config.young_cut_sigma_rel
-                            * float(np.sqrt(abs(cv2.contourArea(quad)))))
+            extent = float(np.sqrt(abs(cv2.contourArea(np.asarray(corners, np.float32)))))
+            if noise.unsettled(t):
+                sigma = max(sigma, config.young_cut_sigma_rel * extent)
+            if measured is not None and t.outline_held and config.cut_extrapolated_sigma_rel > 0:
+                outside = max(sigma, config.cut_extrapolated_sigma_rel * extent)
         out.append(Observation(centre_px=(float(centre[0]), float(centre[1])),
                                box_wh_px=(w, h), confidence=t.confidence,
                                landmark_id=t.landmark_id, corners_px=corners,
                                frame_index=frame_index,
                                corner_sigma_px=sigma,
-                               corner_scale_sigma_px=scale, corners_measured=measured))
+                               corner_scale_sigma_px=scale, corners_measured=measured,
+                               extrapolated_sigma_px=outside))
     return out

@@ -281,6 +281,36 @@ def test_a_plate_cut_by_the_edge_gives_only_its_corners_inside_the_image() -> No
     assert cut.corner_sigma_px > 1.5 * full.corner_sigma_px
 
 
+def test_a_cut_plates_corners_out_of_the_image_are_stated_as_weak_points() -> None:
+    """Issue 19's hover at (6, 6): with one corner of the one plate in view, the fix rested
+    on that corner's bearing (1.6-3.9 m stated) and the strict fake drifted on its IMU.  The
+    corners the outline puts outside the image are given too, at
+    ``cut_extrapolated_sigma_rel`` of its size (never under the measured corners' sigma)
+    when the outline out of view is settled (carried by the cut plate's alignment from an
+    outline of the plate mostly in view; one found afresh on a cut plate is not): 0 leaves
+    them out as before, and a plate wholly in view has none."""
+    _frame, plate, corners = scene()
+    size = float(np.sqrt(abs(cv2.contourArea(corners.astype(np.float32)))))
+    cut_corners = corners + (np.array([320.0, 240.0]) - corners[0]) - 40.0  # TL 40 px inside
+    for rel, want in ((0.05, 0.05 * size), (0.0, None)):
+        p = perception(plate, dataclasses.replace(PerceptionConfig(),
+                                                  cut_extrapolated_sigma_rel=rel))
+        track = track_at(p, cut_corners, (0.0, 0.0, 1.0, 1.0))
+        p.trackset.live["p"] = track
+        track.frames = p.config.young_cut_frames  # followed a while
+        [found] = p.observations(0)  # not settled (found afresh on the cut plate): none
+        assert found.corners_measured == (True, False, False, False)
+        assert found.extrapolated_sigma_px is None
+        track.outline_held = True  # carried by the cut plate's alignment from a settled outline
+        [cut] = p.observations(0)
+        assert cut.corners_measured == (True, False, False, False)
+        assert cut.extrapolated_sigma_px == (None if want is None else pytest.approx(want))
+        assert cut.corner_sigma_px is not None and cut.corner_sigma_px < 0.05 * size
+        p.trackset.live["p"] = track_at(p, corners, (0.0, 0.0, 1.0, 1.0))
+        [whole] = p.observations(0)
+        assert whole.extrapolated_sigma_px is None
+
+
 def test_a_young_cut_plate_states_its_corners_no_better_than_its_unsettled_outline() -> None:
     """Issue 19's square: a plate acquired while cut by the edge had its first outlines
     pixels off; its lone fixes were 0.3-1.7 m off at a stated 0.02-0.14 m and the strict

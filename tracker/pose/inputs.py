@@ -16,6 +16,7 @@ from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from tracker.camera import CameraModel
 from tracker.geometry import FloatArray, rotation_from_rpy
@@ -29,6 +30,8 @@ from tracker.pose.types import (
     Observation,
     RangeSample,
 )
+
+BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,9 @@ class Group:
     #: each outline mode's 1-sigma over ``sigma_px`` when the plate's four corners are
     #: measured and they are not all 1 (``PoseConfig.corner_mode_sigma_rel``), else None
     mode_rel: FloatArray | None = None
+    #: each point's 1-sigma (px) when they differ (a cut plate's extrapolated corners,
+    #: ``Observation.extrapolated_sigma_px``); None: ``sigma_px`` for every point
+    point_sigmas_px: FloatArray | None = None
 
     @cached_property
     def outline_basis(self) -> FloatArray:
@@ -119,10 +125,14 @@ def make_groups(
     groups = []
     for i, lm in best.values():
         obs = observations[i]
+        each = None
         if obs.corners_px is not None:
             measured = np.array(obs.corners_measured or (True,) * 4)  # cut by the edge: some
-            pts = landmark_corners_ned(lm)[measured]
             sig = cfg.pixel_sigma_px if obs.corner_sigma_px is None else obs.corner_sigma_px
+            if obs.extrapolated_sigma_px is not None:  # the rest as weak points
+                each = np.where(measured, sig, max(sig, obs.extrapolated_sigma_px))
+                measured = np.ones(4, dtype=bool)
+            pts = landmark_corners_ned(lm)[measured]
             px = np.array(obs.corners_px, dtype=np.float64)[measured]
         else:
             pts, sig = np.array([lm.position_ned_m], dtype=np.float64), centre_sigma
@@ -134,7 +144,7 @@ def make_groups(
         outline, tilt = (r * sig if obs.all_corners else 0.0 for r in rel)
         mode_rel = modes if obs.all_corners and modes_stated else None
         groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale),
-                            outline, tilt, mode_rel))
+                            outline, tilt, mode_rel, each))
     return groups
 
 
@@ -223,11 +233,21 @@ def point_set(groups: list[Group]) -> PointSet:
     return PointSet(
         np.vstack([g.points_ned for g in groups]),
         np.vstack([g.pixels_ideal for g in groups]),
-        np.repeat([g.sigma_px for g in groups], counts),
+        np.concatenate([np.full(n, g.sigma_px) if g.point_sigmas_px is None
+                        else g.point_sigmas_px for g, n in zip(groups, counts, strict=True)]),
         np.repeat(np.arange(len(groups), dtype=np.int64), counts),
         scale_dir,
         scale_beta,
     )
+
+
+def firm_points(groups: list[Group]) -> BoolArray:
+    """Which of :func:`point_set`'s points are measured, not extrapolated (a cut plate's
+    corners out of the image, ``Group.point_sigmas_px``): a linear start rests on those,
+    the refinement weighs them all."""
+    return np.concatenate([np.ones(g.points_ned.shape[0], dtype=bool)
+                           if g.point_sigmas_px is None else g.point_sigmas_px <= g.sigma_px
+                           for g in groups])
 
 
 def make_priors(

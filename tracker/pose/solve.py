@@ -40,6 +40,7 @@ from tracker.pose.inputs import (
     Context,
     Group,
     camera_arrays,
+    firm_points,
     laser_for,
     laser_hits,
     make_groups,
@@ -321,7 +322,8 @@ def _solve_with_attitude(ctx: Context, groups: list[Group], pts: PointSet) -> _S
     b = bearings_ned(pts.pixels, ctx.k, r_nb @ ctx.r_body_cam)
     size = size_if_needed(ctx, groups[0], b[0], rng) if single else None
     alt = None if ctx.altitude is None else ctx.altitude.down_m
-    p0 = bearing_least_squares(pts.points_ned, b, r_nb, alt, rng)
+    firm = firm_points(groups)  # an extrapolated corner's bearing is neither start nor check
+    p0 = bearing_least_squares(pts.points_ned[firm], b[firm], r_nb, alt, rng)
     if size is not None:
         p0 = size.point_ned - size.distance_m * b[0]
     if p0 is None:
@@ -331,8 +333,8 @@ def _solve_with_attitude(ctx: Context, groups: list[Group], pts: PointSet) -> _S
             if single
             else "degenerate geometry: bearings do not fix the position"
         )
-    rel = pts.points_ned - p0
-    ahead = np.einsum("ij,ij->i", rel, b)
+    rel = pts.points_ned[firm] - p0
+    ahead = np.einsum("ij,ij->i", rel, b[firm])
     cos = ahead / np.maximum(np.linalg.norm(rel, axis=1), 1e-12)
     worst_angle = float(np.max(np.arccos(np.clip(cos, -1.0, 1.0))))
     if not single and worst_angle > _consensus_threshold(ctx):  # cheap all-inlier test
@@ -340,7 +342,7 @@ def _solve_with_attitude(ctx: Context, groups: list[Group], pts: PointSet) -> _S
         if suspect >= 0:
             return _outlier(groups, suspect, _CONSENSUS)
     if np.any(ahead <= 0):
-        gi = int(pts.landmark_index[int(np.argmin(ahead))])
+        gi = int(pts.landmark_index[firm][int(np.argmin(ahead))])
         lid = groups[gi].landmark.landmark_id
         return _Failure(f"landmark {lid!r} would be behind the camera", gi)
     x0 = np.concatenate([p0, rpy])

@@ -48,6 +48,10 @@ class Observation:
     image's edge: the corners outside the image are only extrapolated, and are not
     observations); None: all four.  A partly measured plate gives its measured corners as
     points, without the outline's common errors.
+    ``extrapolated_sigma_px``: with ``corners_measured``, the 1-sigma of the corners it leaves
+    out, which then count as weak points (a cut plate's outline carried out of the image by
+    its alignment on the part in view: they hold its scale and turn, which its measured
+    corners alone do not); None: they are left out.
     """
 
     centre_px: tuple[float, float]
@@ -61,6 +65,7 @@ class Observation:
     corner_sigma_px: float | None = None
     corner_scale_sigma_px: float | None = None
     corners_measured: tuple[bool, bool, bool, bool] | None = None
+    extrapolated_sigma_px: float | None = None
 
     @property
     def all_corners(self) -> bool:

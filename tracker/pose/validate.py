@@ -39,6 +39,9 @@ def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
     if measured is not None and (obs.corners_px is None or len(measured) != 4
                                  or not any(measured)):
         return "corners_measured must flag four corners_px, at least one of them measured"
+    out = obs.extrapolated_sigma_px
+    if out is not None and (measured is None or not _finite((out,)) or out <= 0.0):
+        return f"extrapolated_sigma_px must be finite, > 0 and beside corners_measured, got {out!r}"
     sigma = obs.corner_sigma_px
     if sigma is not None and (not _finite((sigma,)) or sigma <= 0.0):
         return f"corner_sigma_px must be finite and > 0, got {sigma!r}"
@@ -47,7 +50,8 @@ def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
         return f"corner_scale_sigma_px must be finite and >= 0, got {scale!r}"
     if obs.signature is not None and not _finite(tuple(obs.signature)):
         return "signature contains a value that is not finite"
-    flags = obs.corners_measured or (True,) * 4  # an unmeasured corner may lie anywhere
+    # an unmeasured corner may lie anywhere, unless it is used (extrapolated_sigma_px)
+    flags = (True,) * 4 if out is not None else obs.corners_measured or (True,) * 4
     pts = [obs.centre_px, *(c for c, m in zip(obs.corners_px or (), flags, strict=False) if m)]
     if any(
         not (-width_px <= u <= 2 * width_px and -height_px <= v <= 2 * height_px) for u, v in pts
