@@ -68,7 +68,9 @@ class PerceptionConfig:
     #: one corner inside, the fix rested on that corner's bearing alone, 1.6-3.9 m stated,
     #: and the strict fake drifted 0.3-0.6 m on its IMU while hovering at the square's
     #: (6, 6) (docs/decisions.md, "A cut plate's extrapolated corners are weak points").
-    cut_extrapolated_sigma_rel: float = field(default=0.05, metadata={"ge": 0})
+    #: It can make a fix more certain and was measured on rendered plates only: 0 (off) in
+    #: the deployment, 0.05 in the simulator's layer (config/sim.toml).
+    cut_extrapolated_sigma_rel: float = field(default=0.0, metadata={"ge": 0})
     #: ... and while at most this share of its pixels is saturated: over-exposed plates
     #: (58 % of their pixels at 255) put the corners 0.4 px off, 4x the error of the same
     #: plate in normal light (docs/pose.md).  White print on a plate saturates 0-4 %.

@@ -311,6 +311,34 @@ def test_a_cut_plates_corners_out_of_the_image_are_stated_as_weak_points() -> No
         assert whole.extrapolated_sigma_px is None
 
 
+def test_a_plate_crossing_the_edge_states_its_fit_and_a_part_box_gives_no_fix() -> None:
+    """Issue 19's square, one frame in three: wall-01 coming into view (64-96 %) had a fit
+    sigma over its whole outline, part of it out of view, that failed the size model, so it
+    had no corners, and the box-only fallback took its tracker's box, which held the part in
+    view when it was seated: fixes 1.2 m off.  A plate crossing the image's edge keeps its
+    corners, at the larger of the size model and its fit; a ``partial_box`` track gives no
+    box-only observation.  A whole plate with such a fit is still refused its corners."""
+    _frame, plate, corners = scene()
+    p = perception(plate)
+    mostly = corners + np.array([325.0 - corners[:, 0].max(), 0.0])  # 5 px out on the right
+    track = track_at(p, mostly, (100.0, 80.0, 60.0, 60.0))
+    p.trackset.live["p"] = track
+    track.frames = p.config.young_cut_frames
+    model = p.noise.sigma([(float(u), float(v)) for u, v in mostly]) or 0.0
+    track.fit_sigma = 10.0 * p.config.max_fit_sigma_ratio * model  # fails the size model
+    assert not p.noise.fits(track)
+    [edge] = p.observations(0)
+    assert edge.corners_px is not None and edge.corners_measured is None
+    assert edge.corner_sigma_px is not None and edge.corner_sigma_px > 5.0 * model
+    whole = track_at(p, corners, (100.0, 80.0, 60.0, 60.0))
+    whole.fit_sigma, whole.frames = track.fit_sigma, track.frames
+    p.trackset.live["p"] = whole
+    [box_only] = p.observations(0)  # its corners refused: its box stands for it
+    assert box_only.corners_px is None
+    whole.partial_box = True  # the box holds the part that was in view when seated
+    assert p.observations(0) == []
+
+
 def test_a_young_cut_plate_states_its_corners_no_better_than_its_unsettled_outline() -> None:
     """Issue 19's square: a plate acquired while cut by the edge had its first outlines
     pixels off; its lone fixes were 0.3-1.7 m off at a stated 0.02-0.14 m and the strict
