@@ -19,7 +19,13 @@ Rules copied from the autopilots:
 
 :class:`GuidedVehicle` is a truth function the fake flies from SET_POSITION_TARGET_LOCAL_NED
 (GUIDED / OFFBOARD), NAV_TAKEOFF and LAND: a critically damped approach to the target with
-limited speed and acceleration, its tilt following the acceleration.
+limited speed and acceleration, its tilt following the acceleration.  Its horizontal
+acceleration changes no faster than ArduPilot's position controller lets it:
+``PSC_JERK_NE`` (``PSC_JERK_XY`` before 4.7), default 5 m/s^3
+(libraries/AC_AttitudeControl/AC_PosControl.h, ``POSCONTROL_JERK_NE_MSSS``; PX4's
+``MPC_JERK_AUTO`` default 4 m/s^3 is of the same size).  Without it the vehicle leaned 11.5
+deg within one 10 ms step when a leg began, a turn no copter makes, and a camera frame
+matched to an attitude sample one frame old was 11.5 deg off (issue 19).
 """
 
 from __future__ import annotations
@@ -120,6 +126,7 @@ class GuidedVehicle:
     yaw_rad: float = 0.0
     max_speed_m_s: float = 2.0
     max_accel_m_s2: float = 2.0
+    max_jerk_m_s3: float = 5.0  # horizontal (module doc: PSC_JERK_NE)
     bandwidth_rad_s: float = 1.2
     land_speed_m_s: float = 0.5
     step_s: float = 0.01
@@ -131,6 +138,7 @@ class GuidedVehicle:
         self.p = np.array(self.start_ned_m, float)
         self.v = np.zeros(3)
         self.a = np.zeros(3)
+        self._a_ne = np.zeros(2)  # the horizontal acceleration commanded last step
         self.target_yaw = self.yaw_rad
 
     def on_ground(self) -> bool:
@@ -160,12 +168,21 @@ class GuidedVehicle:
             a = (want_v - self.v) * 2.0
         elif self.target is None:
             a = -self.v * 2.0
-        else:
+        else:  # the PD law w^2 (target - p) - 2 w v, its velocity demand held to the speed
             w = self.bandwidth_rad_s
-            a = w * w * (self.target - self.p) - 2.0 * w * self.v
+            want_v = 0.5 * w * (self.target - self.p)
+            fast = float(np.linalg.norm(want_v))
+            if fast > self.max_speed_m_s:
+                want_v *= self.max_speed_m_s / fast
+            a = 2.0 * w * (want_v - self.v)
         norm = float(np.linalg.norm(a))
         if norm > self.max_accel_m_s2:
             a *= self.max_accel_m_s2 / norm
+        step = a[:2] - self._a_ne
+        most = self.max_jerk_m_s3 * dt
+        if float(np.linalg.norm(step)) > most:
+            a[:2] = self._a_ne + step * (most / float(np.linalg.norm(step)))
+        self._a_ne = a[:2].copy()
         v0 = self.v
         self.v = self.v + a * dt
         speed = float(np.linalg.norm(self.v))

@@ -179,10 +179,10 @@ class Trajectory:
 
 class FlownPath:
     """Waypoints flown by the fake autopilot's guided vehicle
-    (:class:`mavlink_bridge.fake_vehicle.GuidedVehicle`, its defaults: 2 m/s, 2 m/s^2, the
-    tilt of its acceleration, up to 11.5 deg), integrated once in its own 10 ms steps and
-    interpolated: the offline twin of a ``--fly`` flight against the strict fake
-    (``TrajectoryConfig.guided``)."""
+    (:class:`mavlink_bridge.fake_vehicle.GuidedVehicle`, its defaults: 2 m/s, 2 m/s^2,
+    ArduPilot's 5 m/s^3, the tilt of its acceleration, up to 11.5 deg), integrated once in
+    its own 10 ms steps and interpolated: the offline twin of a ``--fly`` flight against
+    the strict fake (``TrajectoryConfig.guided``)."""
 
     def __init__(self, waypoints: tuple[Waypoint, ...]) -> None:
         first = waypoints[0]
