@@ -7,7 +7,11 @@ frame's capture time, the :class:`~companion.side_sensors.SideSensors` the solve
   the short way round), with the configured 1-sigma (``pose.attitude_*_sigma_deg``).
   ArduPilot reports no attitude variance in any message (ATTITUDE and ATTITUDE_QUATERNION
   have no such field; EKF_STATUS_REPORT's ``compass_variance`` is an innovation test ratio,
-  AP_AHRS ``get_variances``), so the configured sigma is all there is (docs/pose.md).
+  AP_AHRS ``get_variances``), so there the configured sigma is all there is (docs/pose.md).
+* ``ODOMETRY`` (PX4): its EKF's own attitude variance.  The prior's sigma is the larger of
+  the configured one and the one reported (the newest within ``ODOMETRY_AGE_US``): the
+  autopilot saying it is unsure (after a reset, a yaw it cannot observe) widens the prior;
+  it never narrows it, since in the coupled loop that variance is itself fed by our fixes.
 * ``LOCAL_POSITION_NED``: the EKF's height as NED down about the EKF origin, the frame the
   landmark map is placed in (GLOBAL_POSITION_INT's ``relative_alt`` is above *home*, which
   need not be the origin), interpolated, 1-sigma ``pose.altitude_sigma_m``; only with
@@ -46,7 +50,9 @@ from tracker.pose.types import (
 )
 
 #: The telemetry streams the pose uses (the bridge must ask the autopilot for them).
-SENSOR_STREAMS = ("ATTITUDE", "LOCAL_POSITION_NED", "DISTANCE_SENSOR")
+SENSOR_STREAMS = ("ATTITUDE", "LOCAL_POSITION_NED", "DISTANCE_SENSOR", "ODOMETRY")
+#: How old the newest ODOMETRY may be for its attitude variance to count (asked at 5 Hz)
+ODOMETRY_AGE_US = 1_000_000
 
 Sample = tuple[int, tuple[float, ...]]  # (arrival time us, values)
 
@@ -82,7 +88,8 @@ def nearest(samples: Sequence[Sample], t_us: int, max_gap_us: int) -> tuple[floa
 
 
 class SensorHistory:
-    """Recent ATTITUDE, LOCAL_POSITION_NED and DISTANCE_SENSOR messages (see module doc).
+    """Recent ATTITUDE, LOCAL_POSITION_NED, DISTANCE_SENSOR and ODOMETRY messages (see
+    module doc).
 
     Called with a frame's capture time it returns the :class:`SideSensors` of that time.
     """
@@ -119,8 +126,8 @@ class SensorHistory:
             self.add(item.name, t_us, item.value)
 
     def add(self, name: str, t_us: int, v: Any) -> None:
-        """Record one message's value (``Attitude``, ``LocalPositionNed``, ``DistanceSensor``
-        of :mod:`mavlink_bridge.telemetry`) of time ``t_us`` (companion clock)."""
+        """Record one message's value (``Attitude``, ``LocalPositionNed``, ``DistanceSensor``,
+        ``Odometry`` of :mod:`mavlink_bridge.telemetry`) of time ``t_us`` (companion clock)."""
         values: tuple[float, ...]
         if name == "ATTITUDE":
             values = (float(v.roll_rad), float(v.pitch_rad), float(v.yaw_rad))
@@ -129,6 +136,8 @@ class SensorHistory:
         elif name == "DISTANCE_SENSOR":
             values = (float(v.distance_m), float(v.min_distance_m),
                       float(v.max_distance_m), float(v.orientation))
+        elif name == "ODOMETRY":
+            values = tuple(float(x) for x in v.attitude_variance_rad2)
         else:
             return
         self.samples[name].append((t_us, values))
@@ -165,9 +174,13 @@ class SensorHistory:
         if v is None:
             return None
         cfg = self.config
-        return AttitudeSample(t_us, v[0], v[1], v[2],
-                              math.radians(cfg.attitude_roll_pitch_sigma_deg),
-                              math.radians(cfg.attitude_yaw_sigma_deg))
+        roll_pitch = math.radians(cfg.attitude_roll_pitch_sigma_deg)
+        yaw = math.radians(cfg.attitude_yaw_sigma_deg)
+        var = nearest(list(self.samples["ODOMETRY"]), t_us, ODOMETRY_AGE_US)
+        if var is not None:  # the autopilot's own variance: only ever wider (module doc)
+            roll_pitch = max([roll_pitch, *(math.sqrt(x) for x in var[:2] if x >= 0.0)])
+            yaw = max([yaw, *(math.sqrt(x) for x in var[2:] if x >= 0.0)])
+        return AttitudeSample(t_us, v[0], v[1], v[2], roll_pitch, yaw)
 
     def altitude_at(self, t_us: int) -> AltitudeSample | None:
         """The EKF's NED down at ``t_us`` (``pose.use_altitude``), or None."""

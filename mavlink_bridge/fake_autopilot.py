@@ -9,7 +9,9 @@ It is first-class code: tests, ``companion demo`` and ``companion fake-autopilot
   HEARTBEAT and PX4's TIMESYNC requests until asked with SET_MESSAGE_INTERVAL or
   REQUEST_MESSAGE; a reboot forgets the intervals.  Available: ATTITUDE,
   LOCAL_POSITION_NED, GLOBAL_POSITION_INT (0, 0 until the origin is set, like ArduPilot),
-  SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT, HOME_POSITION (once the origin is set).
+  SYSTEM_TIME, DISTANCE_SENSOR, EKF_STATUS_REPORT, HOME_POSITION (once the origin is set),
+  and on PX4 ODOMETRY (the estimate with its attitude variance:
+  ``reported_attitude_sigma_deg``).
 * Its own estimator (:mod:`mavlink_bridge.fake_ekf`): LOCAL_POSITION_NED, GLOBAL_POSITION_INT,
   ATTITUDE and EKF_STATUS_REPORT report the estimate; fixes are gated against it, never
   against the truth.  Without fixes: "VisOdom: not healthy", flags 0x25, EKF failsafe LAND.
@@ -106,6 +108,7 @@ class FakeAutopilotConfig:
         ("GLOBAL_POSITION_INT", 0.2), ("SYSTEM_TIME", 1.0), ("DISTANCE_SENSOR", 0.1),
         ("EKF_STATUS_REPORT", 0.5), ("TIMESYNC", 0.1), ("HOME_POSITION", 1.0),
         ("SIMSTATE", 0.02), ("SIM_STATE", 0.02), ("HIL_STATE_QUATERNION", 0.02),
+        ("ODOMETRY", 0.1),
     )
     # the simulator's true pose (SIMSTATE/SIM_STATE or HIL_STATE_QUATERNION); off = a real
     # vehicle, which sends no truth
@@ -116,6 +119,10 @@ class FakeAutopilotConfig:
     # carries, on top of the estimator's coupled one (fake_drift: 1 deg roll/pitch, 3 deg yaw,
     # 1 deg/min yaw drift); None: the exact attitude.  Truth streams (SIM_STATE ...) stay exact.
     attitude_error: AttitudeErrorConfig | None = field(default_factory=AttitudeErrorConfig)
+    # the (roll/pitch, yaw) 1-sigma PX4's ODOMETRY states for the attitude (its EKF's
+    # orientation_variance); None: the error's own stationary sigmas (an honest EKF), 0.1 deg
+    # without an error
+    reported_attitude_sigma_deg: tuple[float, float] | None = None
     # DISTANCE_SENSOR's orientation (MAV_SENSOR_ORIENTATION): 25 (PITCH_270) a downward
     # range finder, ArduPilot's RNGFND1_ORIENT default; 0 (NONE) a forward one
     rangefinder_orientation: int = 25
@@ -239,7 +246,7 @@ class FakeAutopilot:
         if self.config.send_truth:
             names |= set(_TRUTH_BY_PROFILE[self.config.profile])
         if self.config.profile != "px4":
-            names.discard("TIMESYNC")
+            names -= {"TIMESYNC", "ODOMETRY"}  # ArduPilot sends no ODOMETRY
         return frozenset(names)
 
     # ------------------------------------------------------------ lifecycle
@@ -425,10 +432,24 @@ class FakeAutopilot:
             mav.ekf_status_report_send(flags, 0.1, 0.1, 0.1, 0.1, 0.0)
         elif name == "TIMESYNC":
             mav.timesync_send(0, self._local_ns())
+        elif name == "ODOMETRY":  # PX4's: position, attitude and their variances
+            cov = [math.nan] * 21
+            cov[15] = cov[18] = math.radians(self._reported_sigmas_deg()[0]) ** 2
+            cov[20] = math.radians(self._reported_sigmas_deg()[1]) ** 2
+            mav.odometry_send(self._local_ns() // 1000, 1, 12, n, e, d,  # LOCAL_NED, BODY_FRD
+                              list(quaternion_from_rpy(r, p, y)), vn, ve, vd, 0.0, 0.0, 0.0,
+                              cov, [math.nan] * 21, 0, 8)  # MAV_ESTIMATOR_TYPE_AUTOPILOT
         elif name == "HOME_POSITION" and self.origin is not None:
             lat, lon, alt = self._global(0.0, 0.0, 0.0)
             mav.home_position_send(lat, lon, alt, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
                                    0.0, 0.0, 0.0)
+
+    def _reported_sigmas_deg(self) -> tuple[float, float]:
+        """The attitude 1-sigma ODOMETRY states (roll/pitch, yaw; the config's)."""
+        if self.config.reported_attitude_sigma_deg is not None:
+            return self.config.reported_attitude_sigma_deg
+        err = self.config.attitude_error
+        return (0.1, 0.1) if err is None else (err.roll_pitch_sigma_deg, err.yaw_sigma_deg)
 
     def _local_ns(self) -> int:
         return self.clock_ns() - self.boot_ns

@@ -31,7 +31,7 @@ MAV_CMD_REQUEST_MESSAGE = 512
 MESSAGE_IDS: dict[str, int] = {
     "ATTITUDE": 30, "LOCAL_POSITION_NED": 32, "GLOBAL_POSITION_INT": 33,
     "DISTANCE_SENSOR": 132, "EKF_STATUS_REPORT": 193, "SIM_STATE": 108, "SIMSTATE": 164,
-    "HIL_STATE_QUATERNION": 115, "SYSTEM_TIME": 2, "HOME_POSITION": 242,
+    "HIL_STATE_QUATERNION": 115, "SYSTEM_TIME": 2, "HOME_POSITION": 242, "ODOMETRY": 331,
 }
 MESSAGE_NAMES: dict[int, str] = {v: k for k, v in MESSAGE_IDS.items()}
 log = logging.getLogger(__name__)
@@ -62,8 +62,9 @@ def needed_streams(camera_fps: float, *, profile: str = "ardupilot", rangefinder
     frame's time; 10 Hz minimum); LOCAL_POSITION_NED (down: the height prior; the monitor
     plots fixes against it) and GLOBAL_POSITION_INT (relative altitude; proves the EKF origin
     is set); DISTANCE_SENSOR with a range finder; EKF_STATUS_REPORT on ArduPilot (PX4 has no
-    such stream) to watch the EKF accept the fixes; the simulator's truth only in follow
-    mode (SIM_STATE on ArduPilot SITL, HIL_STATE_QUATERNION on PX4).
+    such stream) to watch the EKF accept the fixes; ODOMETRY on PX4, whose attitude variance
+    widens the attitude prior (:mod:`companion.sensors`); the simulator's truth only in
+    follow mode (SIM_STATE on ArduPilot SITL, HIL_STATE_QUATERNION on PX4).
     """
     att_hz = float(min(50, max(10, math.ceil(camera_fps))))
     out = [StreamSpec("ATTITUDE", att_hz, "attitude prior of the pose solver"),
@@ -73,6 +74,8 @@ def needed_streams(camera_fps: float, *, profile: str = "ardupilot", rangefinder
         out.append(StreamSpec("DISTANCE_SENSOR", 20.0, "range finder for the height prior"))
     if profile == "ardupilot":
         out.append(StreamSpec("EKF_STATUS_REPORT", 2.0, "EKF health monitoring"))
+    else:  # PX4 states its EKF's attitude variance there (ArduPilot nowhere)
+        out.append(StreamSpec("ODOMETRY", 5.0, "the EKF's attitude variance (attitude prior)"))
     if follow:
         truth = "SIM_STATE" if profile == "ardupilot" else "HIL_STATE_QUATERNION"
         out.append(StreamSpec(truth, 50.0, "follow mode: the simulator's true pose"))
@@ -94,6 +97,7 @@ class _Stream:
     since_ns: int | None = None  # the last ask_all (link-up, reboot)
     asked_ns: int = 0  # the last request
     last_ns: int | None = None
+    back_ns: int | None = None  # the first arrival after it went missing
     retry_s: float = 0.0
     requests: int = 0
     arrivals: collections.deque[int] = field(default_factory=lambda: collections.deque(maxlen=200))
@@ -138,6 +142,8 @@ class StreamWatch:
     def on_message(self, name: str, now_ns: int) -> None:
         s = self._streams.get(name)
         if s is not None:
+            if s.state == "missing":
+                s.back_ns = now_ns
             s.last_ns = now_ns
             s.arrivals.append(now_ns)
 
@@ -176,8 +182,9 @@ class StreamWatch:
             return "missing"
         if last is None:
             return "asked"
-        if (now_ns - s.since_ns) * 1e-9 < max(self.window_s, 6.0 / s.spec.rate_hz):
-            return "arriving"  # too early to judge the rate
+        began = s.since_ns if s.back_ns is None else max(s.since_ns, s.back_ns)
+        if (now_ns - began) * 1e-9 < max(self.window_s, 6.0 / s.spec.rate_hz):
+            return "arriving"  # too early to judge the rate (asked, or back after a silence)
         rate = self.rate_hz(s.spec.name, now_ns)
         return "arriving" if rate >= SLOW_SHARE * s.spec.rate_hz else "slow"
 

@@ -18,6 +18,7 @@ TELEMETRY_NAMES = (
     "HEARTBEAT", "ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME",
     "TIMESYNC", "HOME_POSITION", "EKF_STATUS_REPORT", "DISTANCE_SENSOR", "STATUSTEXT",
     "GPS_GLOBAL_ORIGIN", "COMMAND_ACK", "SIMSTATE", "SIM_STATE", "HIL_STATE_QUATERNION",
+    "ODOMETRY",
 )
 #: Messages that carry a simulator's true pose (never a real vehicle's estimate).
 TRUTH_NAMES = ("SIM_STATE", "SIMSTATE", "HIL_STATE_QUATERNION")
@@ -100,6 +101,27 @@ class DistanceSensor:
     max_distance_m: float
     orientation: int
     sensor_id: int
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """The autopilot's own attitude variance (rad^2; NaN: not reported), from ODOMETRY's
+    ``pose_covariance`` (the upper triangle of x, y, z, roll, pitch, yaw: roll at 15, pitch
+    at 18, yaw at 20).  PX4 streams its EKF's ``orientation_variance`` there
+    (src/modules/mavlink/streams/ODOMETRY.hpp); ArduPilot sends no ODOMETRY."""
+
+    time_usec: int
+    attitude_variance_rad2: tuple[float, float, float]
+
+    @property
+    def time_boot_ms(self) -> int:
+        return self.time_usec // 1000
+
+
+def _odometry(d: Mapping[str, Any]) -> Odometry:
+    cov = list(d.get("pose_covariance") or [])
+    var = tuple(float(cov[i]) if len(cov) == 21 else math.nan for i in (15, 18, 20))
+    return Odometry(_i(d, "time_usec"), (var[0], var[1], var[2]))
 
 
 @dataclass(frozen=True)
@@ -239,6 +261,7 @@ _CONVERTERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
     "SIMSTATE": _simstate,
     "SIM_STATE": _sim_state,
     "HIL_STATE_QUATERNION": _hil_state_quaternion,
+    "ODOMETRY": _odometry,
 }
 
 

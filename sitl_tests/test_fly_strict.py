@@ -32,6 +32,7 @@ import numpy as np
 import pytest
 
 from companion.cli import main
+from companion.square import SquarePlan, square_corners
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.fake_vehicle import ARDUCOPTER_LAND, PX4_LAND
 from tests.run_helpers import fake_and_loop
@@ -122,6 +123,28 @@ def test_an_8s_outage_in_flight_lands_and_stops_fly(
           f"later; {last}")
 
 
+def visits(path_ne: np.ndarray, corner: tuple[float, float, float], near_m: float = 0.3,
+           away_m: float = 1.0) -> int:
+    """How many times the path came within ``near_m`` of ``corner`` (horizontally), each
+    visit counted once it had gone ``away_m`` from it."""
+    dist = np.linalg.norm(path_ne - np.asarray(corner[:2]), axis=1)
+    count, away = 0, True
+    for d in dist:
+        if away and d < near_m:
+            count, away = count + 1, False
+        elif d > away_m:
+            away = True
+    return count
+
+
+def test_visits_counts_each_pass_once() -> None:
+    there, between = [6.0, 6.0], [3.0, 3.0]
+    path = np.array([between, there, [6.1, 6.0], between, there, there, between])
+    assert visits(path, (6.0, 6.0, -4.0)) == 2
+    assert visits(path[:3], (6.0, 6.0, -4.0)) == 1
+    assert visits(path, (0.0, 0.0, -4.0)) == 0
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", SQUARE_SEEDS)
 def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
@@ -129,6 +152,7 @@ def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
         status = fly(fake.local_port, tmp_path, 110.0, "--set", f"source.seed={seed}")
         end_s = fake.flight_s()
         events, vision = list(fake.flight.events), list(fake.vision)
+        truth_ne = np.array([t[:2] for _, _, t in fake.track])
         diffs = np.array([np.subtract(e, t) for _, e, t in fake.track])
         errors = np.linalg.norm(diffs, axis=1)
         failsafe = fake.flight.failsafe
@@ -145,5 +169,7 @@ def test_three_laps_against_the_strict_fake(tmp_path: Path, seed: int) -> None:
           f"events {events[-3:]}")
     assert failsafe is None, events
     assert status == 0
+    laps = [visits(truth_ne, c) for c in square_corners(SquarePlan())]
+    assert min(laps) >= 3, f"the vehicle reached the corners {laps} times: not three laps"
     assert gaps.max() < 1.0
     assert median < 0.10 and worst < 0.5

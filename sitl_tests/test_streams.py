@@ -11,17 +11,20 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from pathlib import Path
 
 import pytest
 
 from companion.autopilot import BridgeSink
+from companion.sensors import SensorHistory
 from mavlink_bridge.bridge import PymavlinkBridge
 from mavlink_bridge.config import MavlinkConfig
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.streams import needed_streams
 from sitl_tests.harness import Flight, sitl_settings, wait_until
+from tracker.pose.config import PoseConfig
 
 ORIGIN = {"origin_lat_deg": 47.39, "origin_lon_deg": 8.54, "origin_alt_m": 400.0}
 
@@ -132,3 +135,31 @@ async def test_the_status_carries_the_streams(tmp_path: Path) -> None:
     warnings = seen["warnings"]
     assert isinstance(warnings, list)
     assert [w for w in warnings if not w.startswith("falling behind")] == [], warnings
+
+
+async def test_px4s_own_attitude_variance_widens_the_prior() -> None:
+    """PX4 states its EKF's attitude variance in ODOMETRY (ArduPilot nowhere): the companion
+    asks for it on PX4 only, and a yaw the autopilot says it does not know (15 deg) widens
+    the pose solver's prior; a roll/pitch it is surer of than configured (1 deg) does not
+    narrow it (companion/sensors.py)."""
+    px4 = tuple((s.name, s.rate_hz) for s in needed_streams(15.0, profile="px4"))
+    assert ("ODOMETRY", 5.0) in px4 and "ODOMETRY" not in dict(asked())
+    cfg = FakeAutopilotConfig(profile="px4", reported_attitude_sigma_deg=(1.0, 15.0))
+    async with FakeAutopilot(cfg) as fake, bridge_to(fake, px4) as bridge:
+        bridge.report_health("ok")
+        history = SensorHistory(bridge, PoseConfig())
+        history.start()
+        try:
+            assert await bridge.wait_link(True, 3.0)
+            came = await until(lambda: history.received["ODOMETRY"] >= 2
+                               and history.received["ATTITUDE"] >= 2, 3.0)
+            assert came is not None, history.received
+            newest = history.last_us()
+            assert newest is not None
+            prior = history.attitude_at(newest)
+        finally:
+            await history.stop()
+    assert prior is not None
+    assert math.degrees(prior.yaw_sigma_rad) == pytest.approx(15.0, rel=1e-5)
+    assert math.degrees(prior.roll_pitch_sigma_rad) == pytest.approx(
+        PoseConfig().attitude_roll_pitch_sigma_deg)

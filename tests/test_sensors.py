@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from companion.sensors import SensorHistory
-from mavlink_bridge.telemetry import Attitude, DistanceSensor, LocalPositionNed
+from mavlink_bridge.telemetry import Attitude, DistanceSensor, LocalPositionNed, Odometry, convert
 from tracker.pose.config import PoseConfig
 
 
@@ -85,4 +85,34 @@ def test_call_gives_all_three() -> None:
     h.add("DISTANCE_SENSOR", 1_000_000, _range(3.0))
     side = h(1_000_000)
     assert side.attitude is not None and side.altitude is not None and side.laser is not None
-    assert h.received == {"ATTITUDE": 1, "LOCAL_POSITION_NED": 1, "DISTANCE_SENSOR": 1}
+    assert h.received == {"ATTITUDE": 1, "LOCAL_POSITION_NED": 1, "DISTANCE_SENSOR": 1,
+                          "ODOMETRY": 0}
+
+
+def test_the_autopilots_own_attitude_variance_only_ever_widens_the_prior() -> None:
+    """PX4's ODOMETRY carries its EKF's orientation variance (pose_covariance 15 / 18 / 20):
+    a yaw it says it does not know widens the prior; a variance tighter than the configured
+    sigma, an old one or NaN (not reported) leaves the configured sigma."""
+    cov = [math.nan] * 21
+    cov[15], cov[18], cov[20] = math.radians(0.5) ** 2, math.radians(4.0) ** 2, \
+        math.radians(20.0) ** 2
+    odom = convert("ODOMETRY", {"time_usec": 2_000_000, "pose_covariance": cov})
+    assert isinstance(odom, Odometry) and odom.time_boot_ms == 2000
+    h = _history(attitude_roll_pitch_sigma_deg=2.5, attitude_yaw_sigma_deg=5.0)
+    h.add("ATTITUDE", 1_000_000, _att(0.0, 0.0, 0.0))
+    h.add("ODOMETRY", 1_000_000, odom)
+    a = h.attitude_at(1_000_000)
+    assert a is not None
+    assert math.degrees(a.roll_pitch_sigma_rad) == pytest.approx(4.0)  # pitch's, the wider
+    assert math.degrees(a.yaw_sigma_rad) == pytest.approx(20.0)
+    h.add("ATTITUDE", 2_480_000, _att(0.0, 0.0, 0.0))
+    h.add("ATTITUDE", 2_500_000, _att(0.0, 0.0, 0.0))
+    late = h.attitude_at(2_500_000)  # the variance 1.5 s old: not counted
+    assert late is not None and math.degrees(late.yaw_sigma_rad) == pytest.approx(5.0)
+    tight = _history(attitude_roll_pitch_sigma_deg=2.5, attitude_yaw_sigma_deg=5.0)
+    tight.add("ATTITUDE", 1_000_000, _att(0.0, 0.0, 0.0))
+    tight.add("ODOMETRY", 1_000_000, Odometry(1_000_000, (1e-6, math.nan, 1e-6)))
+    a = tight.attitude_at(1_000_000)
+    assert a is not None and math.degrees(a.roll_pitch_sigma_rad) == pytest.approx(2.5)
+    assert math.degrees(a.yaw_sigma_rad) == pytest.approx(5.0)
+    assert convert("ODOMETRY", {"time_usec": 0}).attitude_variance_rad2 != (0.0, 0.0, 0.0)

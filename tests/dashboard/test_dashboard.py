@@ -31,6 +31,12 @@ BROWSER_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
 OUT = ROOT / "test-output"
 
 
+#: the status's per-stream report, as ``mavlink_bridge.streams.StreamWatch.report`` gives it
+STREAMS = {"ATTITUDE": {"asked_hz": 30.0, "rate_hz": 29.6, "state": "arriving", "requests": 1},
+           "DISTANCE_SENSOR": {"asked_hz": 20.0, "rate_hz": 0.0, "state": "missing",
+                               "requests": 4}}
+
+
 class FakeCompanion:
     """Publishes status, pose and a changing preview for one vehicle until stopped."""
 
@@ -57,7 +63,8 @@ class FakeCompanion:
                 "state": "tracking", "fps": 30.0, "latency_ms": {"p50": 6.0, "p99": 11.0},
                 "link": "up", "dropped_frames": 0,
                 "counters": {"frames": self.frames, "fixes_sent": self.frames - 1,
-                             "fixes_accepted": self.frames - 2}})
+                             "fixes_accepted": self.frames - 2},
+                "autopilot_streams": STREAMS})
             t = self.frames * 0.1
             self.pub.publish_json("pose", {
                 "position_ned_m": [np.cos(t), np.sin(t), -5.0],
@@ -145,6 +152,9 @@ def test_page_shows_live_preview_and_the_published_counters(
         assert 0 <= published - shown <= 15
         assert (sent - shown, accepted - shown) == (-1, -2)  # exactly the published relation
         assert page.inner_text("td[data-key='state']") == "tracking"
+        # each stream: its state, the rate it arrives at and the rate asked (issue 19)
+        assert (cells["stream ATTITUDE"], cells["stream DISTANCE_SENSOR"]) \
+            == ("arriving 29.6 / 30 Hz", "missing 0.0 / 20 Hz"), cells
         assert not page.is_visible("#stale")
         page.wait_for_function("document.querySelector('#plot') !== null")
         page.screenshot(path=str(OUT / "dashboard.png"), full_page=True)
