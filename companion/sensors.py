@@ -176,8 +176,9 @@ class SensorHistory:
         cfg = self.config
         roll_pitch = math.radians(cfg.attitude_roll_pitch_sigma_deg)
         yaw = math.radians(cfg.attitude_yaw_sigma_deg)
-        var = nearest(list(self.samples["ODOMETRY"]), t_us, ODOMETRY_AGE_US)
-        if var is not None:  # the autopilot's own variance: only ever wider (module doc)
+        odometry = self.samples["ODOMETRY"]  # the newest, not a copy scanned every frame
+        if odometry and abs(odometry[-1][0] - t_us) <= ODOMETRY_AGE_US:
+            var = odometry[-1][1]  # the autopilot's own variance: only ever wider (module doc)
             roll_pitch = max([roll_pitch, *(math.sqrt(x) for x in var[:2] if x >= 0.0)])
             yaw = max([yaw, *(math.sqrt(x) for x in var[2:] if x >= 0.0)])
         return AttitudeSample(t_us, v[0], v[1], v[2], roll_pitch, yaw)

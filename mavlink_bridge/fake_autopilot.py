@@ -433,9 +433,9 @@ class FakeAutopilot:
         elif name == "TIMESYNC":
             mav.timesync_send(0, self._local_ns())
         elif name == "ODOMETRY":  # PX4's: position, attitude and their variances
-            cov = [math.nan] * 21
-            cov[15] = cov[18] = math.radians(self._reported_sigmas_deg()[0]) ** 2
-            cov[20] = math.radians(self._reported_sigmas_deg()[1]) ** 2
+            cov, (tilt_deg, yaw_deg) = [math.nan] * 21, self._reported_sigmas_deg()
+            cov[15] = cov[18] = math.radians(tilt_deg) ** 2
+            cov[20] = math.radians(yaw_deg) ** 2
             mav.odometry_send(self._local_ns() // 1000, 1, 12, n, e, d,  # LOCAL_NED, BODY_FRD
                               list(quaternion_from_rpy(r, p, y)), vn, ve, vd, 0.0, 0.0, 0.0,
                               cov, [math.nan] * 21, 0, 8)  # MAV_ESTIMATOR_TYPE_AUTOPILOT

@@ -23,7 +23,8 @@ limited speed and acceleration, its tilt following the acceleration.  Its horizo
 acceleration changes no faster than ArduPilot's position controller lets it:
 ``PSC_JERK_NE`` (``PSC_JERK_XY`` before 4.7), default 5 m/s^3
 (libraries/AC_AttitudeControl/AC_PosControl.h, ``POSCONTROL_JERK_NE_MSSS``; PX4's
-``MPC_JERK_AUTO`` default 4 m/s^3 is of the same size).  Without it the vehicle leaned 11.5
+``MPC_JERK_AUTO``, 4 m/s^3 in the PX4 SITL configurations seen, not read in PX4's own
+source here, is of the same size).  Without it the vehicle leaned 11.5
 deg within one 10 ms step when a leg began, a turn no copter makes, and a camera frame
 matched to an attitude sample one frame old was 11.5 deg off (issue 19).
 """
@@ -179,9 +180,9 @@ class GuidedVehicle:
         if norm > self.max_accel_m_s2:
             a *= self.max_accel_m_s2 / norm
         step = a[:2] - self._a_ne
-        most = self.max_jerk_m_s3 * dt
-        if float(np.linalg.norm(step)) > most:
-            a[:2] = self._a_ne + step * (most / float(np.linalg.norm(step)))
+        most, change = self.max_jerk_m_s3 * dt, float(np.linalg.norm(step))
+        if change > most:
+            a[:2] = self._a_ne + step * (most / change)
         self._a_ne = a[:2].copy()
         v0 = self.v
         self.v = self.v + a * dt
