@@ -6,8 +6,10 @@ into a raw recording in a temporary folder (``frames.npy`` and ``truth.pkl``; ``
 keeps and reuses one), read into memory and served at the camera's rate (30 fps, >= 900
 frames), so the camera costs nothing.  Each run is a
 child process pinned to one core (``os.sched_setaffinity``), optionally with a competing busy
-process pinned to the same core.  It prints p50 / p99 / max of capture -> worker, processing
-and capture -> wire, dropped frames, the cores the companion used and its accuracy::
+process pinned to the same core (``busy``) or two (``slow``: the companion gets a third of
+the core, a stand-in for a slower board).  It prints p50 / p99 / max of capture -> worker,
+processing and capture -> wire, dropped frames, the cores the companion used and its
+accuracy::
 
     PYTHONPATH=. .venv/bin/python benchmarks/latency_pinned.py --runs 3 \
         --checkout /work/wt/base --checkout .          # old, new, old, new, ... alternated
@@ -16,9 +18,11 @@ and capture -> wire, dropped frames, the cores the companion used and its accura
         --checkout /work/wt/base --checkout .          # `companion demo --json` alternated
     PYTHONPATH=. .venv/bin/python benchmarks/latency_pinned.py --demo --cases quiet,busy \
         --runs 3                                       # ... and beside a busy loop
+    PYTHONPATH=. .venv/bin/python benchmarks/latency_pinned.py --cases slow --runs 3
 
 Each ``--checkout`` runs with that checkout's ``.venv/bin/python`` and its code on
-``PYTHONPATH`` (this file's child mode uses only what the code before issue 23 had too).
+``PYTHONPATH`` (this file's child mode uses only what the code before issue 23 had too; a
+checkout that cannot unpickle the recording's truth renders it with its own simulator).
 Every run ends with issue 23's targets per case (:data:`TARGETS`), met or not by the
 medians and by how many runs.  ``--check`` compares the median over ``--runs`` with
 ``benchmarks/latency_baseline.json``:
@@ -60,16 +64,21 @@ BUSY_CODE = "import os, sys\nos.sched_setaffinity(0, {int(sys.argv[1])})\nwhile 
 
 # -- the recording ---------------------------------------------------------------------------
 
-def record(folder: Path, scenario: str, seconds: float) -> None:
-    """Render the scenario's frames into ``folder`` (raw uint8 frames and their truth)."""
+def _simulator(scenario: str, seconds: float) -> Any:
+    """The checkout's own simulator of ``scenario`` cut to ``seconds``."""
     import dataclasses
-
-    import numpy as np
 
     from companion.sim.scenario import load_scenario
     from companion.sim.simulator import Simulator
 
-    sim = Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
+    return Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
+
+
+def record(folder: Path, scenario: str, seconds: float) -> None:
+    """Render the scenario's frames into ``folder`` (raw uint8 frames and their truth)."""
+    import numpy as np
+
+    sim = _simulator(scenario, seconds)
     count = max(1, round(seconds * sim.fps))
     first, truth0 = sim.render(0, 0.0)
     frames = np.lib.format.open_memmap(folder / "frames.npy", "w+", np.uint8,
@@ -83,6 +92,22 @@ def record(folder: Path, scenario: str, seconds: float) -> None:
     frames.flush()
     with (folder / "truth.pkl").open("wb") as f:
         pickle.dump({"scenario": scenario, "seconds": seconds, "truths": truths}, f)
+    (folder / "meta.json").write_text(json.dumps({"scenario": scenario, "seconds": seconds}))
+
+
+def load_truths(folder: Path, count: int) -> dict[str, Any]:
+    """The recording's scenario, seconds and per-frame truths.  A checkout whose truth
+    types live elsewhere than the recorder's (an older one) cannot unpickle them: it
+    renders the same frames' truths with its own simulator (before anything is timed)."""
+    with (folder / "truth.pkl").open("rb") as f:
+        raw = f.read()
+    try:
+        meta: dict[str, Any] = pickle.loads(raw)
+        return meta
+    except (ImportError, AttributeError):
+        meta = json.loads((folder / "meta.json").read_text())
+    sim = _simulator(meta["scenario"], meta["seconds"])
+    return {**meta, "truths": [sim.render(i, i / sim.fps)[1] for i in range(count)]}
 
 
 # -- one run (child process, inside the checkout under test) ---------------------------------
@@ -99,8 +124,7 @@ def child(args: argparse.Namespace) -> None:
     from companion.settings import load_settings
 
     frames = np.load(Path(args.stream) / "frames.npy", mmap_mode="r")
-    with (Path(args.stream) / "truth.pkl").open("rb") as f:
-        meta = pickle.load(f)
+    meta = load_truths(Path(args.stream), len(frames))
     frames = np.ascontiguousarray(frames)  # into memory: the camera costs nothing
 
     class Recorded(demo.SimCameraSource):
@@ -275,9 +299,29 @@ def busy_loop(core: int | None) -> subprocess.Popen[bytes]:
                                                              else []))
 
 
-def run_child(checkout: Path, stream: Path, core: int, busy: bool,
+def stop(hogs: list[subprocess.Popen[bytes]]) -> None:
+    for hog in hogs:
+        hog.kill()
+        hog.wait()
+
+
+#: busy loops beside a pinned run, on its core: ``slow`` leaves the companion a third of
+#: the core, a stand-in for a board (or an hour of this machine) two to three times slower
+PINNED_HOGS = {"quiet": 0, "busy": 1, "slow": 2}
+
+
+def demo_hogs(case: str) -> list[int | None]:
+    """Busy loops beside a demo: ``demo-busy`` one wherever the OS puts it, ``demo-slow`` one
+    pinned to every core (each core at half its speed for the companion)."""
+    if case == "demo-busy":
+        return [None]
+    cores: list[int | None] = list(sorted(os.sched_getaffinity(0)))
+    return cores if case == "demo-slow" else []
+
+
+def run_child(checkout: Path, stream: Path, core: int, hogs: int,
               profile: bool) -> dict[str, Any]:
-    hog = busy_loop(core) if busy else None
+    hog = [busy_loop(core) for _ in range(hogs)]
     try:
         env = {**os.environ, "PYTHONPATH": str(checkout), "OPENBLAS_NUM_THREADS": "1",
                "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -286,9 +330,7 @@ def run_child(checkout: Path, stream: Path, core: int, busy: bool,
         done = subprocess.run(cmd, env=env, cwd=checkout, capture_output=True, text=True,
                               check=False)
     finally:
-        if hog is not None:
-            hog.kill()
-            hog.wait()
+        stop(hog)
     for line in done.stdout.splitlines():
         if line.startswith("RESULT "):
             result: dict[str, Any] = json.loads(line[7:])
@@ -314,20 +356,18 @@ def cpu_per_frame(s: dict[str, Any]) -> dict[str, Any]:
             "cores_autopilot": s.get("cpu_cores_autopilot")}
 
 
-def run_demo_child(checkout: Path, seconds: float, busy: bool = False) -> dict[str, Any]:
-    """``companion demo --seconds S --json`` of one checkout, as a user runs it; ``busy``:
-    with a busy loop beside it (not pinned: "another process busy on one core")."""
+def run_demo_child(checkout: Path, seconds: float, case: str = "demo") -> dict[str, Any]:
+    """``companion demo --seconds S --json`` of one checkout, as a user runs it, beside the
+    busy loops of ``case`` (:func:`demo_hogs`)."""
     exe = checkout / ".venv" / "bin" / "companion"
     listen = json.dumps([f"tcp/127.0.0.1:{free_port()}"])  # see child()
-    hog = busy_loop(None) if busy else None
+    hog = [busy_loop(core) for core in demo_hogs(case)]
     try:
         done = subprocess.run([str(exe), "--set", f"monitor.listen={listen}", "demo",
                                "--seconds", str(seconds), "--json"],
                               cwd=checkout, capture_output=True, text=True, check=False)
     finally:
-        if hog is not None:
-            hog.kill()
-            hog.wait()
+        stop(hog)
     try:
         s = json.loads(done.stdout)
     except json.JSONDecodeError:
@@ -395,8 +435,8 @@ def gate(summary: dict[str, dict[str, Any]]) -> list[str]:
 #: Issue 23's targets per case: capture -> wire p99 (ms), dropped frames (a share of the
 #: frames), cores of the companion; None: no target.
 TARGETS: dict[str, tuple[float, float, float | None] | None] = {
-    "demo": (20.0, 0.0, 0.5), "demo-busy": (33.0, 0.01, None),
-    "quiet": (33.0, 0.0, None), "busy": None}
+    "demo": (20.0, 0.0, 0.5), "demo-busy": (33.0, 0.01, None), "demo-slow": None,
+    "quiet": (33.0, 0.0, None), "busy": None, "slow": None}
 
 
 def meets(r: dict[str, Any], target: tuple[float, float, float | None]) -> bool:
@@ -451,7 +491,8 @@ def parse() -> argparse.Namespace:
     ap.add_argument("--seconds", type=float, default=31.0, help="recording length (>= 30)")
     ap.add_argument("--core", type=int, default=max(os.sched_getaffinity(0)))
     ap.add_argument("--cases", help="comma-separated: quiet, busy (a busy-loop process on "
-                    "the same core; with --demo, on any core); default quiet,busy pinned, "
+                    "the same core; with --demo, on any core), slow (two on the same core; "
+                    "with --demo, one pinned to each core); default quiet,busy pinned, "
                     "quiet with --demo")
     ap.add_argument("--stream", help="reuse a recording made by an earlier run (folder)")
     ap.add_argument("--demo", action="store_true",
@@ -473,10 +514,10 @@ def main() -> int:
     checkouts = [c.resolve() for c in (args.checkout or [ROOT])]
     spec = args.cases or ("quiet" if args.demo else "quiet,busy")
     cases = [c for c in spec.split(",") if c]
-    if not cases or set(cases) - {"quiet", "busy"}:
-        raise SystemExit(f"--cases: quiet, busy or quiet,busy, not {spec!r}")
+    if not cases or set(cases) - set(PINNED_HOGS):
+        raise SystemExit(f"--cases: a comma-separated list of quiet, busy, slow, not {spec!r}")
     if args.demo:  # the demo's cases by their own names (TARGETS)
-        cases = ["demo" if c == "quiet" else "demo-busy" for c in cases]
+        cases = ["demo" if c == "quiet" else f"demo-{c}" for c in cases]
     with tempfile.TemporaryDirectory(prefix="latency-stream-") as tmp:
         stream = Path(args.stream) if args.stream else Path(tmp)
         stream.mkdir(parents=True, exist_ok=True)
@@ -489,9 +530,9 @@ def main() -> int:
                 for checkout in checkouts:
                     label = f"{checkout.name}:{case}"
                     load = Path("/proc/loadavg").read_text().split()[0]
-                    r = run_demo_child(checkout, args.seconds, case == "demo-busy") \
+                    r = run_demo_child(checkout, args.seconds, case) \
                         if args.demo else run_child(checkout, stream, args.core,
-                                                    case == "busy", args.profile)
+                                                    PINNED_HOGS[case], args.profile)
                     r["load"] = load
                     results.setdefault(label, []).append(r)
                     print(f"run {run + 1} {line(label, r)}", flush=True)
