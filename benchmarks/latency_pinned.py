@@ -2,10 +2,10 @@
 
 The demo's pipeline (fake autopilot on UDP loopback, MAVLink bridge, Zenoh monitoring, flight
 log, perception) runs on a stream recorded beforehand: the scenario's frames are rendered once
-into a raw recording in a temporary folder (``frames.npy`` and ``truth.pkl``; ``--stream``
-keeps and reuses one), read into memory and served at the camera's rate (30 fps, >= 900
-frames), so the camera costs nothing.  Each run is a
-child process pinned to one core (``os.sched_setaffinity``), optionally with a competing busy
+into a raw recording in a temporary folder (``frames.npy``, ``truth.pkl`` and
+``meta.json``; ``--stream`` keeps and reuses one), read into memory and served at the
+camera's rate (30 fps, >= 900 frames), so the camera costs nothing.  Each run is a child
+process pinned to one core (``os.sched_setaffinity``), optionally with a competing busy
 process pinned to the same core (``busy``) or two (``slow``: the companion gets a third of
 the core, a stand-in for a slower board).  It prints p50 / p99 / max of capture -> worker,
 processing and capture -> wire, dropped frames, the cores the companion used and its
@@ -38,6 +38,7 @@ Figures and their reading: docs/benchmarks.md, "Latency tail (issue 23)".
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import pickle
@@ -47,6 +48,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -59,7 +61,15 @@ HOUSEKEEPING_STEPS = {"features": "FeatureAcquirer", "prediction": "PredictionAc
                       "detector": "DetectorAcquirer", "search": "SearchAcquirer"}
 PROBED = ("gc", "threads_cpu_s", "process", "housekeeping", *HOUSEKEEPING_STEPS,
           "slowest_process")
-BUSY_CODE = "import os, sys\nos.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True:\n    pass\n"
+#: a busy loop (argv: the parent's pid, then the core to pin it to, if any) that ends once
+#: its parent is gone, however the parent ended
+BUSY_CODE = """import os, sys
+if len(sys.argv) > 2:
+    os.sched_setaffinity(0, {int(sys.argv[2])})
+while os.getppid() == int(sys.argv[1]):
+    for _ in range(1000000):
+        pass
+"""
 
 
 # -- the recording ---------------------------------------------------------------------------
@@ -92,7 +102,14 @@ def record(folder: Path, scenario: str, seconds: float) -> None:
     frames.flush()
     with (folder / "truth.pkl").open("wb") as f:
         pickle.dump({"scenario": scenario, "seconds": seconds, "truths": truths}, f)
-    (folder / "meta.json").write_text(json.dumps({"scenario": scenario, "seconds": seconds}))
+    write_meta(folder)
+
+
+def write_meta(folder: Path) -> None:
+    """``meta.json`` beside the truth: the scenario and seconds, which any checkout reads."""
+    with (folder / "truth.pkl").open("rb") as f:
+        meta = pickle.load(f)
+    (folder / "meta.json").write_text(json.dumps({k: meta[k] for k in ("scenario", "seconds")}))
 
 
 def load_truths(folder: Path, count: int) -> dict[str, Any]:
@@ -294,15 +311,23 @@ def python_of(checkout: Path) -> str:
 
 def busy_loop(core: int | None) -> subprocess.Popen[bytes]:
     """Another process busy on one core: pinned to ``core``, or wherever the OS puts it."""
-    code = BUSY_CODE if core is not None else "while True:\n    pass\n"
-    return subprocess.Popen([sys.executable, "-c", code] + ([str(core)] if core is not None
-                                                             else []))
+    return subprocess.Popen([sys.executable, "-c", BUSY_CODE, str(os.getpid())]
+                            + ([] if core is None else [str(core)]))
 
 
-def stop(hogs: list[subprocess.Popen[bytes]]) -> None:
-    for hog in hogs:
-        hog.kill()
-        hog.wait()
+@contextlib.contextmanager
+def busy_loops(cores: list[int | None]) -> Iterator[None]:
+    """A busy loop on each of ``cores`` (None: anywhere) while the block runs, killed
+    however it ends."""
+    hogs: list[subprocess.Popen[bytes]] = []
+    try:
+        for core in cores:
+            hogs.append(busy_loop(core))
+        yield
+    finally:
+        for hog in hogs:
+            hog.kill()
+            hog.wait()
 
 
 #: busy loops beside a pinned run, on its core: ``slow`` leaves the companion a third of
@@ -321,16 +346,13 @@ def demo_hogs(case: str) -> list[int | None]:
 
 def run_child(checkout: Path, stream: Path, core: int, hogs: int,
               profile: bool) -> dict[str, Any]:
-    hog = [busy_loop(core) for _ in range(hogs)]
-    try:
+    with busy_loops([core] * hogs):
         env = {**os.environ, "PYTHONPATH": str(checkout), "OPENBLAS_NUM_THREADS": "1",
                "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
         cmd = [python_of(checkout), str(HERE), "--child", "--stream", str(stream),
                "--core", str(core)] + (["--profile"] if profile else [])
         done = subprocess.run(cmd, env=env, cwd=checkout, capture_output=True, text=True,
                               check=False)
-    finally:
-        stop(hog)
     for line in done.stdout.splitlines():
         if line.startswith("RESULT "):
             result: dict[str, Any] = json.loads(line[7:])
@@ -361,13 +383,10 @@ def run_demo_child(checkout: Path, seconds: float, case: str = "demo") -> dict[s
     busy loops of ``case`` (:func:`demo_hogs`)."""
     exe = checkout / ".venv" / "bin" / "companion"
     listen = json.dumps([f"tcp/127.0.0.1:{free_port()}"])  # see child()
-    hog = [busy_loop(core) for core in demo_hogs(case)]
-    try:
+    with busy_loops(demo_hogs(case)):
         done = subprocess.run([str(exe), "--set", f"monitor.listen={listen}", "demo",
                                "--seconds", str(seconds), "--json"],
                               cwd=checkout, capture_output=True, text=True, check=False)
-    finally:
-        stop(hog)
     try:
         s = json.loads(done.stdout)
     except json.JSONDecodeError:
@@ -524,6 +543,8 @@ def main() -> int:
         if not args.demo and not (stream / "frames.npy").exists():
             print(f"recording {args.scenario} ({args.seconds} s) into {stream} ...", flush=True)
             record(stream, args.scenario, args.seconds)
+        elif not args.demo and not (stream / "meta.json").exists():
+            write_meta(stream)  # a recording from before meta.json: for older checkouts
         results: dict[str, list[dict[str, Any]]] = {}
         for run in range(args.runs):
             for case in cases:

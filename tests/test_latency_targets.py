@@ -60,16 +60,61 @@ def test_a_truth_an_older_checkout_cannot_unpickle_is_rendered_by_its_own_simula
     its own simulator from ``meta.json``, the same truth the recorder pickled."""
     import pickle
 
-    from benchmarks.latency_pinned import load_truths, record
+    from benchmarks.latency_pinned import load_truths, record, write_meta
 
     record(tmp_path, "survey", 2 / 30)
+    (tmp_path / "meta.json").unlink()  # a recording from before meta.json: written again
+    write_meta(tmp_path)
     recorded = load_truths(tmp_path, 2)
     # a pickle naming a module this checkout does not have (as 7ad82d0 reading main's)
     unreadable = pickle.dumps(recorded)
-    assert b"companion" in unreadable
     (tmp_path / "truth.pkl").write_bytes(unreadable.replace(b"companion.core", b"companion.gone"))
     with pytest.raises(ModuleNotFoundError):
         pickle.loads((tmp_path / "truth.pkl").read_bytes())
     rebuilt = load_truths(tmp_path, 2)
     assert rebuilt["scenario"] == "survey" and len(rebuilt["truths"]) == 2
     assert repr(rebuilt["truths"]) == repr(recorded["truths"])
+
+
+def test_busy_loops_end_when_the_block_raises_and_when_their_parent_is_gone(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """No busy loop outlives a run: killed when the block raises, and gone by itself when
+    the benchmark that started it was killed (a CI timeout) before it could kill it."""
+    import subprocess
+    import sys
+    import time
+
+    import benchmarks.latency_pinned as lp
+
+    started: list[subprocess.Popen[bytes]] = []
+    real = lp.busy_loop
+
+    def recorded(core: int | None) -> subprocess.Popen[bytes]:
+        started.append(real(core))
+        return started[-1]
+
+    monkeypatch.setattr(lp, "busy_loop", recorded)
+    with pytest.raises(RuntimeError), lp.busy_loops([None, None]):
+        raise RuntimeError("the run failed")
+    assert len(started) == 2 and all(hog.poll() is not None for hog in started)
+
+    # a parent that starts a loop and exits without killing it
+    out = subprocess.run([sys.executable, "-c", "import benchmarks.latency_pinned as lp; "
+                          "print(lp.busy_loop(None).pid)"], capture_output=True, text=True,
+                         check=True, cwd=Path(lp.__file__).parents[1])
+    pid = int(out.stdout)
+    deadline = time.monotonic() + 10.0
+    while running(pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    alive = running(pid)
+    if alive:
+        subprocess.run(["kill", str(pid)], check=False)
+    assert not alive, "the busy loop outlived its parent"
+
+
+def running(pid: int) -> bool:
+    """Is process ``pid`` there and not a zombie?"""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
