@@ -21,8 +21,11 @@ accuracy::
     PYTHONPATH=. .venv/bin/python benchmarks/latency_pinned.py --cases slow --runs 3
 
 Each ``--checkout`` runs with that checkout's ``.venv/bin/python`` and its code on
-``PYTHONPATH`` (this file's child mode uses only what the code before issue 23 had too; a
-checkout that cannot unpickle the recording's truth renders it with its own simulator).
+``PYTHONPATH``; make that ``.venv`` from the lock files (``python3 dev.py demo --seconds 1``
+in the checkout), not with ``pip install -e .``, which takes the newest OpenCV and
+onnxruntime and so compares library versions too (this file's child mode uses only what
+the code before issue 23 had too; a checkout that cannot unpickle the recording's truth
+renders it with its own simulator).
 Every run ends with issue 23's targets per case (:data:`TARGETS`), met or not by the
 medians and by how many runs.  ``--check`` compares the median over ``--runs`` with
 ``benchmarks/latency_baseline.json``:
