@@ -105,13 +105,15 @@ def record(folder: Path, scenario: str, seconds: float) -> None:
     frames.flush()
     with (folder / "truth.pkl").open("wb") as f:
         pickle.dump({"scenario": scenario, "seconds": seconds, "truths": truths}, f)
-    write_meta(folder)
+    write_meta(folder, {"scenario": scenario, "seconds": seconds})
 
 
-def write_meta(folder: Path) -> None:
-    """``meta.json`` beside the truth: the scenario and seconds, which any checkout reads."""
-    with (folder / "truth.pkl").open("rb") as f:
-        meta = pickle.load(f)
+def write_meta(folder: Path, meta: dict[str, Any] | None = None) -> None:
+    """``meta.json`` beside the truth: the scenario and seconds, which any checkout reads
+    (``meta`` None: taken from the truth's pickle, for a recording made before it)."""
+    if meta is None:
+        with (folder / "truth.pkl").open("rb") as f:
+            meta = pickle.load(f)
     (folder / "meta.json").write_text(json.dumps({k: meta[k] for k in ("scenario", "seconds")}))
 
 
@@ -343,8 +345,9 @@ def demo_hogs(case: str) -> list[int | None]:
     pinned to every core (each core at half its speed for the companion)."""
     if case == "demo-busy":
         return [None]
-    cores: list[int | None] = list(sorted(os.sched_getaffinity(0)))
-    return cores if case == "demo-slow" else []
+    if case == "demo-slow":
+        return [*sorted(os.sched_getaffinity(0))]
+    return []
 
 
 def run_child(checkout: Path, stream: Path, core: int, hogs: int,
