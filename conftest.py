@@ -169,8 +169,29 @@ def is_slow(nodeid: str) -> bool:
         path.startswith(folder) for folder in SLOW if folder.endswith("/"))
 
 
+#: The long real-time flights (node id prefixes, each also ``slow``): they wait on the
+#: clock far more than they use a core (~0.5 of one), 16 of CI's 28 minutes one after the
+#: other.  Marked ``realtime``: ``python3 dev.py test`` runs them in a second pytest beside
+#: the rest of the suite (docs/testing.md, "CI's budget").
+REALTIME: tuple[str, ...] = (
+    "sitl_tests/test_fly_strict.py::test_three_laps_against_the_strict_fake",
+    "sitl_tests/test_coupled_attitude.py",
+    "sitl_tests/test_soak.py",
+)
+
+
+def is_realtime(nodeid: str) -> bool:
+    """Whether :data:`REALTIME` lists the test (its file, or the test with all its
+    parameters)."""
+    node = nodeid.split("[", 1)[0]
+    return any(node == p or node.startswith(p + "::") for p in REALTIME)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark the tests listed in :data:`SLOW` ``slow``."""
+    """Mark the tests listed in :data:`SLOW` ``slow``, those in :data:`REALTIME` also
+    ``realtime``."""
     for item in items:
         if is_slow(item.nodeid):
             item.add_marker(pytest.mark.slow)
+        if is_realtime(item.nodeid):
+            item.add_marker(pytest.mark.realtime)

@@ -3,7 +3,8 @@
 
     python3 dev.py demo [ARGS...]   install (once) and run the main job: companion demo ARGS
     python3 dev.py test [ARGS...]   install (once) and run the whole test suite:
-                                    ruff, mypy, then pytest (ARGS go to pytest)
+                                    ruff, mypy, then pytest (ARGS go to pytest; without
+                                    ARGS the long real-time flights run beside the rest)
     python3 dev.py lock             regenerate requirements/*.lock (maintainers)
 
 The environment is a virtualenv in .venv, installed from the hash-checked lock files in
@@ -29,6 +30,11 @@ LOCKS = {"runtime": ROOT / "requirements" / "runtime.lock",
 #: Test tools installed without their declared dependencies (see the file's header).
 TOOLS = ROOT / "requirements" / "tools.lock"
 PYTEST_NO_TESTS = 5
+#: The marker of the long real-time flights (conftest.py REALTIME) and where ``test`` writes
+#: their pytest's output while the rest of the suite runs beside them (test-output/ is ignored
+#: by git).
+REALTIME = "realtime"
+FLIGHTS_LOG = ROOT / "test-output" / "pytest-realtime.log"
 #: The optional features (pyproject.toml); the locks and so the dev environment hold them all.
 EXTRAS = ("postgis", "dashboard", "mavsdk")
 
@@ -91,12 +97,50 @@ def cmd_test(args: list[str]) -> int:
     run(PY, "-m", "ruff", "check", ".")
     say("mypy")
     run(PY, "-m", "mypy")
-    say("pytest")
-    status = run(PY, "-m", "pytest", *args, check=False)
+    if args or (os.cpu_count() or 1) < 2:
+        say("pytest")
+        return pytest_status(run(PY, "-m", "pytest", *args, check=False))
+    return pytest_beside_flights()
+
+
+def pytest_status(status: int) -> int:
+    """pytest's exit status, with "no tests collected" (5) a failure."""
     if status == PYTEST_NO_TESTS:
         say("pytest collected no tests: that is a failure here (wrong path or filter?)")
         return 1
     return status
+
+
+def pytest_beside_flights() -> int:
+    """The whole suite as two pytest processes at once: the long real-time flights
+    (marker ``realtime``, conftest.py) in the background, their output in
+    :data:`FLIGHTS_LOG` and printed when they end, and the rest in the foreground.  The
+    flights wait on the clock (~0.5 core each, one at a time): side by side the suite takes
+    the longer of the two instead of their sum (docs/testing.md, "CI's budget")."""
+    FLIGHTS_LOG.parent.mkdir(exist_ok=True)
+    shown = FLIGHTS_LOG.relative_to(ROOT)
+    say(f"pytest: the real-time flights (-m {REALTIME}) in the background, output in {shown}")
+    with FLIGHTS_LOG.open("w") as log:
+        flights = subprocess.Popen(
+            [str(PY), "-m", "pytest", "-m", REALTIME, "-p", "no:cacheprovider"],
+            cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            say(f"pytest: the rest (-m \"not {REALTIME}\")")
+            rest = run(PY, "-m", "pytest", "-m", f"not {REALTIME}", check=False)
+            if flights.poll() is None:
+                say(f"waiting for the real-time flights (tail -f {shown})")
+            flown = flights.wait()
+        finally:
+            if flights.poll() is None:  # interrupted: no flight left running
+                flights.terminate()
+                flights.wait()
+    say(f"the real-time flights' pytest ({shown}):")
+    print(FLIGHTS_LOG.read_text(), end="", flush=True)
+    statuses = {"the rest": pytest_status(rest), "the real-time flights": pytest_status(flown)}
+    failed = [f"{name} ({status})" for name, status in statuses.items() if status]
+    if failed:
+        say("failed: " + ", ".join(failed))
+    return next((status for status in statuses.values() if status), 0)
 
 
 def cmd_lock(args: list[str]) -> int:
