@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import cv2
@@ -54,14 +55,14 @@ class Quad:
     two_sided: bool = False
     landmark_id: str = ""
 
-    @property
+    @cached_property
     def centre_ned(self) -> FloatArray:
-        """Mean of the corners."""
+        """Mean of the corners (once: the renderer asks every frame)."""
         return np.asarray(self.corners_ned.mean(axis=0), dtype=np.float64)
 
-    @property
+    @cached_property
     def normal_ned(self) -> FloatArray:
-        """Unit outward normal (towards the viewer of the front face)."""
+        """Unit outward normal (towards the viewer of the front face; once)."""
         c = self.corners_ned
         n = np.cross(c[3] - c[0], c[1] - c[0])  # (BL-TL) x (TR-TL) points out of the face
         return np.asarray(n / np.linalg.norm(n), dtype=np.float64)
