@@ -50,6 +50,7 @@ SLOW: tuple[str, ...] = (
     "tests/sources/test_commands.py",
     "tests/test_demo.py",
     "tests/test_demo_visible.py",
+    "tests/test_dev_script.py",
     "tests/test_monitor_cli.py",
     "tests/test_real_photo_landmark.py",
     "tests/test_replay_telemetry.py",

@@ -18,6 +18,7 @@ import hashlib
 import os
 import subprocess
 import sys
+import time
 import venv
 from pathlib import Path
 
@@ -113,10 +114,10 @@ def pytest_status(status: int) -> int:
 
 def pytest_beside_flights() -> int:
     """The whole suite as two pytest processes at once: the long real-time flights
-    (marker ``realtime``, conftest.py) in the background, their output in
-    :data:`FLIGHTS_LOG` and printed when they end, and the rest in the foreground.  The
-    flights wait on the clock (~0.5 core each, one at a time): side by side the suite takes
-    the longer of the two instead of their sum (docs/testing.md, "CI's budget")."""
+    (marker ``realtime``, conftest.py) in the background, writing to :data:`FLIGHTS_LOG`,
+    and the rest in the foreground; then the flights' output, followed live until they end.
+    The flights wait on the clock (~0.5 core each, one at a time): side by side the suite
+    takes the longer of the two instead of their sum (docs/testing.md, "CI's budget")."""
     FLIGHTS_LOG.parent.mkdir(exist_ok=True)
     shown = FLIGHTS_LOG.relative_to(ROOT)
     say(f"pytest: the real-time flights (-m {REALTIME}) in the background, output in {shown}")
@@ -127,20 +128,33 @@ def pytest_beside_flights() -> int:
         try:
             say(f"pytest: the rest (-m \"not {REALTIME}\")")
             rest = run(PY, "-m", "pytest", "-m", f"not {REALTIME}", check=False)
-            if flights.poll() is None:
-                say(f"waiting for the real-time flights (tail -f {shown})")
-            flown = flights.wait()
+            running = flights.poll() is None
+            say(f"the real-time flights' pytest ({shown}){', until it ends' if running else ''}:")
+            flown = follow(flights, FLIGHTS_LOG)
         finally:
             if flights.poll() is None:  # interrupted: no flight left running
                 flights.terminate()
                 flights.wait()
-    say(f"the real-time flights' pytest ({shown}):")
-    print(FLIGHTS_LOG.read_text(), end="", flush=True)
     statuses = {"the rest": pytest_status(rest), "the real-time flights": pytest_status(flown)}
     failed = [f"{name} ({status})" for name, status in statuses.items() if status]
     if failed:
         say("failed: " + ", ".join(failed))
     return next((status for status in statuses.values() if status), 0)
+
+
+def follow(process: subprocess.Popen[bytes], path: Path, every_s: float = 0.5) -> int:
+    """Print ``path`` from its start and as ``process`` writes to it, until it exits;
+    its exit status."""
+    with path.open("rb") as out:
+        while True:
+            done = process.poll() is not None  # then one last read has all it wrote
+            chunk = out.read()
+            if chunk:
+                sys.stdout.buffer.write(chunk)
+                sys.stdout.flush()
+            if done:
+                return process.wait()
+            time.sleep(every_s)
 
 
 def cmd_lock(args: list[str]) -> int:
