@@ -19,9 +19,7 @@ import numpy as np
 from companion.perception_types import PerceptionConfig, Track
 from tracker.boxes import in_view_share, inside
 from tracker.camera import CameraModel, Rectifier
-from tracker.geometry import FloatArray
 from tracker.pose.config import PoseConfig
-from tracker.pose.inputs import outline_basis
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import MapLandmark, Observation, PoseFix
 
@@ -29,9 +27,6 @@ from tracker.pose.types import MapLandmark, Observation, PoseFix
 EDGE_MARGIN_PX = 3.0
 #: Parameters a fix fits to its corners (position and attitude).
 POSE_PARAMETERS = 6
-#: Least redundancy a mode's residual is divided by (:meth:`CornerNoise._mode_variances`):
-#: a mode the pose absorbs almost whole tells little of its error.
-MIN_REDUNDANCY = 0.1
 
 
 class CornerNoise:
@@ -125,14 +120,8 @@ class CornerNoise:
         sigma = obs.corner_sigma_px * (1.0 + self.config.saturated_sigma_gain * track.saturated)
         if track.residual_var is not None and self.config.residual_sigma_fixes > 0:
             sigma = max(sigma, float(np.sqrt(track.residual_var)))
-        least = self.config.lone_mode_sigma_min_rel
-        rel = None
-        if least > 0.0 and track.mode_var is not None and obs.all_corners:
-            learnt = np.clip(np.sqrt(track.mode_var) / sigma, least, 1.0)
-            rel = tuple(float(v) for v in learnt)
-        if sigma == obs.corner_sigma_px and rel is None:
-            return obs
-        return dataclasses.replace(obs, corner_sigma_px=sigma, lone_mode_sigma_rel=rel)
+        return obs if sigma == obs.corner_sigma_px else \
+            dataclasses.replace(obs, corner_sigma_px=sigma)
 
     def learn(self, observations: Sequence[Observation], fix: PoseFix,
               tracks: Mapping[str, Track]) -> None:
@@ -165,36 +154,3 @@ class CornerNoise:
             track = tracks[lid]
             last = track.residual_var
             track.residual_var = var if last is None else last + (var - last) / fixes
-            if o.all_corners and self.config.lone_mode_sigma_min_rel > 0.0:
-                mvar = self._mode_variances(o, by_id[lid], fix, resid)
-                mlast = track.mode_var
-                track.mode_var = mvar if mlast is None else mlast + (mvar - mlast) / fixes
-
-    def _mode_variances(self, obs: Observation, landmark: MapLandmark, fix: PoseFix,
-                        resid: FloatArray) -> FloatArray:
-        """Each outline mode's squared residual of one plate in ``fix`` over its
-        redundancy: ``m_k^2 / (1 - h_k)``, ``h_k`` the share of that mode the fitted pose
-        absorbed (the hat matrix ``J P J^T W`` in the plate's modes, ``P`` the fix's
-        covariance, ``W`` the weights the fix gave the plate's corners: its sigma times
-        ``pose.corner_mode_sigma_rel``).  A plate's shift is mostly absorbed by the pose
-        (residuals a tenth of the error), its aspect and shear hardly at all: the plain
-        ``n / (n - 6)`` correction would state a lone plate's shift ten times too tight."""
-        corners = np.asarray(obs.corners_px, np.float64)
-        q = outline_basis(corners)
-        pose = np.concatenate([fix.position_ned_m, fix.attitude_rpy_rad]).astype(np.float64)
-        world = landmark_corners_ned(landmark)
-
-        def project(x: FloatArray) -> FloatArray:
-            pts = self.camera.world_to_camera(world, x[:3], (float(x[3]), float(x[4]), float(x[5])))
-            return np.asarray(self.camera.project_camera_points(pts), np.float64).ravel()
-
-        steps = np.array([1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6])
-        base = project(pose)
-        jac = np.column_stack([(project(pose + np.eye(6)[i] * steps[i]) - base) / steps[i]
-                               for i in range(6)])
-        jm = q.T @ jac  # the pose's effect on each mode
-        sigma = float(obs.corner_sigma_px or self.pose_config.pixel_sigma_px)
-        stated = sigma**2 * np.square(np.asarray(self.pose_config.corner_mode_sigma_rel))
-        hat = np.einsum("ki,ij,kj->k", jm, np.asarray(fix.covariance)[:6, :6], jm) / stated
-        redundancy = np.clip(1.0 - hat, MIN_REDUNDANCY, 1.0)
-        return np.asarray((q.T @ resid.ravel()) ** 2 / redundancy, np.float64)

@@ -104,12 +104,6 @@ class PerceptionConfig:
     #: and a real crop can sit biased (0.6-0.8 px) where neither the size model nor the fit
     #: sees it; the other plates do (docs/decisions.md, issue 25).
     residual_sigma_fixes: float = field(default=10.0, metadata={"ge": 0})
-    #: A plate alone in a fix states each mode of its outline (shift, rotation, scale,
-    #: aspect, shear, perspective) as its corners erred in that mode in recent fixes with
-    #: other plates (the same residuals and average as ``residual_sigma_fixes``), no less
-    #: than this share of its corner sigma and no more than the sigma itself (0: off, every
-    #: mode at the corner sigma).  Learnt on the camera in flight, from the plate itself.
-    lone_mode_sigma_min_rel: float = field(default=0.0, metadata={"ge": 0, "le": 1})
     #: A plate's corners with a share ``s`` of its pixels saturated state their sigma times
     #: ``1 + saturated_sigma_gain * s``: sudden_light's plates 50-60 % saturated (160 %
     #: light) had corners 0.41 px off against 0.10 px unsaturated, 4x (docs/pose.md).
@@ -211,9 +205,6 @@ class Track:
     #: mean squared corner reprojection residual (px^2, per coordinate, corrected for the
     #: pose's parameters) over recent fixes from two or more plates (None: none yet)
     residual_var: float | None = None
-    #: the same per mode of the outline (px^2, 8: tracker.pose.inputs.outline_basis), for the
-    #: plate's fixes alone (``lone_mode_sigma_min_rel``; None: none yet)
-    mode_var: FloatArray | None = None
     #: fixes in a row that left this track's corners out
     pose_rejections: int = 0
     #: appearance checks failed in a row (0: the last check found the landmark)

@@ -195,18 +195,13 @@ def _outline_modes(g: Group, lone: bool) -> tuple[FloatArray, FloatArray]:
     """A plate's outline modes (k x 2 x 8, :func:`outline_basis`) and their betas (8,): each
     mode's variance is the corners' ``(sigma * mode_rel)**2``, the scale's plus the
     declared width error's (``scale_beta``).  A lone plate (its corners all the fix has)
-    keeps ``sigma**2`` in every mode (or what its track learnt of each,
-    ``Observation.lone_mode_sigma_rel``), adds ``outline_sigma_px**2`` to each from the scale
+    keeps ``sigma**2`` in every mode, adds ``outline_sigma_px**2`` to each from the scale
     on, and its keystone along the height has at least ``tilt_sigma_px**2`` there: one
     plate cannot average them out, and with smaller modes its corners outweigh the
     attitude prior (docs/pose.md, "A plate's corners err together")."""
     q = g.outline_basis
     sig = g.sigma_px
-    if lone:
-        learnt = g.observation.lone_mode_sigma_rel
-        var = np.full(8, sig**2) if learnt is None else sig**2 * np.square(learnt)
-    else:
-        var = np.full(8, sig**2) if g.mode_rel is None else sig**2 * g.mode_rel**2
+    var = np.full(8, sig**2) if g.mode_rel is None or lone else sig**2 * g.mode_rel**2
     if g.scale_beta > 0.0:  # beta = 1 - sigma / sqrt(sigma^2 + a): a back from beta
         var[3] += sig**2 * ((1.0 / (1.0 - g.scale_beta)) ** 2 - 1.0)
     if lone:
@@ -221,9 +216,8 @@ def point_set(groups: list[Group]) -> PointSet:
     from the corners: its width error, ``mode_rel`` when the fix has other landmarks, and
     one plate alone its outline's."""
     counts = [g.points_ned.shape[0] for g in groups]
-    lone = len(groups) == 1 and groups[0].observation.all_corners and (
+    lone = len(groups) == 1 and groups[0].observation.all_corners and \
         max(groups[0].outline_sigma_px, groups[0].tilt_sigma_px) > 0.0
-        or groups[0].observation.lone_mode_sigma_rel is not None)
     scale_dir = scale_beta = None
     if lone or (len(groups) > 1 and any(g.mode_rel is not None for g in groups)):
         modes = [_outline_modes(g, lone) if g.observation.all_corners

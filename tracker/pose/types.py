@@ -52,10 +52,6 @@ class Observation:
     out, which then count as weak points (a cut plate's outline carried out of the image by
     its alignment on the part in view: they hold its scale and turn, which its measured
     corners alone do not); None: they are left out.
-    ``lone_mode_sigma_rel``: each of the outline's eight modes' 1-sigma over
-    ``corner_sigma_px`` (:func:`tracker.pose.inputs.outline_basis`), as this plate's corners
-    erred in fixes with other plates; used when its corners are all a fix has (a lone plate
-    otherwise states ``corner_sigma_px`` in every mode); None: not known.
     """
 
     centre_px: tuple[float, float]
@@ -70,7 +66,6 @@ class Observation:
     corner_scale_sigma_px: float | None = None
     corners_measured: tuple[bool, bool, bool, bool] | None = None
     extrapolated_sigma_px: float | None = None
-    lone_mode_sigma_rel: tuple[float, ...] | None = None
 
     @property
     def all_corners(self) -> bool:

@@ -48,9 +48,6 @@ def check_observation(obs: Observation, width_px: int, height_px: int) -> str:
     scale = obs.corner_scale_sigma_px
     if scale is not None and (not _finite((scale,)) or scale < 0.0):
         return f"corner_scale_sigma_px must be finite and >= 0, got {scale!r}"
-    rel = obs.lone_mode_sigma_rel
-    if rel is not None and (len(rel) != 8 or not _finite(tuple(rel)) or min(rel) <= 0.0):
-        return f"lone_mode_sigma_rel must be eight finite values > 0, got {rel!r}"
     if obs.signature is not None and not _finite(tuple(obs.signature)):
         return "signature contains a value that is not finite"
     # an unmeasured corner may lie anywhere, unless it is used (extrapolated_sigma_px)
