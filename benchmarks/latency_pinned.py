@@ -4,7 +4,8 @@ The demo's pipeline (fake autopilot on UDP loopback, MAVLink bridge, Zenoh monit
 log, perception) runs on a stream recorded beforehand: the scenario's frames are rendered once
 into a raw recording in a temporary folder (``frames.npy``, ``truth.pkl`` and
 ``meta.json``; ``--stream`` keeps and reuses one), read into memory and served at the
-camera's rate (30 fps, >= 900 frames), so the camera costs nothing.  Each run is a child
+camera's rate (30 fps, >= 900 frames; ``--fps`` records at another rate, as a slower
+board's camera would be set), so the camera costs nothing.  Each run is a child
 process pinned to one core (``os.sched_setaffinity``), optionally with a competing busy
 process pinned to the same core (``busy``) or two (``slow``: the companion gets a third of
 the core, a stand-in for a slower board).  It prints p50 / p99 / max of capture -> worker,
@@ -77,21 +78,24 @@ while os.getppid() == int(sys.argv[1]):
 
 # -- the recording ---------------------------------------------------------------------------
 
-def _simulator(scenario: str, seconds: float) -> Any:
-    """The checkout's own simulator of ``scenario`` cut to ``seconds``."""
+def _simulator(scenario: str, seconds: float, fps: float | None = None) -> Any:
+    """The checkout's own simulator of ``scenario`` cut to ``seconds`` (its camera at ``fps``
+    frames a second; None: the scenario's)."""
     import dataclasses
 
     from companion.sim.scenario import load_scenario
     from companion.sim.simulator import Simulator
 
-    return Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds))
+    return Simulator(dataclasses.replace(load_scenario(scenario), seconds=seconds,
+                                         **({} if fps is None else {"fps": fps})))
 
 
-def record(folder: Path, scenario: str, seconds: float) -> None:
-    """Render the scenario's frames into ``folder`` (raw uint8 frames and their truth)."""
+def record(folder: Path, scenario: str, seconds: float, fps: float | None = None) -> None:
+    """Render the scenario's frames into ``folder`` (raw uint8 frames and their truth), its
+    camera at ``fps`` (None: the scenario's)."""
     import numpy as np
 
-    sim = _simulator(scenario, seconds)
+    sim = _simulator(scenario, seconds, fps)
     count = max(1, round(seconds * sim.fps))
     first, truth0 = sim.render(0, 0.0)
     frames = np.lib.format.open_memmap(folder / "frames.npy", "w+", np.uint8,
@@ -104,17 +108,19 @@ def record(folder: Path, scenario: str, seconds: float) -> None:
         truths.append(truth)
     frames.flush()
     with (folder / "truth.pkl").open("wb") as f:
-        pickle.dump({"scenario": scenario, "seconds": seconds, "truths": truths}, f)
-    write_meta(folder, {"scenario": scenario, "seconds": seconds})
+        pickle.dump({"scenario": scenario, "seconds": seconds, "fps": fps, "truths": truths}, f)
+    write_meta(folder, {"scenario": scenario, "seconds": seconds, "fps": fps})
 
 
 def write_meta(folder: Path, meta: dict[str, Any] | None = None) -> None:
-    """``meta.json`` beside the truth: the scenario and seconds, which any checkout reads
-    (``meta`` None: taken from the truth's pickle, for a recording made before it)."""
+    """``meta.json`` beside the truth: the scenario, seconds and camera rate (None: the
+    scenario's), which any checkout reads (``meta`` None: taken from the truth's pickle, for
+    a recording made before it)."""
     if meta is None:
         with (folder / "truth.pkl").open("rb") as f:
             meta = pickle.load(f)
-    (folder / "meta.json").write_text(json.dumps({k: meta[k] for k in ("scenario", "seconds")}))
+    (folder / "meta.json").write_text(json.dumps(
+        {"scenario": meta["scenario"], "seconds": meta["seconds"], "fps": meta.get("fps")}))
 
 
 def load_truths(folder: Path, count: int) -> dict[str, Any]:
@@ -128,7 +134,7 @@ def load_truths(folder: Path, count: int) -> dict[str, Any]:
         return meta
     except (ImportError, AttributeError):
         meta = json.loads((folder / "meta.json").read_text())
-    sim = _simulator(meta["scenario"], meta["seconds"])
+    sim = _simulator(meta["scenario"], meta["seconds"], meta.get("fps"))
     return {**meta, "truths": [sim.render(i, i / sim.fps)[1] for i in range(count)]}
 
 
@@ -169,6 +175,14 @@ def child(args: argparse.Namespace) -> None:
 
     demo.SimCameraSource = Recorded  # type: ignore[misc]
     demo.summary = summary  # type: ignore[assignment]
+    fps = meta.get("fps")
+    if fps is not None:  # the recording's camera rate, not the scenario's
+        named = demo.load_scenario
+
+        def load_scenario(name: str) -> Any:
+            return dataclasses.replace(named(name), fps=fps)
+
+        demo.load_scenario = load_scenario  # type: ignore[assignment]
     others = set(range(os.cpu_count() or 1)) - {args.core}
     if hasattr(demo, "AUTOPILOT_CORES") and others:
         # the fake autopilot in its own process (code since issue 23's second round) runs
@@ -514,6 +528,8 @@ def parse() -> argparse.Namespace:
     ap.add_argument("--runs", type=int, default=1, help="runs per checkout and case")
     ap.add_argument("--scenario", default="survey")
     ap.add_argument("--seconds", type=float, default=31.0, help="recording length (>= 30)")
+    ap.add_argument("--fps", type=float, help="the recording's camera rate (default: the "
+                    "scenario's, 30): what a slower board's camera is set to")
     ap.add_argument("--core", type=int, default=max(os.sched_getaffinity(0)))
     ap.add_argument("--cases", help="comma-separated: quiet, busy (a busy-loop process on "
                     "the same core; with --demo, on any core), slow (two on the same core; "
@@ -547,10 +563,17 @@ def main() -> int:
         stream = Path(args.stream) if args.stream else Path(tmp)
         stream.mkdir(parents=True, exist_ok=True)
         if not args.demo and not (stream / "frames.npy").exists():
-            print(f"recording {args.scenario} ({args.seconds} s) into {stream} ...", flush=True)
-            record(stream, args.scenario, args.seconds)
+            rate = "" if args.fps is None else f" at {args.fps:g} fps"
+            print(f"recording {args.scenario} ({args.seconds} s{rate}) into {stream} ...",
+                  flush=True)
+            record(stream, args.scenario, args.seconds, args.fps)
         elif not args.demo and not (stream / "meta.json").exists():
             write_meta(stream)  # a recording from before meta.json: for older checkouts
+        if not args.demo and args.fps is not None:
+            recorded = json.loads((stream / "meta.json").read_text()).get("fps")
+            if recorded != args.fps:
+                raise SystemExit(f"--fps {args.fps:g}, but {stream} was recorded at "
+                                 f"{recorded or 'the scenario'}'s rate: record another")
         results: dict[str, list[dict[str, Any]]] = {}
         for run in range(args.runs):
             for case in cases:

@@ -76,6 +76,31 @@ def test_a_truth_an_older_checkout_cannot_unpickle_is_rendered_by_its_own_simula
     assert repr(rebuilt["truths"]) == repr(recorded["truths"])
 
 
+@pytest.mark.slow  # renders frames: ~1 s
+def test_a_recording_at_another_camera_rate_keeps_it_for_every_checkout(tmp_path: Path) -> None:
+    """``--fps 15``: frames 1/15 s apart, the rate in ``meta.json``, and an older checkout
+    that renders the truth itself renders it at that rate too."""
+    import json
+    import pickle
+
+    import numpy as np
+
+    from benchmarks.latency_pinned import _simulator, load_truths, record
+
+    slow = tmp_path
+    record(slow, "hover", 3 / 15, fps=15.0)  # hover: the vehicle moves from the start
+    assert json.loads((slow / "meta.json").read_text())["fps"] == 15.0
+    assert len(np.load(slow / "frames.npy")) == 3
+    at15 = load_truths(slow, 3)["truths"]
+    at30 = _simulator("hover", 3 / 15).render(2, 2 / 30)[1]  # the scenario's own rate
+    assert _simulator("hover", 1.0).fps == 30.0 and at15[2].pose != at30.pose
+    unreadable = (slow / "truth.pkl").read_bytes().replace(b"companion.core", b"companion.gone")
+    (slow / "truth.pkl").write_bytes(unreadable)
+    with pytest.raises(ModuleNotFoundError):
+        pickle.loads(unreadable)
+    assert repr(load_truths(slow, 3)["truths"]) == repr(at15)
+
+
 def test_busy_loops_end_when_the_block_raises_and_when_their_parent_is_gone(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """No busy loop outlives a run: killed when the block raises, and gone by itself when
