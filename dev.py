@@ -14,8 +14,10 @@ library only: this script runs before anything is installed.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -36,6 +38,8 @@ PYTEST_NO_TESTS = 5
 #: by git).
 REALTIME = "realtime"
 FLIGHTS_LOG = ROOT / "test-output" / "pytest-realtime.log"
+#: How long the flights get to end on SIGTERM before they are killed (an interrupted suite).
+STOP_GRACE_S = 5.0
 #: The optional features (pyproject.toml); the locks and so the dev environment hold them all.
 EXTRAS = ("postgis", "dashboard", "mavsdk")
 
@@ -98,9 +102,12 @@ def cmd_test(args: list[str]) -> int:
     run(PY, "-m", "ruff", "check", ".")
     say("mypy")
     run(PY, "-m", "mypy")
-    if args or (os.cpu_count() or 1) < 2:
+    if args or len(os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity")
+                    else range(os.cpu_count() or 1)) < 2:
         say("pytest")
         return pytest_status(run(PY, "-m", "pytest", *args, check=False))
+    # a SIGTERM (a CI's timeout) unwinds like Ctrl-C, so that no flight is left running
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     return pytest_beside_flights()
 
 
@@ -117,14 +124,17 @@ def pytest_beside_flights() -> int:
     (marker ``realtime``, conftest.py) in the background, writing to :data:`FLIGHTS_LOG`,
     and the rest in the foreground; then the flights' output, followed live until they end.
     The flights wait on the clock (~0.5 core each, one at a time): side by side the suite
-    takes the longer of the two instead of their sum (docs/testing.md, "CI's budget")."""
+    takes the longer of the two instead of their sum (docs/testing.md, "CI's budget").
+    Interrupted, the flights' process group is ended too (:func:`stop_group`)."""
     FLIGHTS_LOG.parent.mkdir(exist_ok=True)
     shown = FLIGHTS_LOG.relative_to(ROOT)
     say(f"pytest: the real-time flights (-m {REALTIME}) in the background, output in {shown}")
     with FLIGHTS_LOG.open("w") as log:
+        # a session of its own: the terminal's Ctrl-C reaches the rest only, and the flights
+        # (pytest and every process it started) are stopped as one group below
         flights = subprocess.Popen(
             [str(PY), "-m", "pytest", "-m", REALTIME, "-p", "no:cacheprovider"],
-            cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+            cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             say(f"pytest: the rest (-m \"not {REALTIME}\")")
             rest = run(PY, "-m", "pytest", "-m", f"not {REALTIME}", check=False)
@@ -132,14 +142,26 @@ def pytest_beside_flights() -> int:
             say(f"the real-time flights' pytest ({shown}){', until it ends' if running else ''}:")
             flown = follow(flights, FLIGHTS_LOG)
         finally:
-            if flights.poll() is None:  # interrupted: no flight left running
-                flights.terminate()
-                flights.wait()
+            stop_group(flights)  # interrupted: no flight left running
     statuses = {"the rest": pytest_status(rest), "the real-time flights": pytest_status(flown)}
     failed = [f"{name} ({status})" for name, status in statuses.items() if status]
     if failed:
         say("failed: " + ", ".join(failed))
     return next((status for status in statuses.values() if status), 0)
+
+
+def stop_group(process: subprocess.Popen[bytes]) -> None:
+    """End ``process``'s process group (its session: :func:`pytest_beside_flights`) and
+    reap it: SIGTERM, then after :data:`STOP_GRACE_S` SIGKILL to whatever is left.  A
+    flight catches SIGTERM to land cleanly and pytest then starts the next one, so the
+    kill is what ends a suite; the group also holds what the flights started."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(process.pid, signal.SIGTERM)
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        process.wait(timeout=STOP_GRACE_S)
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
 
 
 def follow(process: subprocess.Popen[bytes], path: Path, every_s: float = 0.5) -> int:

@@ -3,7 +3,6 @@ the suite (docs/testing.md, "CI's budget")."""
 
 from __future__ import annotations
 
-import os
 import stat
 import time
 from pathlib import Path
@@ -26,19 +25,40 @@ def test_the_realtime_flights_are_slow_and_named_by_file_or_test() -> None:
 
 
 def fake_python(tmp_path: Path, flights: int, rest: int, sleep: float = 0.6) -> Path:
-    """A stand-in for the venv's python: ``-m pytest -m realtime ...`` writes its pid,
-    prints a line, sleeps ``sleep`` s, prints another and exits ``flights``; any other
-    pytest, ``rest``."""
+    """A stand-in for the venv's python.  ``-m pytest -m realtime ...``: ignores SIGTERM (as
+    a flight does, landing) and so does the child it starts (``sleep``), writes both pids,
+    prints a line, waits for the child, prints another and exits ``flights``.  Any other
+    pytest waits until the flights have started (they run at the same time), then prints a
+    line and exits ``rest``."""
+    pids = tmp_path / "flights.pid"
     script = tmp_path / "python"
     script.write_text(f"""#!/bin/sh
 if [ "$4" = "realtime" ]; then
-  echo $$ > "{tmp_path}/flights.pid"; echo "flights: $*"; sleep {sleep}; echo "flights end"
+  trap '' TERM
+  sleep {sleep} &
+  echo "$$ $!" > "{pids}.tmp" && mv "{pids}.tmp" "{pids}"
+  echo "flights: $*"
+  wait
+  echo "flights end"
   exit {flights}
 fi
-echo "rest: $*"; exit {rest}
+i=0
+while [ ! -f "{pids}" ] && [ $i -lt 200 ]; do sleep 0.05; i=$((i + 1)); done
+[ -f "{pids}" ] || {{ echo "rest: the flights had not started"; exit 99; }}
+echo "rest: $*"
+exit {rest}
 """)
     script.chmod(script.stat().st_mode | stat.S_IXUSR)
     return script
+
+
+def running(pid: int) -> bool:
+    """Is ``pid`` a live process (not gone, not a zombie waiting to be reaped)?"""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
 
 
 @pytest.mark.parametrize(("flights", "rest", "status", "said"), [
@@ -46,9 +66,10 @@ echo "rest: $*"; exit {rest}
     (1, 0, 1, "failed: the real-time flights (1)"),
     (0, 2, 2, "failed: the rest (2)"),
     (5, 0, 1, "failed: the real-time flights (1)"),  # none collected is a failure
+    (0, 5, 1, "failed: the rest (1)"),
     (1, 3, 3, "failed: the rest (3), the real-time flights (1)"),
 ])
-def test_both_pytests_run_and_either_failing_fails(
+def test_both_pytests_run_at_once_and_either_failing_fails(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str],
         flights: int, rest: int, status: int, said: str | None) -> None:
     monkeypatch.setattr(dev, "PY", fake_python(tmp_path, flights, rest))
@@ -58,30 +79,43 @@ def test_both_pytests_run_and_either_failing_fails(
         out = capfd.readouterr().out
     finally:
         dev.FLIGHTS_LOG.unlink(missing_ok=True)
-    assert "rest: -m pytest -m not realtime" in out
+    assert "rest: -m pytest -m not realtime" in out  # it saw the flights running
     # the flights' output, written to the log while the rest ran, is printed after it and
-    # followed until they end
+    # followed until they end; nothing of theirs is left running
     assert out.index("rest: -m pytest") < out.index("flights: -m pytest -m realtime") \
         < out.index("flights end")
     assert (said in out) if said else ("failed" not in out)
+    assert not any(running(int(pid)) for pid in (tmp_path / "flights.pid").read_text().split())
 
 
 def test_an_interrupted_suite_leaves_no_flight_running(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C (or SIGTERM, which dev.py turns into the same unwinding) while the rest runs:
+    the flights, which ignore SIGTERM as a landing flight does, and what they started are
+    killed after the grace and reaped."""
     monkeypatch.setattr(dev, "PY", fake_python(tmp_path, 0, 0, sleep=60))
     monkeypatch.setattr(dev, "FLIGHTS_LOG", dev.ROOT / "test-output" / f"t-{tmp_path.name}.log")
+    monkeypatch.setattr(dev, "STOP_GRACE_S", 0.3)
+    pids = tmp_path / "flights.pid"
 
     def interrupted(*_cmd: object, check: bool = True) -> int:
-        while not (tmp_path / "flights.pid").exists():  # the flights have started
+        deadline = time.monotonic() + 10.0
+        while not pids.exists():  # the flights have started
+            assert time.monotonic() < deadline, "the flights never started"
             time.sleep(0.05)
         raise KeyboardInterrupt
 
     monkeypatch.setattr(dev, "run", interrupted)
+    started = time.monotonic()
     try:
         with pytest.raises(KeyboardInterrupt):
             dev.pytest_beside_flights()
     finally:
         dev.FLIGHTS_LOG.unlink(missing_ok=True)
-    pid = int((tmp_path / "flights.pid").read_text())
-    with pytest.raises(ProcessLookupError):  # terminated and reaped
-        os.kill(pid, 0)
+    assert time.monotonic() - started < 10.0  # not the flights' 60 s
+    leader, child = (int(p) for p in pids.read_text().split())
+    assert not running(leader)
+    deadline = time.monotonic() + 5.0  # the killed child's zombie is its new parent's to reap
+    while running(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not running(child)
