@@ -202,7 +202,11 @@ def main() -> int:
         print(__doc__)
         return 2
     os.chdir(ROOT)
-    return COMMANDS[sys.argv[1]](sys.argv[2:])
+    try:
+        return COMMANDS[sys.argv[1]](sys.argv[2:])
+    except KeyboardInterrupt:  # Ctrl-C: what ran was stopped on the way out
+        say("interrupted")
+        return 130
 
 
 if __name__ == "__main__":
