@@ -102,13 +102,19 @@ def cmd_test(args: list[str]) -> int:
     run(PY, "-m", "ruff", "check", ".")
     say("mypy")
     run(PY, "-m", "mypy")
-    if args or len(os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity")
-                    else range(os.cpu_count() or 1)) < 2:
+    if args or usable_cores() < 2:
         say("pytest")
         return pytest_status(run(PY, "-m", "pytest", *args, check=False))
     # a SIGTERM (a CI's timeout) unwinds like Ctrl-C, so that no flight is left running
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     return pytest_beside_flights()
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def pytest_status(status: int) -> int:

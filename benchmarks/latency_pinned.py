@@ -521,6 +521,17 @@ def write_baseline(summary: dict[str, dict[str, Any]], note: str) -> None:
     BASELINE.write_text(json.dumps(base, indent=2) + "\n")
 
 
+def positive(text: str) -> float:
+    """An argument that must be a number above 0 (argparse says so in one line)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f"must be a number above 0, not {text!r}")
+    return value
+
+
 def parse() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--checkout", action="append", type=Path,
@@ -528,7 +539,7 @@ def parse() -> argparse.Namespace:
     ap.add_argument("--runs", type=int, default=1, help="runs per checkout and case")
     ap.add_argument("--scenario", default="survey")
     ap.add_argument("--seconds", type=float, default=31.0, help="recording length (>= 30)")
-    ap.add_argument("--fps", type=float, help="the recording's camera rate (default: the "
+    ap.add_argument("--fps", type=positive, help="the recording's camera rate (default: the "
                     "scenario's, 30): what a slower board's camera is set to")
     ap.add_argument("--core", type=int, default=max(os.sched_getaffinity(0)))
     ap.add_argument("--cases", help="comma-separated: quiet, busy (a busy-loop process on "

@@ -143,3 +143,14 @@ def running(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except (FileNotFoundError, ProcessLookupError, IndexError):
         return False
+
+
+def test_a_camera_rate_must_be_a_number_above_zero() -> None:
+    import argparse
+
+    from benchmarks.latency_pinned import positive
+
+    assert positive("15") == 15.0
+    for bad in ("0", "-15", "abc", "nan"):
+        with pytest.raises(argparse.ArgumentTypeError, match="above 0"):
+            positive(bad)
