@@ -13,14 +13,21 @@ import conftest
 import dev
 
 
-def test_the_realtime_flights_are_slow_and_named_by_file_or_test() -> None:
+def test_the_realtime_flights_are_slow_and_named_by_folder_file_or_test(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     for prefix in conftest.REALTIME:
         assert conftest.is_slow(prefix)  # the fast suite leaves them out too
     assert conftest.is_realtime(
         "sitl_tests/test_fly_strict.py::test_three_laps_against_the_strict_fake[3]")
+    assert conftest.is_realtime(
+        "sitl_tests/test_mavlink_faults.py::test_corrupted_bytes_from_autopilot")
+    assert not conftest.is_realtime("tests/test_demo.py::test_x")
+    assert not conftest.is_realtime("sitl_tests_other/test_x.py::test_x")
+    monkeypatch.setattr(conftest, "REALTIME", ("sitl_tests/test_soak.py",
+                                               "sitl_tests/test_a.py::test_b"))
     assert conftest.is_realtime("sitl_tests/test_soak.py::test_soak_short")
-    assert not conftest.is_realtime(
-        "sitl_tests/test_fly_strict.py::test_an_8s_outage_in_flight_lands_and_stops_fly")
+    assert conftest.is_realtime("sitl_tests/test_a.py::test_b[1]")
+    assert not conftest.is_realtime("sitl_tests/test_a.py::test_bc")
     assert not conftest.is_realtime("sitl_tests/test_soak.py_other::test_x")
 
 
