@@ -7,7 +7,9 @@ records the companion's resident memory, open file descriptors and threads (psut
 fixes the autopilot fused in that interval.  After a warm-up (default: 10 % of the flight,
 at least 15 s) it checks:
 
-* resident memory grows by at most 5 % (last sample vs the first after warm-up, and the peak);
+* resident memory grows by at most 5 %: the floor of each interval (read every 0.25 s: what
+  the process keeps between transient buffers), last vs the first after warm-up; and the
+  interval's peak (Linux's VmHWM), the highest after warm-up vs the first third's highest;
 * open file descriptors and threads do not grow (the peak of the last third of the samples
   is at most the peak of the first third: thread pools start their threads lazily);
 * the fix rate is steady: no interval after warm-up without fused fixes, and the median rate
@@ -50,7 +52,8 @@ def main() -> int:
     if args.json:
         args.json.write_text(json.dumps(result, indent=1), encoding="utf-8")
     for s in result["samples"]:
-        print(f"{s['t_s']:8.1f} s  rss {s['rss_mb']:8.2f} MB  fds {s['fds']:3d}  "
+        print(f"{s['t_s']:8.1f} s  rss {s['rss_mb']:8.2f} MB (peak {s['rss_peak_mb']:8.2f})  "
+              f"fds {s['fds']:3d}  "
               f"threads {s['threads']:3d}  fused {s['fused']:4d}")
     print(json.dumps(result["verdict"], indent=1))
     return 0 if result["verdict"]["ok"] and result["exit_status"] == 0 else 1
