@@ -44,6 +44,9 @@ class SourceConfig:
     ``realtime``: replay recorded times at their pace (false: as fast as possible).
     ``loop``: start again at the end of a finite source.  ``fps`` is used where the source
     has no times of its own (OTB folders, videos without timestamps, the simulator).
+    ``camera_fps``: the frame rate to ask a live camera for (0: its own; a GStreamer
+    pipeline states its rate in its caps instead, docs/deploy.md "The camera's frame rate
+    comes first").
     ``stall_timeout_s``: a live source that delivers nothing for this long raises
     :class:`~companion.sources.live.SourceStallError` (and counts a stall).
     """
@@ -55,6 +58,7 @@ class SourceConfig:
     loop: bool = False
     speed: float = field(default=1.0, metadata={"gt": 0})
     fps: float = field(default=30.0, metadata={"gt": 0})
+    camera_fps: float = field(default=0.0, metadata={"ge": 0, "le": 1000})
     stall_timeout_s: float = field(default=2.0, metadata={"gt": 0})
     open_timeout_s: float = field(default=5.0, metadata={"gt": 0})
     width: int = field(default=0, metadata={"ge": 0})  # 0 = camera default / scenario size

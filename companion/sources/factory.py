@@ -132,7 +132,7 @@ async def open_source(config: SourceConfig, context: OpenContext | None = None
         size = (c.width, c.height) if c.width and c.height else None
         return await CameraSource.open(c.spec, open_timeout_s=c.open_timeout_s,
                                        camera_id=c.camera_id, stall_timeout_s=c.stall_timeout_s,
-                                       size=size)
+                                       size=size, fps=c.camera_fps or None)
     opener = _opener(c.kind)
     if opener is None:
         raise InputError(f"{c.spec}: a simulated camera (source kind {c.kind}) is not "

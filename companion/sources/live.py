@@ -22,7 +22,7 @@ from typing import Any, Protocol
 import cv2
 import numpy as np
 
-from companion.errors import InputError, SourceError
+from companion.errors import ConfigError, InputError, SourceError
 from companion.sources.base import EndOfStream, Frame, ImageU8, Pacer, SourceStatus, monotonic_us
 
 log = logging.getLogger(__name__)
@@ -143,6 +143,21 @@ def open_capture(spec: str) -> Capture:
     return cv2.VideoCapture(target, backend)
 
 
+def ask_rate(cap: Capture, spec: str, fps: float) -> None:
+    """Ask the camera for ``fps`` frames a second and log what it says it will deliver (a
+    driver may round to a rate it has, or keep its own: the log says so, the companion runs
+    on; the frames' own times are what the pipeline uses)."""
+    cap.set(cv2.CAP_PROP_FPS, float(fps))
+    got = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+    if got <= 0.0:
+        log.warning("camera %s: asked for %g fps; it does not say its rate", spec, fps)
+    elif abs(got - fps) > 0.05 * fps:
+        log.warning("camera %s: asked for %g fps, it runs at %g fps (a rate its mode "
+                    "has: v4l2-ctl --list-formats-ext)", spec, fps, got)
+    else:
+        log.info("camera %s: %g fps", spec, got)
+
+
 class CameraSource:
     """A live camera; frames stamped with the monotonic clock as they arrive.
 
@@ -156,11 +171,13 @@ class CameraSource:
         camera_id: str = "cam0",
         stall_timeout_s: float = 2.0,
         size: tuple[int, int] | None = None,
+        fps: float | None = None,
         capture_factory: CaptureFactory = open_capture,
     ) -> None:
         self.spec, self.camera_id = spec, camera_id
         self.stall_timeout_s = stall_timeout_s
         self.size = size
+        self.fps = fps  # asked of the camera (None: its own rate)
         self.status = SourceStatus()
         self._factory = capture_factory
         self._cap: Capture | None = None
@@ -176,6 +193,10 @@ class CameraSource:
         """Open the camera and start its capture thread, or raise :class:`SourceError`."""
         source = cls(spec, **kwargs)
         backend = camera_target(spec)[1]
+        if source.fps is not None and backend == cv2.CAP_GSTREAMER:
+            raise ConfigError("source.camera_fps: a GStreamer pipeline sets its rate in its "
+                              f"caps (... ! video/x-raw,framerate={source.fps:g}/1 ! ...); "
+                              "leave camera_fps at 0")
         if source._factory is open_capture and not _has_backend(backend):
             name = cv2.videoio_registry.getBackendName(backend)
             raise SourceError(f"camera {spec}: this OpenCV build has no {name} support")
@@ -195,6 +216,8 @@ class CameraSource:
         if source.size is not None:  # ask for the configured size; other sizes are skipped
             cap.set(cv2.CAP_PROP_FRAME_WIDTH, float(source.size[0]))
             cap.set(cv2.CAP_PROP_FRAME_HEIGHT, float(source.size[1]))
+        if source.fps is not None:
+            ask_rate(cap, spec, source.fps)
         source._start(cap, loop)
         return source
 

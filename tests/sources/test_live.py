@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from companion import simulated
-from companion.errors import InputError, SourceError
+from companion.errors import ConfigError, InputError, SourceError
 from companion.sources.base import EndOfStream
 from companion.sources.config import SourceConfig
 from companion.sources.factory import guess_kind, open_source, resolve, split_spec
@@ -77,7 +77,7 @@ class FakeCapture:
         return True, np.full(shape, self.count, np.uint8)
 
     def get(self, prop: int) -> float:
-        return 0.0
+        return self.props.get(prop, 0.0)
 
     def set(self, prop: int, value: float) -> bool:
         self.props[prop] = value
@@ -124,6 +124,51 @@ async def test_camera_asks_for_the_configured_size() -> None:
     source = await CameraSource.open("0", size=(64, 48), capture_factory=lambda s: fake)
     source.close()
     assert fake.props[cv2.CAP_PROP_FRAME_WIDTH] == 64.0
+
+
+class RoundingCapture(FakeCapture):
+    """A driver that has only 30 and 60 fps modes: asked for another rate, it takes 30."""
+
+    def set(self, prop: int, value: float) -> bool:
+        if prop == cv2.CAP_PROP_FPS and value not in (30.0, 60.0):
+            value = 30.0
+        return super().set(prop, value)
+
+
+async def test_camera_asks_for_the_configured_rate_and_says_what_it_got(
+        caplog: pytest.LogCaptureFixture) -> None:
+    fake = FakeCapture(1)
+    caplog.set_level("INFO", logger="companion.sources.live")
+    source = await CameraSource.open("0", fps=15.0, capture_factory=lambda s: fake)
+    source.close()
+    assert fake.props[cv2.CAP_PROP_FPS] == 15.0
+    assert "camera 0: 15 fps" in caplog.text and "WARNING" not in caplog.text
+
+    caplog.clear()
+    source = await CameraSource.open("/dev/video0", fps=15.0,
+                                     capture_factory=lambda s: RoundingCapture(1))
+    source.close()
+    assert "camera /dev/video0: asked for 15 fps, it runs at 30 fps" in caplog.text
+
+    caplog.clear()
+    plain = FakeCapture(1)
+    source = await CameraSource.open("0", capture_factory=lambda s: plain)
+    source.close()
+    assert cv2.CAP_PROP_FPS not in plain.props  # no rate configured: the camera's own
+
+
+async def test_a_rate_for_a_gstreamer_pipeline_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match=r"framerate=15/1"):
+        await CameraSource.open("v4l2src ! videoconvert ! appsink", fps=15.0,
+                                capture_factory=lambda s: FakeCapture(1))
+
+
+async def test_source_camera_fps_reaches_the_camera(monkeypatch: pytest.MonkeyPatch) -> None:
+    fake = FakeCapture(1)
+    monkeypatch.setattr(cv2, "VideoCapture", lambda target, backend: fake)
+    source = await open_source(SourceConfig(spec="camera:0", camera_fps=15.0))
+    source.close()
+    assert fake.props[cv2.CAP_PROP_FPS] == 15.0
 
 
 async def test_real_missing_camera_device_is_a_source_error() -> None:
