@@ -33,6 +33,9 @@ Verdict = Literal["pass", "warn", "fail"]
 #: 200 ms apart (EV_MAX_INTERVAL, docs/deploy.md); ArduPilot's EKF3 calls the sensor
 #: unhealthy after 300 ms.
 MIN_FPS = {"ardupilot": 1000.0 / 300.0, "px4": 5.0}
+#: How far the measured frame rate may be from ``source.camera_fps`` before the camera line
+#: warns (30 frames of a live camera measure its rate to a few per cent).
+CAMERA_FPS_TOLERANCE = 0.15
 #: MAV_AUTOPILOT of each profile's HEARTBEAT (common.xml: ARDUPILOTMEGA 3, PX4 12).
 AUTOPILOT_IDS = {"ardupilot": 3, "px4": 12}
 AUTOPILOT_NAMES = {3: "ArduPilot", 12: "PX4"}
@@ -134,6 +137,11 @@ def check_frames(settings: Settings, sample: FrameSample) -> Check:
     if sample.fps < need:
         return Check("camera", "fail", f"{spec}: {sample.fps:.1f} fps, under the {need:.1f} "
                      f"fixes per second the {settings.vehicle.profile} EKF needs")
+    asked = settings.source.camera_fps
+    if asked and abs(sample.fps - asked) > CAMERA_FPS_TOLERANCE * asked:
+        return Check("camera", "warn", f"{spec}: {w}x{h} at {sample.fps:.1f} fps, not the "
+                     f"{asked:g} fps source.camera_fps asks (the driver keeps to its modes' "
+                     "rates: v4l2-ctl --list-formats-ext)")
     return Check("camera", "pass", f"{spec}: {w}x{h} at {sample.fps:.1f} fps "
                  f"({sample.frames} frames), as the camera file says")
 

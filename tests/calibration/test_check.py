@@ -147,3 +147,17 @@ def test_an_autopilot_not_set_up_fails_parameters_and_a_missing_stream_fails_str
     assert lines["parameters"].startswith("FAIL  parameters: VISO_TYPE 0 (wants 1); ")
     assert "EK3_SRC1_POSXY 3 (wants 6)" in lines["parameters"]
     assert "VISO_DELAY_MS" not in lines["parameters"]  # any answer will do for the delay
+
+
+def test_a_camera_off_its_asked_rate_warns() -> None:
+    """``source.camera_fps`` asked 15 fps and the camera delivers 30: a warning naming
+    both (the flight can go on; the driver keeps to its modes), 16 fps passes."""
+    from companion.preflight import FrameSample, check_frames
+    from companion.settings import load_settings
+
+    settings = load_settings(sets=["source.spec=camera:0", "source.camera_fps=15"])
+    size = (settings.camera.width, settings.camera.height)
+    off = check_frames(settings, FrameSample(30, size, 30.0))
+    assert off.verdict == "warn" and "at 30.0 fps, not the 15 fps source.camera_fps" \
+        in off.detail, off
+    assert check_frames(settings, FrameSample(30, size, 16.0)).verdict == "pass"
