@@ -5,8 +5,9 @@ is the preflight that opens them: companion/preflight.py).
 :func:`check_flightlog_dir` (its link is its own).  Each failure is a one-line
 :class:`~companion.errors.ConfigError` (exit status 2) naming the setting, the value and
 why: the connection string (every spelling of docs/mavlink.md), the serial device, the
-signing key file, the flight log directory.  Nothing is created or opened for writing: a
-directory that does not exist yet is judged by its nearest existing parent.
+signing key file, the flight log directory, a camera rate the camera cannot be asked for.
+Nothing is created or opened for writing: a directory that does not exist yet is judged by
+its nearest existing parent.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from pathlib import Path
 
 from companion.errors import ConfigError
 from companion.settings import Settings
+from companion.sources.config import camera_rate_refusal
+from companion.sources.factory import resolve
 from mavlink_bridge.codec import load_signing_key
 from mavlink_bridge.endpoint import Endpoint, parse_endpoint
 from mavlink_bridge.errors import EndpointError, SigningKeyError
@@ -25,6 +28,7 @@ from mavlink_bridge.errors import EndpointError, SigningKeyError
 def preflight(settings: Settings) -> None:
     """Everything ``companion run`` needs from the files and devices it names."""
     check_flightlog_dir(settings)
+    check_camera_rate(settings)
     endpoint = check_endpoint(settings.mavlink.endpoint)
     if endpoint.kind == "serial":
         check_serial_device(endpoint)
@@ -34,6 +38,17 @@ def preflight(settings: Settings) -> None:
             load_signing_key(key)
         except SigningKeyError as err:
             raise ConfigError(f"mavlink.signing_key_file: {err}") from None
+
+
+def check_camera_rate(settings: Settings) -> None:
+    """``source.camera_fps`` can be asked of the configured camera (other sources do not
+    use it: a replay of a recording with the vehicle's file keeps working)."""
+    fps, source = settings.source.camera_fps, resolve(settings.source)
+    refusal = camera_rate_refusal(source.spec, fps) if fps and source.kind == "camera" \
+        else None
+    if refusal is not None:
+        raise ConfigError(f"source.camera_fps = {fps:g} "
+                          f"({settings.origin_of('source.camera_fps')}): {refusal}")
 
 
 def check_endpoint(spec: str) -> Endpoint:

@@ -137,7 +137,7 @@ def check_frames(settings: Settings, sample: FrameSample) -> Check:
     if sample.fps < need:
         return Check("camera", "fail", f"{spec}: {sample.fps:.1f} fps, under the {need:.1f} "
                      f"fixes per second the {settings.vehicle.profile} EKF needs")
-    asked = settings.source.camera_fps
+    asked = settings.source.camera_fps if resolve(settings.source).kind == "camera" else 0.0
     if asked and abs(sample.fps - asked) > CAMERA_FPS_TOLERANCE * asked:
         return Check("camera", "warn", f"{spec}: {w}x{h} at {sample.fps:.1f} fps, not the "
                      f"{asked:g} fps source.camera_fps asks (the driver keeps to its modes' "

@@ -59,8 +59,11 @@ class MemoryWatch:
             self.exact = False
 
     def read(self) -> None:
-        """One read of resident memory (psutil.Error when the process has gone)."""
+        """One read of resident memory (psutil.Error when the process has gone: a zombie,
+        whose memory psutil reads as 0 before it is reaped, included)."""
         rss = self.process.memory_info().rss / MB
+        if rss <= 0.0 or self.process.status() == psutil.STATUS_ZOMBIE:
+            raise psutil.NoSuchProcess(self.process.pid)
         self.floor, self.peak = min(self.floor, rss), max(self.peak, rss)
 
     def close(self) -> tuple[float, float]:
@@ -75,8 +78,12 @@ class MemoryWatch:
 
 
 def high_water_mb(status: Path) -> float | None:
-    """VmHWM of a ``/proc/PID/status`` file in MB (None when it has none)."""
-    for line in status.read_text(encoding="ascii").splitlines():
+    """VmHWM of a ``/proc/PID/status`` file in MB (None when it has none or is gone)."""
+    try:
+        text = status.read_text(encoding="ascii")
+    except OSError:
+        return None
+    for line in text.splitlines():
         if line.startswith("VmHWM:"):
             return int(line.split()[1]) / 1024
     return None
@@ -90,6 +97,7 @@ class Sample:
     fds: int
     threads: int
     fused: int  # fixes fused by the autopilot in this interval
+    rss_peak_exact: bool = True  # the peak is VmHWM's (False: the highest poll)
 
 
 def soak_scenario(tmp: Path, seconds: float, fps: float) -> Path:
@@ -126,37 +134,66 @@ async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
             sys.executable, "-m", "companion", "--config",
             str(run_config(tmp, scenario, fake.local_port)), "run", "--seconds",
             str(seconds), cwd=tmp, env=env, stderr=asyncio.subprocess.PIPE)
-        ps, memory = psutil.Process(proc.pid), MemoryWatch(proc.pid)
-        start, seen = time.monotonic(), 0
-        next_sample = start + sample_s
+        assert proc.stderr is not None
+        err = bytearray()
+        # read as it comes: a long flight's log must never fill the pipe and stall it
+        reading = asyncio.ensure_future(_drain(proc.stderr, err))
         exited = asyncio.ensure_future(proc.wait())
         try:
-            while time.monotonic() - start < seconds + 60:
-                await asyncio.wait({exited}, timeout=POLL_S)
-                if exited.done():
-                    break
-                try:
-                    memory.read()
-                    if time.monotonic() < next_sample:
-                        continue
-                    next_sample += sample_s
-                    floor, peak = memory.close()
-                    fds, threads = ps.num_fds(), ps.num_threads()
-                except psutil.Error:  # it ended between the wait and the read
-                    break
-                fused = sum(1 for r in fake.vision[seen:] if r.accepted)
-                seen = len(fake.vision)
-                samples.append(Sample(round(time.monotonic() - start, 1), round(floor, 2),
-                                      round(peak, 2), fds, threads, fused))
+            await _watch(proc.pid, exited, fake, samples, seconds + 60, sample_s)
         finally:
-            if proc.returncode is None:
-                proc.send_signal(signal.SIGTERM)
-            _, err = await proc.communicate()
             exited.cancel()
+            await _stop(proc)
+            await asyncio.wait({reading}, timeout=5.0)
+            reading.cancel()
     return {"seconds": seconds, "sample_s": sample_s, "fps": fps,
             "exit_status": proc.returncode, "stderr_tail": err.decode()[-500:],
             "samples": [asdict(s) for s in samples],
             "verdict": verdict(samples, seconds, thread_slack, warm_up_s)}
+
+
+async def _watch(pid: int, exited: asyncio.Future[int], fake: FakeAutopilot,
+                 samples: list[Sample], limit_s: float, sample_s: float) -> None:
+    """Append a :class:`Sample` every ``sample_s`` until the process exits (or
+    ``limit_s``), reading its memory every POLL_S in between."""
+    start, seen = time.monotonic(), 0
+    next_sample = start + sample_s
+    try:
+        ps, memory = psutil.Process(pid), MemoryWatch(pid)
+        while time.monotonic() - start < limit_s:
+            await asyncio.wait({exited}, timeout=POLL_S)
+            if exited.done():
+                return
+            memory.read()
+            if time.monotonic() < next_sample:
+                continue
+            next_sample += sample_s
+            floor, peak = memory.close()
+            fds, threads = ps.num_fds(), ps.num_threads()
+            fused = sum(1 for r in fake.vision[seen:] if r.accepted)
+            seen = len(fake.vision)
+            samples.append(Sample(round(time.monotonic() - start, 1), round(floor, 2),
+                                  round(peak, 2), fds, threads, fused, memory.exact))
+    except psutil.Error:  # it ended (or is ending) between the wait and a read
+        return
+
+
+async def _drain(stream: asyncio.StreamReader, into: bytearray, keep: int = 65536) -> None:
+    """Read ``stream`` to its end, keeping its last ``keep`` bytes in ``into``."""
+    while chunk := await stream.read(4096):
+        into += chunk
+        del into[:-keep]
+
+
+async def _stop(proc: asyncio.subprocess.Process, grace_s: float = 30.0) -> None:
+    """SIGTERM if still running, then SIGKILL after ``grace_s``; reaped either way."""
+    if proc.returncode is None:
+        proc.send_signal(signal.SIGTERM)
+    try:
+        await asyncio.wait_for(proc.wait(), grace_s)
+    except TimeoutError:
+        proc.kill()
+        await proc.wait()
 
 
 def pct(value: float, reference: float) -> float:
@@ -167,7 +204,8 @@ def pct(value: float, reference: float) -> float:
 def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0,
             warm_up_s: float | None = None) -> dict[str, Any]:
     """The soak's checks on samples after the warm-up (memory: the last interval's floor
-    against the first's, and the peak against the first third's peak; ``thread_slack``:
+    against the first's, and the peak against the first third's peak where the peaks are
+    exact -- VmHWM -- else reported only; ``thread_slack``:
     threads the last third may have beyond the first third's peak; the short CI form allows
     1, for a pool thread started late under load; ``warm_up_s``: None = 10 % of the flight,
     at least 15 s)."""
@@ -193,6 +231,10 @@ def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0,
         "rss_peak_mb": max(s.rss_peak_mb for s in after),
         "rss_peak_growth_pct": pct(max(s.rss_peak_mb for s in after),
                                    max(s.rss_peak_mb for s in first)),
+        # judged only where the kernel's high-water mark gave it: the highest of reads
+        # every POLL_S misses a 50 ms transient most of the time, so one third can miss
+        # every one while another catches one (a false growth)
+        "rss_peak_exact": all(s.rss_peak_exact for s in after),
         # pools start threads lazily: growth = the last third's peak over the first third's
         "fds_first_last_third": [max(s.fds for s in first), max(s.fds for s in last)],
         "threads_first_last_third": [max(s.threads for s in first),
@@ -201,7 +243,8 @@ def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0,
                                "median_first_half": first_half,
                                "median_second_half": second_half},
     }
-    out["ok"] = bool(out["rss_growth_pct"] <= 5.0 and out["rss_peak_growth_pct"] <= 5.0
+    peak_ok = out["rss_peak_growth_pct"] <= 5.0 or not out["rss_peak_exact"]
+    out["ok"] = bool(out["rss_growth_pct"] <= 5.0 and peak_ok
                      and max(s.fds for s in last) <= max(s.fds for s in first)
                      and max(s.threads for s in last)
                      <= max(s.threads for s in first) + thread_slack

@@ -65,3 +65,17 @@ class SourceConfig:
     height: int = field(default=0, metadata={"ge": 0})
     seed: int = field(default=0, metadata={"ge": 0})
     follow: FollowConfig = field(default_factory=FollowConfig)
+
+
+def camera_rate_refusal(spec: str, fps: float) -> str | None:
+    """Why ``source.camera_fps`` cannot be asked of the camera ``spec`` (None: it can):
+    a GStreamer pipeline states its rate in its caps, a network stream's is set where it is
+    sent (OpenCV cannot change either once open)."""
+    s = spec.strip()
+    if "!" in s:
+        return ("a GStreamer pipeline sets its rate in its caps (... ! video/x-raw,"
+                f"framerate={fps:g}/1 ! ...); leave source.camera_fps at 0")
+    if "://" in s:
+        return ("a network stream's rate is set where it is sent (the camera's or the "
+                "server's settings); leave source.camera_fps at 0")
+    return None

@@ -24,6 +24,7 @@ import numpy as np
 
 from companion.errors import ConfigError, InputError, SourceError
 from companion.sources.base import EndOfStream, Frame, ImageU8, Pacer, SourceStatus, monotonic_us
+from companion.sources.config import camera_rate_refusal
 
 log = logging.getLogger(__name__)
 
@@ -147,13 +148,16 @@ def ask_rate(cap: Capture, spec: str, fps: float) -> None:
     """Ask the camera for ``fps`` frames a second and log what it says it will deliver (a
     driver may round to a rate it has, or keep its own: the log says so, the companion runs
     on; the frames' own times are what the pipeline uses)."""
-    cap.set(cv2.CAP_PROP_FPS, float(fps))
+    taken = bool(cap.set(cv2.CAP_PROP_FPS, float(fps)))
     got = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
-    if got <= 0.0:
-        log.warning("camera %s: asked for %g fps; it does not say its rate", spec, fps)
+    says = f"it reports {got:g} fps" if got > 0.0 else "it does not say its rate"
+    if not taken:
+        log.warning("camera %s: the driver refused %g fps (CAP_PROP_FPS); %s", spec, fps, says)
+    elif got <= 0.0:
+        log.warning("camera %s: asked for %g fps; %s", spec, fps, says)
     elif abs(got - fps) > 0.05 * fps:
-        log.warning("camera %s: asked for %g fps, it runs at %g fps (a rate its mode "
-                    "has: v4l2-ctl --list-formats-ext)", spec, fps, got)
+        log.warning("camera %s: asked for %g fps, it runs at %g fps (the rates its modes "
+                    "have, whole numbers on V4L2: v4l2-ctl --list-formats-ext)", spec, fps, got)
     else:
         log.info("camera %s: %g fps", spec, got)
 
@@ -193,10 +197,9 @@ class CameraSource:
         """Open the camera and start its capture thread, or raise :class:`SourceError`."""
         source = cls(spec, **kwargs)
         backend = camera_target(spec)[1]
-        if source.fps is not None and backend == cv2.CAP_GSTREAMER:
-            raise ConfigError("source.camera_fps: a GStreamer pipeline sets its rate in its "
-                              f"caps (... ! video/x-raw,framerate={source.fps:g}/1 ! ...); "
-                              "leave camera_fps at 0")
+        refusal = None if source.fps is None else camera_rate_refusal(spec, source.fps)
+        if refusal is not None:
+            raise ConfigError(f"source.camera_fps: camera {spec}: {refusal}")
         if source._factory is open_capture and not _has_backend(backend):
             name = cv2.videoio_registry.getBackendName(backend)
             raise SourceError(f"camera {spec}: this OpenCV build has no {name} support")

@@ -161,3 +161,21 @@ def test_a_camera_off_its_asked_rate_warns() -> None:
     assert off.verdict == "warn" and "at 30.0 fps, not the 15 fps source.camera_fps" \
         in off.detail, off
     assert check_frames(settings, FrameSample(30, size, 16.0)).verdict == "pass"
+    unset = load_settings(sets=["source.spec=camera:0"])
+    assert check_frames(unset, FrameSample(30, size, 30.0)).verdict == "pass"
+    # a recording replayed with the vehicle's file: its rate is the recording's, no warning
+    video = load_settings(sets=["source.spec=video:/tmp/x.mp4", "source.camera_fps=15"])
+    assert check_frames(video, FrameSample(30, size, 30.0)).verdict == "pass"
+
+
+def test_a_camera_rate_that_cannot_be_asked_is_a_config_error_naming_its_layer() -> None:
+    from companion.config_checks import check_camera_rate
+    from companion.errors import ConfigError
+    from companion.settings import load_settings
+
+    pipeline = "camera:v4l2src ! videoconvert ! appsink"
+    with pytest.raises(ConfigError, match=r"source.camera_fps = 15 \(--set\).*framerate=15/1"):
+        check_camera_rate(load_settings(sets=[f"source.spec={pipeline}",
+                                              "source.camera_fps=15"]))
+    check_camera_rate(load_settings(sets=["source.spec=camera:0", "source.camera_fps=15"]))
+    check_camera_rate(load_settings(sets=["source.spec=stream:/tmp/s", "source.camera_fps=15"]))

@@ -157,9 +157,40 @@ async def test_camera_asks_for_the_configured_rate_and_says_what_it_got(
     assert cv2.CAP_PROP_FPS not in plain.props  # no rate configured: the camera's own
 
 
-async def test_a_rate_for_a_gstreamer_pipeline_is_a_config_error() -> None:
+class RefusingCapture(FakeCapture):
+    """A backend that takes no rate (set returns False) and says it runs at 25 fps."""
+
+    def set(self, prop: int, value: float) -> bool:
+        return prop != cv2.CAP_PROP_FPS and super().set(prop, value)
+
+    def get(self, prop: int) -> float:
+        return 25.0 if prop == cv2.CAP_PROP_FPS else super().get(prop)
+
+
+class SilentCapture(FakeCapture):
+    """A driver that takes the rate and reports none (CAP_PROP_FPS reads 0)."""
+
+    def get(self, prop: int) -> float:
+        return 0.0
+
+
+async def test_a_camera_that_refuses_or_hides_its_rate_is_said(
+        caplog: pytest.LogCaptureFixture) -> None:
+    for fake, said in ((RefusingCapture(1), "the driver refused 15 fps (CAP_PROP_FPS); it "
+                        "reports 25 fps"),
+                       (SilentCapture(1), "asked for 15 fps; it does not say its rate")):
+        caplog.clear()
+        source = await CameraSource.open("0", fps=15.0, capture_factory=lambda s, f=fake: f)
+        source.close()
+        assert said in caplog.text, caplog.text
+
+
+async def test_a_rate_for_a_pipeline_or_a_url_is_a_config_error() -> None:
     with pytest.raises(ConfigError, match=r"framerate=15/1"):
         await CameraSource.open("v4l2src ! videoconvert ! appsink", fps=15.0,
+                                capture_factory=lambda s: FakeCapture(1))
+    with pytest.raises(ConfigError, match=r"set where it is sent"):
+        await CameraSource.open("rtsp://127.0.0.1:8554/cam", fps=15.0,
                                 capture_factory=lambda s: FakeCapture(1))
 
 
