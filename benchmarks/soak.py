@@ -19,7 +19,7 @@ at least 15 s) it checks:
 The flight runs in real time (the MAVLink stack and the fake autopilot run on the monotonic
 clock), so 30 minutes take 30 minutes:
 
-    PYTHONPATH=. python benchmarks/soak.py --minutes 30 --json soak-30min.json
+    PYTHONPATH=. python benchmarks/soak.py --minutes 30 --json soak-30min.json --plot soak.png
 
 ``LMC_SOAK_MINUTES`` sets the default length; CI runs ``sitl_tests/test_soak.py``, a 75 s
 form of the same checks (a 30 s warm-up).  Exit status 0 when every check passes, 1 otherwise.
@@ -37,7 +37,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from testsupport.soak import soak  # noqa: E402
+import cv2  # noqa: E402
+
+from testsupport.soak import plot, soak  # noqa: E402
 
 
 def main() -> int:
@@ -47,10 +49,13 @@ def main() -> int:
     parser.add_argument("--sample-s", type=float, default=10.0)
     parser.add_argument("--fps", type=float, default=15.0)
     parser.add_argument("--json", type=Path, help="write samples and verdict here")
+    parser.add_argument("--plot", type=Path, help="draw the memory over the flight (PNG)")
     args = parser.parse_args()
     result = asyncio.run(soak(args.minutes * 60, args.sample_s, args.fps))
     if args.json:
         args.json.write_text(json.dumps(result, indent=1), encoding="utf-8")
+    if args.plot:
+        cv2.imwrite(str(args.plot), plot(result))
     for s in result["samples"]:
         print(f"{s['t_s']:8.1f} s  rss {s['rss_mb']:8.2f} MB (peak {s['rss_peak_mb']:8.2f})  "
               f"fds {s['fds']:3d}  "

@@ -8,7 +8,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from testsupport.soak import soak
+import cv2
+
+from testsupport.soak import plot, soak
+
+#: The picture of the last short soak (test-output/ is ignored by git).
+PICTURE = Path(__file__).resolve().parents[1] / "test-output" / "soak-short.png"
 
 
 async def test_soak_short(tmp_path: Path) -> None:
@@ -27,6 +32,10 @@ async def test_soak_short(tmp_path: Path) -> None:
     print("samples (t s, RSS floor MB, RSS peak MB, fds, threads, fused):",
           [(s["t_s"], s["rss_mb"], s["rss_peak_mb"], s["fds"], s["threads"], s["fused"])
            for s in result["samples"]])
+    PICTURE.parent.mkdir(exist_ok=True)
+    if result["samples"]:
+        cv2.imwrite(str(PICTURE), plot(result))
+        print("memory over the flight:", PICTURE)
     assert result["exit_status"] == 0, result["stderr_tail"]
     assert len(result["samples"]) >= 12, "the flight did not last"
     assert v["fused_per_interval"]["median"] > 0, "no fixes: nothing was soaked"

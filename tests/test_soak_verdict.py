@@ -34,6 +34,9 @@ def child() -> Iterator[subprocess.Popen[str]]:
     yield proc
     proc.kill()
     proc.wait(5)
+    for pipe in (proc.stdin, proc.stdout):
+        if pipe is not None:
+            pipe.close()
 
 
 def spike(proc: subprocess.Popen[str]) -> None:
@@ -117,3 +120,20 @@ def test_peaks_without_the_high_water_mark_are_reported_not_judged() -> None:
     assert out["ok"], out
     rising = [241.0 + i for i in range(15)]
     assert not verdict(samples(rising, rising, exact=False), 15.0, warm_up_s=0.0)["ok"]
+
+
+def test_the_picture_draws_floor_and_peak() -> None:
+    """The soak's picture: both lines drawn (the palette's first two colours present),
+    the verdict in its title's pixels not checked (text)."""
+    from companion.evaluation.plots import PALETTE
+    from testsupport.soak import plot
+
+    floors = [241.0 + 0.01 * i for i in range(15)]
+    peaks = [273.0, 241.2, 273.1] * 5
+    ss = samples(floors, peaks)
+    result = {"seconds": 45.0, "samples": [s.__dict__ for s in ss],
+              "verdict": verdict(ss, 45.0, warm_up_s=3.0)}
+    img = plot(result)
+    assert img.shape == (400, 800, 3)
+    for colour in PALETTE[:2]:
+        assert (img == colour).all(axis=2).sum() > 50, colour

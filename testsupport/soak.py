@@ -23,8 +23,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 import psutil
 
+from companion.evaluation.plots import Series, line_plot
 from companion.sim.scenario import SCENARIO_DIR, load_scenario
 from companion.sim.simulator import Simulator
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
@@ -250,3 +253,25 @@ def verdict(samples: list[Sample], seconds: float, thread_slack: int = 0,
                      <= max(s.threads for s in first) + thread_slack
                      and min(rates) > 0 and second_half >= 0.7 * first_half)
     return out
+
+
+def plot(result: dict[str, Any]) -> npt.NDArray[np.uint8]:
+    """The soak's memory as a picture (BGR): each interval's floor and peak over the flight,
+    the floor after the warm-up (what is judged) drawn over in a colour of its own."""
+    samples = result["samples"]
+    t = np.array([s["t_s"] for s in samples], np.float64)
+    floor = np.array([s["rss_mb"] for s in samples], np.float64)
+    peak = np.array([s["rss_peak_mb"] for s in samples], np.float64)
+    v = result["verdict"]
+    warm = float(v.get("warm_up_s", 0.0))
+    after = t >= warm
+    lo = float(np.min(floor[after])) if after.any() else float(np.min(floor))
+    hi = float(np.max(peak[after])) if after.any() else float(np.max(peak))
+    verdict_text = "ok" if v.get("ok") else "FAILED"
+    peak_label = "peak (VmHWM)" if v.get("rss_peak_exact") else "peak (highest read)"
+    return line_plot(
+        [Series(peak_label, t, peak), Series("floor", t, floor),
+         Series("floor, judged", t[after], floor[after])],
+        f"soak {result['seconds']:g} s: RSS floor {v.get('rss_growth_pct')} %, "
+        f"peak {v.get('rss_peak_growth_pct')} % after {warm:g} s -- {verdict_text}",
+        "s", "MB", (0.95 * lo, 1.05 * hi), size=(800, 400))
