@@ -239,3 +239,18 @@ def test_a_frame_source_that_fails_for_good_exits_1(
     assert status == 1, err
     assert err[-1].startswith("frame source failed: no readable frame in a whole pass"), err
     assert not any("Traceback" in line for line in err)
+
+
+@pytest.mark.parametrize("command", [["config"], ["run", "--seconds", "1"]])
+@pytest.mark.parametrize(("spec", "says"), [
+    ("camera:v4l2src ! videoconvert ! appsink", "framerate=15/1"),
+    ("camera:rtsp://127.0.0.1:8554/cam", "set where it is sent"),
+])
+def test_a_camera_rate_that_cannot_be_asked_is_one_line_before_anything_opens(
+        spec: str, says: str, command: list[str], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    line = one_line_failure(capsys, [*FLIGHT, "--set", f'flightlog.dir="{tmp_path}"',
+                                     "--set", f'source.spec="{spec}"',
+                                     "--set", "source.camera_fps=15", *command], 2)
+    assert line.startswith("source.camera_fps = 15 (--set): ") and says in line, line
+    assert list(tmp_path.iterdir()) == []  # refused before the flight log or the camera
