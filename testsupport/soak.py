@@ -69,15 +69,15 @@ class MemoryWatch:
             raise psutil.NoSuchProcess(self.process.pid)
         self.floor, self.peak = min(self.floor, rss), max(self.peak, rss)
 
-    def close(self) -> tuple[float, float]:
-        """The interval's (floor, peak) in MB; the next interval starts."""
+    def close(self) -> tuple[float, float, bool]:
+        """The interval's floor and peak in MB, and whether that peak is the kernel's
+        high-water mark; the next interval starts."""
         self.read()
-        peak = self.peak
-        if self.exact:
+        floor, peak, exact = self.floor, self.peak, self.exact
+        if exact:
             peak = max(peak, high_water_mb(self.proc_dir / "status") or 0.0)
-        out = (self.floor, peak)
         self.restart()
-        return out
+        return floor, peak, exact
 
 
 def high_water_mb(status: Path) -> float | None:
@@ -150,7 +150,7 @@ async def soak(seconds: float, sample_s: float = 5.0, fps: float = 15.0,
             await asyncio.wait({reading}, timeout=5.0)
             reading.cancel()
     return {"seconds": seconds, "sample_s": sample_s, "fps": fps,
-            "exit_status": proc.returncode, "stderr_tail": err.decode()[-500:],
+            "exit_status": proc.returncode, "stderr_tail": err.decode(errors="replace")[-500:],
             "samples": [asdict(s) for s in samples],
             "verdict": verdict(samples, seconds, thread_slack, warm_up_s)}
 
@@ -171,12 +171,12 @@ async def _watch(pid: int, exited: asyncio.Future[int], fake: FakeAutopilot,
             if time.monotonic() < next_sample:
                 continue
             next_sample += sample_s
-            floor, peak = memory.close()
+            floor, peak, exact = memory.close()
             fds, threads = ps.num_fds(), ps.num_threads()
             fused = sum(1 for r in fake.vision[seen:] if r.accepted)
             seen = len(fake.vision)
             samples.append(Sample(round(time.monotonic() - start, 1), round(floor, 2),
-                                  round(peak, 2), fds, threads, fused, memory.exact))
+                                  round(peak, 2), fds, threads, fused, exact))
     except psutil.Error:  # it ended (or is ending) between the wait and a read
         return
 
