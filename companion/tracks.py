@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.cores import CoreKeeper
 from companion.corner_noise import CornerNoise
 from companion.corners import Corners
 from companion.perception_types import Occupancy, PerceptionConfig, Start, Track, TrackView
@@ -54,11 +55,18 @@ class TrackSet:
         self._tracks: dict[str, Track] = {}
         self._lock = threading.Lock()  # the set's changes, the snapshot and the hand-over
         self._pending: list[Start] = []
-        self._pool = concurrent.futures.ThreadPoolExecutor(1, "companion-tracks") \
+        self._pool_tid = 0  # the second thread's native id, once it runs
+        self._pool = concurrent.futures.ThreadPoolExecutor(
+            1, "companion-tracks", initializer=self._note_thread) \
             if config.parallel_tracks else None
+        self._keeper = CoreKeeper() \
+            if config.parallel_tracks and config.keep_frame_cores else None
         self._checked: dict[str, float] = {}  # this frame's appearance checks (correlation)
         self._early: frozenset[str] = frozenset()  # turns taken early (_spread_turns)
         self._frames = 0
+
+    def _note_thread(self) -> None:
+        self._pool_tid = threading.get_native_id()
 
     @property
     def live(self) -> dict[str, Track]:
@@ -145,6 +153,8 @@ class TrackSet:
                     return
                 alive[i] = self._update_one(tracks[i], image, checks[i], motion)
 
+        if self._keeper is not None:
+            self._keeper.frame(self._pool_tid)
         there = self._pool.submit(drain)
         try:
             drain()
@@ -274,6 +284,8 @@ class TrackSet:
 
     def close(self) -> None:
         """Stop the track-update thread."""
+        if self._keeper is not None:
+            self._keeper.release()
         if self._pool is not None:
             self._pool.shutdown(wait=True)
 
