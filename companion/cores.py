@@ -80,19 +80,22 @@ def process_cores() -> set[int]:
 class CoreKeeper:
     """Keeps the frame worker and one other thread on a core each (the module's notes).
 
-    Call :meth:`frame` on the worker thread before each frame's parallel update, with the
-    other thread's native id (0 until it has one); :meth:`release` at the end.  The
-    readers and the setter are injectable for tests."""
+    Call :meth:`frame` on the worker thread at each frame, before its track updates, with
+    the other thread's native id (0 until it has one); :meth:`release` at the end.  Called
+    on the process's main thread (a benchmark or a test driving the perception itself) it
+    keeps nothing: that thread's set is the process's, and the processes it starts inherit
+    it.  The readers and the setter are injectable for tests."""
 
     def __init__(self, cores: set[int] | None = None, *, read: Reader = schedstat,
                  set_cores: Setter | None = None, load: Load = machine_load,
-                 machine_cores: int | None = None) -> None:
+                 machine_cores: int | None = None, any_thread: bool = False) -> None:
         allowed = sorted(process_cores() if cores is None else cores)
         self.all = set(allowed)
         self.pair = (allowed[-2], allowed[-1]) if len(allowed) >= 2 else None
         self.machine_cores = machine_cores or os.cpu_count() or 1
         self._read, self._load = read, load
         self._set = set_cores or _set_affinity
+        self._any_thread = any_thread  # tests: the main thread may be kept too
         self.kept = False
         self.worker = self.other = 0
         self.released = 0  # times let go
@@ -102,8 +105,9 @@ class CoreKeeper:
 
     def frame(self, other_tid: int) -> None:
         """Count a frame; once a window, keep or let go (see the module's notes)."""
-        if self.pair is None or other_tid == 0:
-            return
+        on_main = threading.current_thread() is threading.main_thread()
+        if self.pair is None or other_tid == 0 or (on_main and not self._any_thread):
+            return  # (the main thread's set is the process's, and its children inherit it)
         self.worker, self.other = threading.get_native_id(), other_tid
         self._frames += 1
         if self._since is not None and self._frames < WINDOW_FRAMES:

@@ -167,8 +167,8 @@ class PerceptionConfig:
     #: the GIL): lower latency with several landmarks in view, the same CPU time.
     parallel_tracks: bool = True
     #: With ``parallel_tracks``, keep the frame worker and the second track thread on a
-    #: core each (the process's last two) while they do not wait for them; let them move
-    #: when they do, and try again later (:mod:`companion.cores`, Linux only).
+    #: core each (the process's last two) while other processes leave those cores free
+    #: and the threads do not wait for them (:mod:`companion.cores`, Linux only).
     keep_frame_cores: bool = True
 
 

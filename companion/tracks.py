@@ -119,6 +119,8 @@ class TrackSet:
         every = self.config.verify_every_frames
         checks = [check_all or (self._frames + i) % every == 0 for i in range(len(tracks))]
         self._spread_turns(tracks)
+        if self._keeper is not None:  # every frame: its looks a second apart
+            self._keeper.frame(self._pool_tid)
         alive_now = self._update_all(tracks, image, checks, motion)
         for track, alive in zip(tracks, alive_now, strict=True):
             if not alive:
@@ -153,8 +155,6 @@ class TrackSet:
                     return
                 alive[i] = self._update_one(tracks[i], image, checks[i], motion)
 
-        if self._keeper is not None:
-            self._keeper.frame(self._pool_tid)
         there = self._pool.submit(drain)
         try:
             drain()

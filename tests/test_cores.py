@@ -43,7 +43,7 @@ class Machine:
 
 def keeper(m: Machine, allowed: set[int] | None = None) -> CoreKeeper:
     return CoreKeeper({0, 1} if allowed is None else allowed, read=m.read,
-                      set_cores=m.set_cores, load=m.load, machine_cores=2)
+                      set_cores=m.set_cores, load=m.load, machine_cores=2, any_thread=True)
 
 
 def frames(k: CoreKeeper, m: Machine, others: float, **kw: float) -> None:
@@ -106,7 +106,7 @@ def test_one_core_or_no_statistics_keep_nothing() -> None:
     assert not k.kept and m.sets == [] and k.pair is None
 
     blind = CoreKeeper({0, 1}, read=lambda tid: None, set_cores=m.set_cores, load=m.load,
-                       machine_cores=2)
+                       machine_cores=2, any_thread=True)
     for _ in range(3 * WINDOW_FRAMES):
         blind.frame(other_tid=4242)
     assert not blind.kept and m.sets == []
@@ -120,12 +120,31 @@ def test_a_core_taken_away_leaves_them_free_for_good() -> None:
             raise OSError(22, "Invalid argument")
         m.set_cores(tid, allowed)
 
-    k = CoreKeeper({0, 1}, read=m.read, set_cores=refuse, load=m.load, machine_cores=2)
+    k = CoreKeeper({0, 1}, read=m.read, set_cores=refuse, load=m.load, machine_cores=2,
+                   any_thread=True)
     k.frame(other_tid=4242)
     frames(k, m, others=0.0)
     assert not k.kept and k.pair is None
     frames(k, m, others=0.0)
     assert not k.kept
+
+
+def test_the_main_thread_is_never_kept_but_a_worker_thread_is() -> None:
+    """A benchmark or a test driving the perception on the main thread keeps nothing (the
+    processes it starts would inherit one core); the flight's worker thread is kept."""
+    m = Machine()
+    k = CoreKeeper({0, 1}, read=m.read, set_cores=m.set_cores, load=m.load, machine_cores=2)
+    k.frame(other_tid=4242)
+    frames(k, m, others=0.0)
+    assert not k.kept and m.sets == []
+    def fly() -> None:
+        for _ in range(2):
+            frames(k, m, others=0.0)
+
+    worker = threading.Thread(target=fly)
+    worker.start()
+    worker.join()
+    assert k.kept and m.sets[0][0] == worker.native_id
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux's /proc")
