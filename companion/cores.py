@@ -102,6 +102,7 @@ class CoreKeeper:
         self._frames = 0
         self._pause = 0
         self._since: tuple[int, int, int, int, int] | None = None  # see _sample
+        self._looked = False  # the first frame starts the first window
 
     def frame(self, other_tid: int) -> None:
         """Count a frame; once a window, keep or let go (see the module's notes)."""
@@ -110,10 +111,10 @@ class CoreKeeper:
             return  # (the main thread's set is the process's, and its children inherit it)
         self.worker, self.other = threading.get_native_id(), other_tid
         self._frames += 1
-        if self._since is not None and self._frames < WINDOW_FRAMES:
-            return
+        if self._looked and self._frames < WINDOW_FRAMES:
+            return  # (a missing reading is tried again a window later, not every frame)
         before, now = self._since, self._sample()
-        self._since, self._frames = now, 0
+        self._since, self._frames, self._looked = now, 0, True
         if before is None or now is None:
             return
         run, wait = now[0] - before[0], now[1] - before[1]

@@ -105,11 +105,17 @@ def test_one_core_or_no_statistics_keep_nothing() -> None:
         frames(k, m, others=0.0)
     assert not k.kept and m.sets == [] and k.pair is None
 
-    blind = CoreKeeper({0, 1}, read=lambda tid: None, set_cores=m.set_cores, load=m.load,
+    reads: list[int] = []
+
+    def missing(tid: int) -> None:
+        reads.append(tid)
+
+    blind = CoreKeeper({0, 1}, read=missing, set_cores=m.set_cores, load=m.load,
                        machine_cores=2, any_thread=True)
     for _ in range(3 * WINDOW_FRAMES):
         blind.frame(other_tid=4242)
     assert not blind.kept and m.sets == []
+    assert len(reads) == 2 * 3  # both threads, once a window: not every frame
 
 
 def test_a_core_taken_away_leaves_them_free_for_good() -> None:
