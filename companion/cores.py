@@ -11,12 +11,13 @@ A thread kept to a core cannot leave it, though: beside another busy process it 
 of that core (a busy loop beside the demo: p99 22-25 -> 24-32 ms, kept for the whole
 flight).  So :class:`CoreKeeper` looks once a window (``WINDOW_FRAMES`` frames): it keeps
 the threads only while other processes used at most ``MAX_OTHERS_CORES`` cores over the
-window (the machine's busy time, ``/proc/stat``, less this process's), and lets them go
-when they did, or when the kept threads waited more than ``MAX_WAIT_SHARE`` of their time
-on a run queue (``/proc/self/task/TID/schedstat``); after that it waits ``PAUSE_WINDOWS``
-windows before keeping them again.  It keeps them only where the process may run on two
-cores or more (the last two of its set: the system's own work tends to the first ones),
-on Linux.
+window on the cores the process may use (their busy time, ``/proc/stat``, less this
+process's: on a board that gives the companion cores of its own by ``CPUAffinity=``, the
+load on the others does not count), and lets them go when they did, or when the kept
+threads waited more than ``MAX_WAIT_SHARE`` of their time on a run queue
+(``/proc/self/task/TID/schedstat``); after that it waits ``PAUSE_WINDOWS`` windows before
+keeping them again.  It keeps them only where the process may run on two cores or more
+(the last two of its set: the system's own work tends to the first ones), on Linux.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ PAUSE_WINDOWS = 10
 Reader = Callable[[int], tuple[int, int] | None]
 #: sets the allowed cores of a thread of this process (by its native id)
 Setter = Callable[[int, set[int]], None]
-#: (the machine's busy ticks over all its cores, all its ticks, this process's CPU ticks)
+#: (the busy ticks of the process's cores, all their ticks, this process's CPU ticks)
 Load = Callable[[], tuple[int, int, int] | None]
 
 
@@ -56,15 +57,24 @@ def schedstat(tid: int) -> tuple[int, int] | None:
         return None
 
 
-def machine_load() -> tuple[int, int, int] | None:
-    """The machine's busy and total clock ticks (``/proc/stat``: every core; idle and
-    waiting for I/O are not busy) and this process's CPU ticks (``/proc/self/stat``)."""
+def machine_load(cores: set[int] | None = None, stat: str = "/proc/stat",
+                 own: str = "/proc/self/stat") -> tuple[int, int, int] | None:
+    """The busy and total clock ticks of ``cores`` (``/proc/stat``'s line of each; every
+    core when None; idle and waiting for I/O are not busy) and this process's CPU ticks
+    (``/proc/self/stat``); None when a reading is missing."""
     try:
-        with open("/proc/stat") as fh:
-            ticks = [int(v) for v in fh.readline().split()[1:]]
-        with open("/proc/self/stat") as fh:
-            own = fh.read().rsplit(")", 1)[1].split()
-        return sum(ticks) - ticks[3] - ticks[4], sum(ticks), int(own[11]) + int(own[12])
+        with open(stat) as fh:
+            lines = [line.split() for line in fh if line.startswith("cpu")]
+        picked = [line for line in lines[1:] if int(line[0][3:]) in cores] \
+            if cores else lines[:1]
+        busy = total = 0
+        for line in picked:
+            ticks = [int(v) for v in line[1:]]
+            busy += sum(ticks) - ticks[3] - ticks[4]
+            total += sum(ticks)
+        with open(own) as fh:
+            mine = fh.read().rsplit(")", 1)[1].split()
+        return (busy, total, int(mine[11]) + int(mine[12])) if picked else None
     except (OSError, ValueError, IndexError):
         return None
 
@@ -87,13 +97,13 @@ class CoreKeeper:
     it.  The readers and the setter are injectable for tests."""
 
     def __init__(self, cores: set[int] | None = None, *, read: Reader = schedstat,
-                 set_cores: Setter | None = None, load: Load = machine_load,
-                 machine_cores: int | None = None, any_thread: bool = False) -> None:
+                 set_cores: Setter | None = None, load: Load | None = None,
+                 any_thread: bool = False) -> None:
         allowed = sorted(process_cores() if cores is None else cores)
         self.all = set(allowed)
         self.pair = (allowed[-2], allowed[-1]) if len(allowed) >= 2 else None
-        self.machine_cores = machine_cores or os.cpu_count() or 1
-        self._read, self._load = read, load
+        self._read = read
+        self._load = load or (lambda: machine_load(self.all))
         self._set = set_cores or _set_affinity
         self._any_thread = any_thread  # tests: the main thread may be kept too
         self.kept = False
@@ -119,7 +129,7 @@ class CoreKeeper:
             return
         run, wait = now[0] - before[0], now[1] - before[1]
         ticks = max(now[3] - before[3], 1)
-        others = ((now[2] - before[2]) - (now[4] - before[4])) / ticks * self.machine_cores
+        others = ((now[2] - before[2]) - (now[4] - before[4])) / ticks * len(self.all)
         self._pause = max(0, self._pause - 1)
         if self.kept and run > 0 and wait > MAX_WAIT_SHARE * run:
             self._pause = PAUSE_WINDOWS

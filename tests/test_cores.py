@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -43,7 +44,7 @@ class Machine:
 
 def keeper(m: Machine, allowed: set[int] | None = None) -> CoreKeeper:
     return CoreKeeper({0, 1} if allowed is None else allowed, read=m.read,
-                      set_cores=m.set_cores, load=m.load, machine_cores=2, any_thread=True)
+                      set_cores=m.set_cores, load=m.load, any_thread=True)
 
 
 def frames(k: CoreKeeper, m: Machine, others: float, **kw: float) -> None:
@@ -111,7 +112,7 @@ def test_one_core_or_no_statistics_keep_nothing() -> None:
         reads.append(tid)
 
     blind = CoreKeeper({0, 1}, read=missing, set_cores=m.set_cores, load=m.load,
-                       machine_cores=2, any_thread=True)
+                       any_thread=True)
     for _ in range(3 * WINDOW_FRAMES):
         blind.frame(other_tid=4242)
     assert not blind.kept and m.sets == []
@@ -126,8 +127,7 @@ def test_a_core_taken_away_leaves_them_free_for_good() -> None:
             raise OSError(22, "Invalid argument")
         m.set_cores(tid, allowed)
 
-    k = CoreKeeper({0, 1}, read=m.read, set_cores=refuse, load=m.load, machine_cores=2,
-                   any_thread=True)
+    k = CoreKeeper({0, 1}, read=m.read, set_cores=refuse, load=m.load, any_thread=True)
     k.frame(other_tid=4242)
     frames(k, m, others=0.0)
     assert not k.kept and k.pair is None
@@ -139,7 +139,7 @@ def test_the_main_thread_is_never_kept_but_a_worker_thread_is() -> None:
     """A benchmark or a test driving the perception on the main thread keeps nothing (the
     processes it starts would inherit one core); the flight's worker thread is kept."""
     m = Machine()
-    k = CoreKeeper({0, 1}, read=m.read, set_cores=m.set_cores, load=m.load, machine_cores=2)
+    k = CoreKeeper({0, 1}, read=m.read, set_cores=m.set_cores, load=m.load)
     k.frame(other_tid=4242)
     frames(k, m, others=0.0)
     assert not k.kept and m.sets == []
@@ -162,3 +162,32 @@ def test_the_kernels_statistics_are_read() -> None:
     assert load is not None and 0 <= load[0] <= load[1] and load[2] >= 0
     assert cores.schedstat(2**31 - 1) is None  # no such thread
     assert cores.process_cores() == set(os.sched_getaffinity(os.getpid()))
+
+
+
+def test_the_load_counted_is_on_the_processs_own_cores(tmp_path: Path) -> None:
+    """A 4-core board whose cores 0-1 are busy with other work and 2-3 given to the
+    companion (systemd's ``CPUAffinity=``): only cores 2-3's ticks count."""
+    stat, own = tmp_path / "stat", tmp_path / "own"
+
+    def second(n: int, busy01: int, busy23: int) -> None:
+        """``n`` seconds (100 ticks each) since boot: cores 0-1 and 2-3 busy so many."""
+        per_core = [busy01, busy01, busy23, busy23]
+        rows = [f"cpu{c} {b} 0 0 {100 * n - b} 0 0 0 0 0 0" for c, b in enumerate(per_core)]
+        stat.write_text("\n".join([f"cpu  {sum(per_core)} 0 0 {400 * n - sum(per_core)} "
+                                   "0 0 0 0 0 0", *rows, "intr 1 2 3", ""]))
+        mine = 2 * busy23  # the companion is all the load on cores 2-3
+        own.write_text(f"4242 (python3) S {'0 ' * 10}{mine // 2} {mine - mine // 2} 0 0\n")
+
+    def others(cores_read: set[int] | None) -> int:
+        """Other processes' ticks over the second second."""
+        second(1, 0, 0)
+        before = cores.machine_load(cores_read, stat=str(stat), own=str(own))
+        second(2, 100, 40)
+        after = cores.machine_load(cores_read, stat=str(stat), own=str(own))
+        assert before is not None and after is not None
+        return (after[0] - before[0]) - (after[2] - before[2])
+
+    assert others({2, 3}) == 0  # nothing else on the companion's cores
+    assert others(None) == 200  # the whole machine: cores 0-1 busy
+    assert cores.machine_load({7}, stat=str(stat), own=str(own)) is None  # no such core
