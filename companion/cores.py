@@ -42,8 +42,9 @@ PAUSE_WINDOWS = 10
 Reader = Callable[[int], tuple[int, int] | None]
 #: sets the allowed cores of a thread of this process (by its native id)
 Setter = Callable[[int, set[int]], None]
-#: (the busy ticks of the process's cores, all their ticks, this process's CPU ticks)
-Load = Callable[[], tuple[int, int, int] | None]
+#: of the given cores: (their busy ticks, all their ticks, how many cores were read, this
+#: process's CPU ticks), None if unknown
+Load = Callable[[set[int] | None], tuple[int, int, int, int] | None]
 
 
 def schedstat(tid: int) -> tuple[int, int] | None:
@@ -58,15 +59,16 @@ def schedstat(tid: int) -> tuple[int, int] | None:
 
 
 def machine_load(cores: set[int] | None = None, stat: str = "/proc/stat",
-                 own: str = "/proc/self/stat") -> tuple[int, int, int] | None:
+                 own: str = "/proc/self/stat") -> tuple[int, int, int, int] | None:
     """The busy and total clock ticks of ``cores`` (``/proc/stat``'s line of each; every
-    core when None; idle and waiting for I/O are not busy) and this process's CPU ticks
-    (``/proc/self/stat``); None when a reading is missing."""
+    core when None; idle and waiting for I/O are not busy), how many cores that was (a core
+    offline has no line) and this process's CPU ticks (``/proc/self/stat``); None when a
+    reading is missing."""
     try:
         with open(stat) as fh:
             lines = [line.split() for line in fh if line.startswith("cpu")]
         picked = [line for line in lines[1:] if int(line[0][3:]) in cores] \
-            if cores else lines[:1]
+            if cores is not None else lines[1:]
         busy = total = 0
         for line in picked:
             ticks = [int(v) for v in line[1:]]
@@ -74,7 +76,7 @@ def machine_load(cores: set[int] | None = None, stat: str = "/proc/stat",
             total += sum(ticks)
         with open(own) as fh:
             mine = fh.read().rsplit(")", 1)[1].split()
-        return (busy, total, int(mine[11]) + int(mine[12])) if picked else None
+        return (busy, total, len(picked), int(mine[11]) + int(mine[12])) if picked else None
     except (OSError, ValueError, IndexError):
         return None
 
@@ -97,13 +99,12 @@ class CoreKeeper:
     it.  The readers and the setter are injectable for tests."""
 
     def __init__(self, cores: set[int] | None = None, *, read: Reader = schedstat,
-                 set_cores: Setter | None = None, load: Load | None = None,
+                 set_cores: Setter | None = None, load: Load = machine_load,
                  any_thread: bool = False) -> None:
         allowed = sorted(process_cores() if cores is None else cores)
         self.all = set(allowed)
         self.pair = (allowed[-2], allowed[-1]) if len(allowed) >= 2 else None
-        self._read = read
-        self._load = load or (lambda: machine_load(self.all))
+        self._read, self._load = read, load
         self._set = set_cores or _set_affinity
         self._any_thread = any_thread  # tests: the main thread may be kept too
         self.kept = False
@@ -111,7 +112,7 @@ class CoreKeeper:
         self.released = 0  # times let go
         self._frames = 0
         self._pause = 0
-        self._since: tuple[int, int, int, int, int] | None = None  # see _sample
+        self._since: tuple[int, ...] | None = None  # see _sample
         self._looked = False  # the first frame starts the first window
 
     def frame(self, other_tid: int) -> None:
@@ -128,8 +129,8 @@ class CoreKeeper:
         if before is None or now is None:
             return
         run, wait = now[0] - before[0], now[1] - before[1]
-        ticks = max(now[3] - before[3], 1)
-        others = ((now[2] - before[2]) - (now[4] - before[4])) / ticks * len(self.all)
+        ticks = max(now[3] - before[3], 1)  # over now[4] cores
+        others = ((now[2] - before[2]) - (now[5] - before[5])) / ticks * now[4]
         self._pause = max(0, self._pause - 1)
         if self.kept and run > 0 and wait > MAX_WAIT_SHARE * run:
             self._pause = PAUSE_WINDOWS
@@ -167,10 +168,10 @@ class CoreKeeper:
             self.released += 1
             log.debug("frame threads free to move: %s", why)
 
-    def _sample(self) -> tuple[int, int, int, int, int] | None:
-        """Both threads' run and wait (ns), the machine's busy and total ticks, this
-        process's ticks; None when a reading is missing."""
-        a, b, load = self._read(self.worker), self._read(self.other), self._load()
+    def _sample(self) -> tuple[int, ...] | None:
+        """Both threads' run and wait (ns), then :data:`Load`'s reading of the process's
+        cores; None when a reading is missing."""
+        a, b, load = self._read(self.worker), self._read(self.other), self._load(self.all)
         if a is None or b is None or load is None:
             return None
         return a[0] + b[0], a[1] + b[1], *load

@@ -16,27 +16,30 @@ from companion.cores import MAX_OTHERS_CORES, PAUSE_WINDOWS, WINDOW_FRAMES, Core
 
 class Machine:
     """Scripted scheduler statistics: per window, the frame threads' run and wait (ms) and
-    the cores other processes kept busy."""
+    the cores other processes kept busy on the process's cores."""
 
     def __init__(self) -> None:
         self.run_ns = self.wait_ns = 0
-        self.busy = self.total = self.own = 0
+        self.seconds = self.busy = self.own = 0
         self.sets: list[tuple[int, set[int]]] = []
+        self.asked: list[set[int] | None] = []
 
     def window(self, others: float, run_ms: float = 500.0, wait_ms: float = 10.0,
                own_cores: float = 0.4) -> None:
-        """One second passes on a 2-core machine."""
+        """One second passes."""
         self.run_ns += int(run_ms * 1e6)
         self.wait_ns += int(wait_ms * 1e6)
-        self.total += 200
+        self.seconds += 1
         self.own += round(own_cores * 100)
         self.busy += round((own_cores + others) * 100)
 
     def read(self, tid: int) -> tuple[int, int]:
         return self.run_ns // 2, self.wait_ns // 2  # each thread half
 
-    def load(self) -> tuple[int, int, int]:
-        return self.busy, self.total, self.own
+    def load(self, cores: set[int] | None) -> tuple[int, int, int, int]:
+        self.asked.append(cores)
+        n = len(cores or {0, 1})
+        return self.busy, 100 * n * self.seconds, n, self.own
 
     def set_cores(self, tid: int, allowed: set[int]) -> None:
         self.sets.append((tid, set(allowed)))
@@ -63,7 +66,7 @@ def test_threads_are_kept_on_the_last_two_cores_when_the_machine_is_otherwise_qu
     k.frame(other_tid=4242)  # the first look only starts the window
     assert not k.kept
     frames(k, m, others=0.2)  # the simulated camera and the autopilot's 0.2 cores
-    assert k.kept
+    assert k.kept and m.asked[-1] == {0, 1, 2, 3}  # the load on the process's cores
     assert m.sets == [(threading.get_native_id(), {2}), (4242, {3})]
     k.release()
     assert not k.kept and m.sets[-2:] == [(threading.get_native_id(), {0, 1, 2, 3}),
@@ -159,35 +162,61 @@ def test_the_kernels_statistics_are_read() -> None:
     run_wait = cores.schedstat(tid)
     assert run_wait is not None and run_wait[0] > 0
     load = cores.machine_load()
-    assert load is not None and 0 <= load[0] <= load[1] and load[2] >= 0
+    assert load is not None and 0 <= load[0] <= load[1] and load[3] >= 0
+    assert 1 <= load[2] <= (os.cpu_count() or 1)
     assert cores.schedstat(2**31 - 1) is None  # no such thread
     assert cores.process_cores() == set(os.sched_getaffinity(os.getpid()))
 
 
 
-def test_the_load_counted_is_on_the_processs_own_cores(tmp_path: Path) -> None:
-    """A 4-core board whose cores 0-1 are busy with other work and 2-3 given to the
-    companion (systemd's ``CPUAffinity=``): only cores 2-3's ticks count."""
-    stat, own = tmp_path / "stat", tmp_path / "own"
+class Board:
+    """A board's ``/proc/stat`` (the online cores' lines) and this process's
+    ``/proc/self/stat`` written to files, a second at a time: ``busy`` ticks (of 100) per
+    online core, ``own`` of them this process's."""
 
-    def second(n: int, busy01: int, busy23: int) -> None:
-        """``n`` seconds (100 ticks each) since boot: cores 0-1 and 2-3 busy so many."""
-        per_core = [busy01, busy01, busy23, busy23]
-        rows = [f"cpu{c} {b} 0 0 {100 * n - b} 0 0 0 0 0 0" for c, b in enumerate(per_core)]
-        stat.write_text("\n".join([f"cpu  {sum(per_core)} 0 0 {400 * n - sum(per_core)} "
-                                   "0 0 0 0 0 0", *rows, "intr 1 2 3", ""]))
-        mine = 2 * busy23  # the companion is all the load on cores 2-3
-        own.write_text(f"4242 (python3) S {'0 ' * 10}{mine // 2} {mine - mine // 2} 0 0\n")
+    def __init__(self, folder: Path, online: list[int]) -> None:
+        self.stat, self.own_file, self.online = folder / "stat", folder / "own", online
+        self.seconds, self.busy, self.own = 0, [0] * len(online), 0
+        self.second([0] * len(online), own=0)
 
-    def others(cores_read: set[int] | None) -> int:
-        """Other processes' ticks over the second second."""
-        second(1, 0, 0)
-        before = cores.machine_load(cores_read, stat=str(stat), own=str(own))
-        second(2, 100, 40)
-        after = cores.machine_load(cores_read, stat=str(stat), own=str(own))
-        assert before is not None and after is not None
-        return (after[0] - before[0]) - (after[2] - before[2])
+    def second(self, busy: list[int], own: int) -> None:
+        self.seconds += 1
+        self.busy = [a + b for a, b in zip(self.busy, busy, strict=True)]
+        self.own += own
+        rows = [f"cpu{c} {b} 0 0 {100 * self.seconds - b} 0 0 0 0 0 0"
+                for c, b in zip(self.online, self.busy, strict=True)]
+        idle = 100 * len(self.online) * self.seconds - sum(self.busy)
+        self.stat.write_text("\n".join([f"cpu  {sum(self.busy)} 0 0 {idle} 0 0 0 0 0 0",
+                                         *rows, "intr 1 2 3", ""]))
+        self.own_file.write_text(f"4242 (python3) S {'0 ' * 10}{self.own} 0 0 0\n")
 
-    assert others({2, 3}) == 0  # nothing else on the companion's cores
-    assert others(None) == 200  # the whole machine: cores 0-1 busy
-    assert cores.machine_load({7}, stat=str(stat), own=str(own)) is None  # no such core
+    def load(self, which: set[int] | None) -> tuple[int, int, int, int] | None:
+        return cores.machine_load(which, stat=str(self.stat), own=str(self.own_file))
+
+
+def test_the_load_counted_is_on_the_process_own_cores(tmp_path: Path) -> None:
+    """A board giving the companion cores 1-4 (systemd's ``CPUAffinity=1 2 3 4``), core 2
+    offline: a camera driver busy on core 0 does not free the frame threads; a process busy
+    on the companion's online cores does, by its share of those three cores."""
+    board, m = Board(tmp_path, online=[0, 1, 3, 4]), Machine()
+    k = CoreKeeper({1, 2, 3, 4}, read=m.read, set_cores=m.set_cores, load=board.load,
+                   any_thread=True)
+
+    def window(busy: list[int], own: int) -> None:
+        for i in range(WINDOW_FRAMES):
+            if i == WINDOW_FRAMES - 1:
+                m.window(0.0)
+                board.second(busy, own)
+            k.frame(other_tid=4242)
+
+    k.frame(other_tid=4242)
+    window([100, 40, 40, 40], own=120)  # core 0 the driver's; 1, 3, 4 all ours
+    assert k.kept and m.sets[-1] == (4242, {4})
+    window([100, 40, 40, 100], own=120)  # another process: 0.6 of core 4
+    assert not k.kept and k.released == 1
+    window([100, 40, 40, 85], own=120)  # 0.45 of a core over three cores read: kept again
+    assert k.kept
+    whole = cores.machine_load(None, stat=str(board.stat), own=str(board.own_file))
+    assert whole is not None and whole[2] == 4  # every online core's line when no set
+    assert board.load({2, 7}) is None  # no such core online: no reading
+    assert board.load(set()) is None  # no core at all: not the whole machine
