@@ -96,14 +96,16 @@ class CoreKeeper:
     the other thread's native id (0 until it has one); :meth:`release` at the end.  Called
     on the process's main thread (a benchmark or a test driving the perception itself) it
     keeps nothing: that thread's set is the process's, and the processes it starts inherit
-    it.  The readers and the setter are injectable for tests."""
+    it.  Without ``cores`` the process's cores are read (``process``) and read again at
+    each look: moved by ``taskset`` or a cgroup, the threads follow (while the process has
+    two cores or more).  The readers and the setter are injectable for tests."""
 
     def __init__(self, cores: set[int] | None = None, *, read: Reader = schedstat,
                  set_cores: Setter | None = None, load: Load = machine_load,
-                 any_thread: bool = False) -> None:
-        allowed = sorted(process_cores() if cores is None else cores)
-        self.all = set(allowed)
-        self.pair = (allowed[-2], allowed[-1]) if len(allowed) >= 2 else None
+                 any_thread: bool = False,
+                 process: Callable[[], set[int]] = process_cores) -> None:
+        self._follow = process if cores is None else None
+        self._use(process() if cores is None else cores)
         self._read, self._load = read, load
         self._set = set_cores or _set_affinity
         self._any_thread = any_thread  # tests: the main thread may be kept too
@@ -124,6 +126,12 @@ class CoreKeeper:
         self._frames += 1
         if self._looked and self._frames < WINDOW_FRAMES:
             return  # (a missing reading is tried again a window later, not every frame)
+        moved = self._follow() if self._follow is not None else self.all
+        if moved and moved != self.all:
+            self._use(moved)  # a new window: the load read was of other cores
+            self._since, self._looked = None, False
+            self._release(f"the process's cores are now {sorted(moved)}")
+            return
         before, now = self._since, self._sample()
         self._since, self._frames, self._looked = now, 0, True
         if before is None or now is None:
@@ -139,6 +147,11 @@ class CoreKeeper:
             self._release(f"other processes kept {others:.1f} cores busy")
         elif not self.kept and others <= MAX_OTHERS_CORES and not self._pause:
             self._keep()
+
+    def _use(self, cores: set[int]) -> None:
+        allowed = sorted(cores)
+        self.all = set(allowed)
+        self.pair = (allowed[-2], allowed[-1]) if len(allowed) >= 2 else None
 
     def release(self) -> None:
         """Both threads back on every core of the process (at the end of a flight)."""

@@ -220,3 +220,22 @@ def test_the_load_counted_is_on_the_process_own_cores(tmp_path: Path) -> None:
     assert whole is not None and whole[2] == 4  # every online core's line when no set
     assert board.load({2, 7}) is None  # no such core online: no reading
     assert board.load(set()) is None  # no core at all: not the whole machine
+
+
+def test_the_threads_follow_the_process_when_its_cores_change() -> None:
+    """``taskset`` (or a cgroup) moves the process from cores 0-3 to 4-5: the kept threads
+    are let go onto the new cores at the next look and kept on 4 and 5 a window later."""
+    m, now = Machine(), [{0, 1, 2, 3}]
+    k = CoreKeeper(read=m.read, set_cores=m.set_cores, load=m.load, any_thread=True,
+                   process=lambda: set(now[0]))
+    k.frame(other_tid=4242)
+    frames(k, m, others=0.1)
+    assert k.kept and m.sets[-1] == (4242, {3})
+    now[0] = {4, 5}
+    frames(k, m, others=0.1)
+    assert not k.kept and m.sets[-1] == (4242, {4, 5}) and k.pair == (4, 5)
+    frames(k, m, others=0.1)  # a window on the new cores' load first
+    assert not k.kept
+    frames(k, m, others=0.1)
+    assert k.kept and m.sets[-2:] == [(threading.get_native_id(), {4}), (4242, {5})]
+    assert m.asked[-1] == {4, 5}
