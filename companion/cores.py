@@ -126,8 +126,7 @@ class CoreKeeper:
         self._frames += 1
         if self._looked and self._frames < WINDOW_FRAMES:
             return  # (a missing reading is tried again a window later, not every frame)
-        moved = self._follow() if self._follow is not None else self.all
-        if moved and moved != self.all:
+        if self._follow is not None and (moved := self._follow()) and moved != self.all:
             self._use(moved)  # a new window: the load read was of other cores
             self._since, self._looked = None, False
             self._release(f"the process's cores are now {sorted(moved)}")

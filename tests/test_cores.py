@@ -232,10 +232,10 @@ def test_the_threads_follow_the_process_when_its_cores_change() -> None:
     frames(k, m, others=0.1)
     assert k.kept and m.sets[-1] == (4242, {3})
     now[0] = {4, 5}
-    frames(k, m, others=0.1)
+    frames(k, m, others=0.0)
     assert not k.kept and m.sets[-1] == (4242, {4, 5}) and k.pair == (4, 5)
-    frames(k, m, others=0.1)  # a window on the new cores' load first
-    assert not k.kept
+    frames(k, m, others=0.1)  # a window on the new cores' load first: the readings of
+    assert not k.kept  # cores 0-3 and 4-5 are not compared (here they would say "keep")
     frames(k, m, others=0.1)
     assert k.kept and m.sets[-2:] == [(threading.get_native_id(), {4}), (4242, {5})]
     assert m.asked[-1] == {4, 5}
