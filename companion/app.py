@@ -183,10 +183,13 @@ class CompanionApp:
                  preview: PreviewFn | None = None,
                  diagnose: Callable[[], Blocker | None] | None = None,
                  facts: dict[str, Any] | None = None,
-                 observers: Sequence[ResultObserver] = ()) -> None:
+                 observers: Sequence[ResultObserver] = (),
+                 clock_us: Callable[[], int] = now_us) -> None:
         """``diagnose`` names why no fix can come (:class:`companion.nofix.NoFixWatch`);
         ``facts`` are fixed for the flight and shown in every status (e.g. the map);
-        ``observers`` subscribe to the results (:class:`ResultObserver`), in this order."""
+        ``observers`` subscribe to the results (:class:`ResultObserver`), in this order;
+        ``clock_us``: the clock the frames are stamped on, for their queueing, processing
+        and capture-to-wire times (a replay on the recording's clock has its own)."""
         self.source = source
         self.processor = processor
         self.sink = sink
@@ -199,6 +202,7 @@ class CompanionApp:
         self.diagnose = diagnose
         self.facts = facts or {}
         self.observers = tuple(observers)
+        self.clock_us = clock_us
         self.blocker: Blocker | None = None
         self.counters = Counters()
         self.stats = AppStats()
@@ -287,10 +291,10 @@ class CompanionApp:
         try:
             while True:
                 frame = await self._slot.get()
-                taken_us = now_us()
+                taken_us = self.clock_us()
                 self.stats.queue_ms.add((taken_us - frame.t_us) / 1000.0)
                 result = await loop.run_in_executor(self._executor, self._process, frame)
-                self.stats.process_ms.add((now_us() - taken_us) / 1000.0)
+                self.stats.process_ms.add((self.clock_us() - taken_us) / 1000.0)
                 await self._handle(result)
                 self._after(frame, result)
         except (SlotClosedError, asyncio.CancelledError):
@@ -335,7 +339,7 @@ class CompanionApp:
         now_s = self.clock_s()
         sent = result.fix is not None and await self.sink.send_fix(result.fix)
         if sent:
-            self.stats.capture_to_wire_ms.add((now_us() - result.capture_t_us) / 1000.0)
+            self.stats.capture_to_wire_ms.add((self.clock_us() - result.capture_t_us) / 1000.0)
         self.counters.frames += 1
         self.stats.fps.tick(now_s)
         self._recent_bad = [*self._recent_bad[-29:], result.bad_frame]
@@ -370,7 +374,7 @@ class CompanionApp:
             while not self._stop.is_set():
                 self._update_health()
                 await self._watch_keep_up()
-                self.reporter.report("status", now_us(), self.status())
+                self.reporter.report("status", self.clock_us(), self.status())
                 try:
                     await asyncio.wait_for(self._stop.wait(), self.status_period_s)
                 except TimeoutError:
@@ -395,7 +399,7 @@ class CompanionApp:
             old, self.state = self.state, state
             log.info("health %s -> %s", old, state)
             self._event("health", old=old, new=state)
-            self.reporter.report("status", now_us(), self.status())
+            self.reporter.report("status", self.clock_us(), self.status())
 
     async def _watch_keep_up(self) -> None:
         """Say once when the processing falls behind the camera (frames dropped), and
@@ -438,7 +442,7 @@ class CompanionApp:
             self._event("no-fix-cleared", cause=previous.cause)
 
     def _event(self, name: str, **fields: Any) -> None:
-        self.reporter.report("events", now_us(), {"event": name, **fields})
+        self.reporter.report("events", self.clock_us(), {"event": name, **fields})
 
     def status(self) -> dict[str, Any]:
         """The status payload (docs/monitoring.md)."""
@@ -477,4 +481,4 @@ class CompanionApp:
             await self.sink.statustext(f"stopped after {self.counters.frames} frames")
         except Exception as err:  # the link may already be gone
             log.warning("final STATUSTEXT not sent: %s", err)
-        self.reporter.report("status", now_us(), self.status())
+        self.reporter.report("status", self.clock_us(), self.status())

@@ -10,10 +10,16 @@ flight it judges fixes against are the recording's at the frame's moment.
 * real time (default): ``T(r) = T0 + r``; a frame is delivered at ``T(r)``; when the
   processing falls behind, frames are dropped as from a live camera.
 * ``--fast``: no frame is dropped; the next frame is decoded while the worker processes
-  the last one and delivered once it is done.  The fake's clock is stepped to the frame's
-  ``r``, it sends what is due (the recorded telemetry up to ``r``) and the frame is then
-  stamped with the companion's clock ``T`` at its delivery: ``r -> T`` is monotonic,
-  piecewise, and the same for the gate, the attitude lookup and the latency.
+  the last one and delivered once it is done.  From the first frame the companion's clock
+  (its frames' stamps, its bridge, the arrival of the autopilot's messages) *is* the
+  recording's: ``T(r) = T0 + r``, stepped, as the fake's, so that the perception sees the
+  recording's time between frames however fast or loaded the machine is (before, frames
+  were stamped at their delivery: a loaded machine's longer steps changed the replay's
+  figures).  The fake's clock is stepped to the frame's ``r``, it sends what is due (the
+  recorded telemetry up to ``r``), the replay waits for those bytes to arrive, and the
+  frame is delivered stamped ``T(r)``.  The latency is the processing's own: the frame's
+  stamp against its stamp plus the real time since its delivery.  After the last frame
+  the clock runs on in real time (the flight's end waits on it).
 
 The attitude: a version-2 stream's recorded ATTITUDE, replayed by the fake
 (:mod:`mavlink_bridge.fake_replay`); without telemetry, ``truth_pose.csv`` plus an
@@ -44,8 +50,10 @@ from companion.recorded import OnCompanionClock, RecordedTruth, TruthAttitude
 from companion.replay_score import ReplayScorer, replay_summary, visible_counts
 from companion.runtime import CompanionFlight, bridge_for, detector_for
 from companion.settings import Settings
-from companion.sources.base import Frame, monotonic_us
+from companion.sources.base import EndOfStream, Frame, monotonic_us
 from companion.sources.files import RecordedStreamSource
+from mavlink_bridge.bridge import PymavlinkBridge
+from mavlink_bridge.endpoint import Connection
 from mavlink_bridge.fake_autopilot import FakeAutopilot, FakeAutopilotConfig
 from mavlink_bridge.fake_replay import RecordedMessage, TelemetryReplay
 from mavlink_bridge.vehicle import TruthFn, VehicleState
@@ -56,24 +64,38 @@ log = logging.getLogger(__name__)
 READY_S = 5.0
 #: ``--fast`` steps the fake autopilot's clock by its own loop period (10 ms).
 TICK_US = 10_000
-#: How long ``--fast`` lets the loopback deliver the telemetry of a step before the frame.
+#: How long ``--fast`` lets the companion take in the telemetry of a step once its bytes
+#: have arrived, before the frame.
 SETTLE_S = 0.002
+#: How long ``--fast`` waits for a step's telemetry to arrive at most (a datagram lost on
+#: loopback: the frame goes on without it, and the wait is logged), looking this often.
+ARRIVAL_S = 1.0
+ARRIVAL_POLL_S = 0.0002
+#: ``--fast``'s pre-roll: a HEARTBEAT every this many 10 ms polls (the link comes up on it)
+BEAT_POLLS = 10
 
 
 class ReplayClock:
     """The recording's time on the companion's clock (module doc).
 
-    ``fake_ns`` is the fake autopilot's clock.  It runs in real time from the fake's start
-    (its flight time 0, ``t0_ns``) until :meth:`start` at the first frame -- the pre-roll,
-    in which the link comes up and the companion asks for its streams -- and the
-    recording's time 0 is then the fake's flight time :attr:`preroll_s`: the fake flies
-    and replays ``recording_s(flight time)``."""
+    ``fake_ns`` is the fake autopilot's clock, from the fake's start (its flight time 0,
+    ``t0_ns``); the pre-roll lasts until :meth:`start` at the first frame (the link comes
+    up, the companion asks for its streams and sets the origin) and the recording's time 0
+    is then the fake's flight time :attr:`preroll_s`: the fake flies and replays
+    ``recording_s(flight time)``.  In real time both clocks are the machine's; in
+    ``--fast`` they are the recording's as stepped (the pre-roll takes none of it), and
+    ``companion_ns`` is the companion's bridge's."""
 
     def __init__(self, fast: bool) -> None:
         self.fast = fast
         self.t0_ns = time.monotonic_ns()
         self.started_ns: int | None = None
         self.recorded_us = 0
+        #: ``--fast``: when the last frame was delivered (None while stepping), and when the
+        #: stream ended (the clock runs on in real time from then)
+        self.delivered_ns: int | None = None
+        self.ended_ns: int | None = None
+        self._end_extra_ns = 0
         #: called with :attr:`preroll_s` at :meth:`start`
         self.on_start: list[Callable[[float], None]] = []
 
@@ -81,22 +103,56 @@ class ReplayClock:
     def preroll_s(self) -> float:
         return 0.0 if self.started_ns is None else (self.started_ns - self.t0_ns) / 1e9
 
+    @property
+    def stepped(self) -> bool:
+        """``--fast`` after the first frame: the clock is the recording's, stepped."""
+        return self.fast and self.started_ns is not None
+
     def start(self) -> None:
-        self.started_ns = time.monotonic_ns()
+        # --fast: the pre-roll took none of the recording's clock (it stood at t0_ns)
+        self.started_ns = self.t0_ns if self.fast else time.monotonic_ns()
         for fn in self.on_start:
             fn(self.preroll_s)
 
+    def end(self) -> None:
+        """The stream has no more frames: ``--fast``'s clocks run on in real time."""
+        if self.ended_ns is None:
+            self._end_extra_ns = self._processing_ns()
+            self.ended_ns = time.monotonic_ns()
+
+    def _processing_ns(self) -> int:
+        """The real time since the last frame's delivery, up to the next step's first
+        tick (0 while stepping)."""
+        if self.delivered_ns is None:
+            return 0
+        return min(time.monotonic_ns() - self.delivered_ns, TICK_US * 1000 - 1000)
+
     def fake_ns(self) -> int:
-        if self.fast and self.started_ns is not None:
-            return self.started_ns + self.recorded_us * 1000
-        return time.monotonic_ns()
+        """The fake's clock: real time; in ``--fast`` the recording's time as stepped
+        (:attr:`recorded_us`; module doc), standing at :attr:`t0_ns` through the pre-roll,
+        so that the fake's estimator (its noise drawn per step) starts the recording in
+        the same state however long the link took to come up."""
+        if not self.fast:
+            return time.monotonic_ns()
+        ran_on = 0 if self.ended_ns is None else time.monotonic_ns() - self.ended_ns
+        return self.t0_ns + self.recorded_us * 1000 + ran_on
+
+    def companion_ns(self) -> int:
+        """The companion's bridge's clock: the fake's, and in ``--fast`` while a frame is
+        processed also the real time since its delivery, up to the next step's first tick:
+        a fix's age is its processing's, and the clock never steps back."""
+        if not self.fast:
+            return time.monotonic_ns()
+        extra = self._processing_ns() if self.ended_ns is None else self._end_extra_ns
+        return self.fake_ns() + extra
 
     def recording_s(self, flight_s: float) -> float:
         """The recording's time at the fake's flight time (0 during the pre-roll)."""
         return 0.0 if self.started_ns is None else max(flight_s - self.preroll_s, 0.0)
 
     def companion_us(self, recorded_us: int) -> int:
-        """Real time: when a frame recorded at ``recorded_us`` is due."""
+        """When a frame recorded at ``recorded_us`` is due (real time), or is stamped
+        (``--fast``)."""
         return (self.started_ns or time.monotonic_ns()) // 1000 + recorded_us
 
 
@@ -112,10 +168,18 @@ class ReplaySource(OnCompanionClock, ResultObserver):
         self.clock = clock
         #: called after the clock stepped (the fake sends what is due)
         self.step: Callable[[], None] | None = None
+        #: ``--fast``: the fake's HEARTBEAT, sent through the pre-roll (its clock stands)
+        self.beat: Callable[[], None] | None = None
         #: True once the autopilot streams what the companion asked (waited for, up to
         #: :data:`READY_S`, before the first frame)
         self.ready: Callable[[], bool] = lambda: True
         self.first_us: int | None = None
+        #: ``--fast``: the two ends of the loopback (the fake's, the companion's), whose
+        #: bytes in flight are waited for: a step's telemetry is in before its frame, and a
+        #: frame's fix reached the fake before the next step (UDP: bytes written, read)
+        self.ends: tuple[Callable[[], Connection | None], Callable[[], Connection | None]] = (
+            lambda: None, lambda: None)
+        self.late_steps = 0
         self.delivered = self.finished = self.settled = 0
         self._done = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -124,16 +188,46 @@ class ReplaySource(OnCompanionClock, ResultObserver):
         self.seconds = (times[-1] - times[0]) / 1e6 + period if times else 0.0
 
     async def _wait_ready(self) -> None:
-        for _ in range(round(READY_S / 0.01)):
+        for i in range(round(READY_S / 0.01)):
             if self.ready():
                 return
+            if self.beat is not None and i % BEAT_POLLS == 0:
+                self.beat()
             await asyncio.sleep(0.01)
         log.warning("replay: the companion did not ask the fake autopilot for its streams "
                     "within %g s: starting anyway", READY_S)
 
+    async def _arrival(self) -> None:
+        """``--fast``: until every byte either end wrote has been read by the other (or
+        :data:`ARRIVAL_S` passed), then :data:`SETTLE_S` for the readers to take it in."""
+        for _ in range(round(ARRIVAL_S / ARRIVAL_POLL_S)):
+            if self._in_flight() <= 0:
+                break
+            await asyncio.sleep(ARRIVAL_POLL_S)
+        else:
+            self.late_steps += 1
+            log.debug("replay: %d bytes still in flight on the loopback after %g s",
+                      self._in_flight(), ARRIVAL_S)
+        await asyncio.sleep(SETTLE_S)
+
+    def _in_flight(self) -> int:
+        fake, ours = (end() for end in self.ends)
+        if fake is None or ours is None:
+            return 0
+        return (fake.bytes_written - ours.bytes_read) + (ours.bytes_written - fake.bytes_read)
+
+    def now_us(self) -> int:
+        """The companion's clock for the latency: real time, and in ``--fast`` the last
+        frame's stamp plus the real time since its delivery (the processing's own)."""
+        if not self.clock.stepped or self.last_us is None:
+            return monotonic_us()
+        since = self.clock.delivered_ns
+        return self.last_us + (0 if since is None else (time.monotonic_ns() - since) // 1000)
+
     def _step_to(self, r_us: int) -> None:
         """``--fast``: the fake's clock to ``r_us`` in its own 10 ms ticks (its streams are
         scheduled as in continuous time, not once per frame)."""
+        self.clock.delivered_ns = None
         for t_us in [*range(self.clock.recorded_us + TICK_US, r_us, TICK_US), r_us]:
             self.clock.recorded_us = t_us
             if self.step is not None:
@@ -157,7 +251,11 @@ class ReplaySource(OnCompanionClock, ResultObserver):
 
     async def recv(self) -> Frame:
         self._loop = asyncio.get_running_loop()
-        frame = await self.stream.recv()
+        try:
+            frame = await self.stream.recv()
+        except EndOfStream:
+            self.clock.end()
+            raise
         if self.first_us is None:
             self.first_us = frame.t_us
             await self._wait_ready()
@@ -168,9 +266,11 @@ class ReplaySource(OnCompanionClock, ResultObserver):
             while min(self.finished, self.settled) < self.delivered:
                 self._done.clear()
                 await self._done.wait()
+            await self._arrival()  # the last frame's fix at the fake first
             self._step_to(r_us)
-            await asyncio.sleep(SETTLE_S)
-            t_us = monotonic_us()
+            await self._arrival()
+            t_us = self.clock.companion_us(r_us)
+            self.clock.delivered_ns = time.monotonic_ns()
         else:
             t_us = self.clock.companion_us(r_us)
             await asyncio.sleep(max(0.0, (t_us - monotonic_us()) / 1e6))
@@ -178,17 +278,6 @@ class ReplaySource(OnCompanionClock, ResultObserver):
         self.remember(t_us, frame.index, frame.t_us)
         self.delivered += 1
         return Frame(frame.index, t_us, frame.image, frame.camera_id)
-
-
-async def _heartbeats(fake: FakeAutopilot) -> None:
-    """``--fast``: the fake's HEARTBEAT at 1 Hz of the companion's clock as well.  Its
-    streams follow the recording's stepped time, but a link's liveness is judged on the
-    companion's clock (``mavlink.link_timeout_s``): a processing slower than a third of
-    real time would otherwise let the link time out (``no_link`` refusals, seen at load
-    average 18)."""
-    while True:
-        await asyncio.sleep(1.0)
-        fake.send_heartbeat()
 
 
 def recorded_flight(poses: dict[int, tuple[int, TruthPose]]) -> TruthFn | None:
@@ -267,11 +356,10 @@ def _fake(settings: Settings, clock: ReplayClock, source: ReplaySource, truth: R
           telemetry: TelemetryReplay | None) -> FakeAutopilot:
     """The fake autopilot flying the recording on its time, replaying its telemetry."""
     flight = recorded_flight(truth.poses) or (telemetry.trajectory() if telemetry else None)
-    # --fast: the fake's clock is the recording's and the stamps the companion's, two bases
-    # that drift apart; ArduPilot's jitter correction would read that drift as link lag
+    # one clock for the fake and the companion (module doc): its jitter correction as
+    # ArduPilot's
     fake = FakeAutopilot(FakeAutopilotConfig(profile=settings.vehicle.profile,
-                                             endpoint="udpin:127.0.0.1:0",
-                                             jitter_correction=not clock.fast),
+                                             endpoint="udpin:127.0.0.1:0"),
                          truth=None if flight is None else
                          lambda t: flight(clock.recording_s(t)),
                          clock_ns=clock.fake_ns, replay=telemetry)
@@ -279,7 +367,9 @@ def _fake(settings: Settings, clock: ReplayClock, source: ReplaySource, truth: R
     if telemetry is not None:
         clock.on_start.append(telemetry.start)
     source.step = fake.tick
-    source.ready = lambda: "ATTITUDE" in fake.streams.periods
+    # the streams asked and the EKF origin set: what the fake sends from the first frame on
+    # does not depend on how long the link took to come up
+    source.ready = lambda: "ATTITUDE" in fake.streams.periods and fake.origin is not None
     return fake
 
 
@@ -301,24 +391,26 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
     fake = _fake(settings, clock, source, truth, telemetry)
     camera = stream.meta.camera
     await fake.start()
-    beats = asyncio.create_task(_heartbeats(fake) if fast else asyncio.sleep(0))
     cpu0, wall0 = os.times(), time.monotonic()
     try:
         o = pmap.origin
-        bridge = bridge_for(settings, endpoint=f"udpout:127.0.0.1:{fake.local_port}",
+        # --fast: the bridge on the recording's clock, as the frames and the fake (module doc)
+        bridge = bridge_for(settings, clock.companion_ns if fast else None,
+                            endpoint=f"udpout:127.0.0.1:{fake.local_port}",
                             origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
                             origin_alt_m=o.alt_m, set_origin=True)
+        if fast:  # bridge_for refuses MAVSDK on a clock of ours
+            assert isinstance(bridge, PymavlinkBridge)
+            link = bridge.link
+            source.ends = (lambda: fake.connection, lambda: link.connection)
+            source.beat = fake.send_heartbeat
         flight = CompanionFlight(settings, source, bridge, pmap, camera, attitude=attitude,
-                                 prefix="replay")
-        if fast:  # the fake's clock is stepped: its time_boot_ms does not run with ours
-            flight.sensors.boot_clock = None
+                                 prefix="replay", clock_us=source.now_us if fast else None)
         scorer = ReplayScorer(truth, camera, pmap.landmarks, flight.sensors)
         flight.observe(scorer, source)  # the source last: the scoring is done when it hears
         app = await flight.run()
     finally:
         cpu1, wall1 = os.times(), time.monotonic()
-        beats.cancel()
-        await asyncio.gather(beats, return_exceptions=True)
         await fake.stop()
     busy = (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / max(wall1 - wall0, 1e-9)
     visible = visible_counts(truth, camera, pmap.landmarks)

@@ -21,7 +21,7 @@ from typing import Any
 
 import cv2
 
-from companion.app import CompanionApp, Frame, FrameResult, FrameSource, ResultObserver
+from companion.app import CompanionApp, Frame, FrameResult, FrameSource, ResultObserver, now_us
 from companion.autopilot import BridgeSink
 from companion.core.validate import to_plain
 from companion.errors import ConfigError, InputError, note_stop_signal
@@ -113,8 +113,11 @@ class CompanionFlight:
 
     def __init__(self, settings: Settings, source: FrameSource, bridge: VisionBridge,
                  pmap: PracticalMap, camera: CameraModel, *,
-                 attitude: AttitudeSource | None = None, prefix: str = "flight") -> None:
+                 attitude: AttitudeSource | None = None, prefix: str = "flight",
+                 clock_us: Callable[[], int] | None = None) -> None:
         self.settings = settings
+        #: the frames' clock when not the machine's monotonic one (:class:`CompanionApp`)
+        self.clock_us = clock_us
         self.source = source
         self.bridge = bridge
         self.pmap = pmap
@@ -159,7 +162,7 @@ class CompanionFlight:
                 self.source, perception, BridgeSink(bridge), reporter, settings.vehicle.id,
                 1.0 / mon.status_rate_hz, preview=preview_for(mon), diagnose=watch,
                 facts={"map": _map_summary(report), "noise": noise_status(settings)},
-                observers=self.observers)
+                observers=self.observers, clock_us=self.clock_us or now_us)
             app.report_event("map", report)
             for sig in (signal.SIGINT, signal.SIGTERM):
                 with contextlib.suppress(NotImplementedError, RuntimeError):
@@ -247,14 +250,15 @@ def _stop_by_signal(app: CompanionApp, signum: int) -> None:
     app.request_stop()
 
 
-def bridge_for(settings: Settings, **overrides: Any) -> VisionBridge:
+def bridge_for(settings: Settings, clock_ns: Callable[[], int] | None = None,
+               **overrides: Any) -> VisionBridge:
     """The configured MAVLink backend, its profile following ``vehicle.profile``, asking for
-    the streams the configuration needs."""
+    the streams the configuration needs (``clock_ns``: :func:`create_bridge`'s)."""
     import dataclasses
 
     overrides.setdefault("streams", stream_rates(settings))
     cfg = dataclasses.replace(settings.mavlink, profile=settings.vehicle.profile, **overrides)
     try:
-        return create_bridge(cfg)
+        return create_bridge(cfg, clock_ns)
     except BackendError as err:  # e.g. the mavsdk extra is not installed: one line
         raise ConfigError(str(err)) from None

@@ -139,8 +139,11 @@ class PymavlinkBridge(BridgePolicy):
             self._note_origin(item)
 
 
-def create_bridge(config: MavlinkConfig) -> VisionBridge:
-    """The backend the configuration asks for."""
+def create_bridge(config: MavlinkConfig,
+                  clock_ns: Callable[[], int] | None = None) -> VisionBridge:
+    """The backend the configuration asks for; ``clock_ns``: the clock the bridge judges
+    ages and stamps arrivals with, when not the machine's monotonic one (a replay on the
+    recording's clock, pymavlink only: MAVSDK keeps its own)."""
     if config.backend == "mavsdk":
         try:  # native library: load lazily
             from mavlink_bridge.mavsdk_backend import MavsdkBridge
@@ -149,5 +152,8 @@ def create_bridge(config: MavlinkConfig) -> VisionBridge:
                 f"mavlink.backend = \"mavsdk\" needs the optional package mavsdk ({err.name} "
                 "is not installed): pip install 'landmark-companion[mavsdk]'") from None
 
+        if clock_ns is not None:
+            raise BackendError("mavlink.backend = \"mavsdk\" keeps its own clock: a replay "
+                               "on the recording's clock (--fast) needs \"pymavlink\"")
         return MavsdkBridge(config)
-    return PymavlinkBridge(config)
+    return PymavlinkBridge(config, clock_ns or time.monotonic_ns)

@@ -151,6 +151,10 @@ class Connection:
         self.endpoint = endpoint
         self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         self.bytes_dropped = 0
+        #: bytes handed to the datagram socket (UDP; what a loopback peer will read), and
+        #: bytes read from it
+        self.bytes_written = 0
+        self.bytes_read = 0
         self.local_port = 0
 
     def write(self, data: bytes) -> None:  # pragma: no cover - overridden
@@ -172,6 +176,7 @@ class _UdpProtocol(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: tuple[str | object, ...]) -> None:
         if self._conn.endpoint.kind == "udpin":
             self._conn.peer = addr  # answer whoever spoke last, like mavutil
+        self._conn.bytes_read += len(data)
         self._on_data(data)
 
     def error_received(self, exc: Exception) -> None:
@@ -197,8 +202,10 @@ class UdpConnection(Connection):
             return
         if self.endpoint.kind == "udpout":
             self.transport.sendto(data)
+            self.bytes_written += len(data)
         elif self.peer is not None:
             self.transport.sendto(data, self.peer)
+            self.bytes_written += len(data)
         else:
             self.bytes_dropped += len(data)  # nobody has spoken to us yet
 
