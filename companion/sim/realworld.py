@@ -39,6 +39,13 @@ from tracker.camera import CameraModel
 ROOT = Path(__file__).resolve().parents[2]
 
 
+#: The settings the real-imagery worlds are replayed and scored with, over the simulator's
+#: layer (docs/benchmarks.md): SIFT acquisition (as in deployment), 6 inliers, and the
+#: vagueness gate at 5 % of the distance.
+REAL_WORLD_SETS = ("--set", 'acquire.features="sift"', "--set", "acquire.min_inliers=6",
+                   "--set", "fixgate.max_sigma_rel=0.05")
+
+
 def shared_data() -> Path:
     """The shared data folder (``LMC_SHARED_DATA`` or ``../shared/data``)."""
     return Path(os.environ.get("LMC_SHARED_DATA", ROOT.parent / "shared" / "data"))

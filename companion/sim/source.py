@@ -173,8 +173,9 @@ class SimCameraSource(OfSimulatedWorld):
             self._process, _render_elsewhere, index, t_s, slot)
         if piped is not None:
             image = piped
+        elif self._slots is None or slot is None:  # closed while it was being rendered
+            raise asyncio.CancelledError
         else:
-            assert self._slots is not None and slot is not None
             image = _from_slot(self._slots, slot, shape).copy()
         self.render_cpu_elsewhere_s += cpu_s
         self._render_wall_s = max(RENDER_TIME_DECAY * self._render_wall_s, took)
@@ -229,8 +230,12 @@ class SimCameraSource(OfSimulatedWorld):
         return index
 
     def close(self) -> None:
-        """Stop delivering (and the rendering process)."""
+        """Stop delivering (and the rendering process); a frame being rendered ahead is
+        cancelled, not left to fail on the slots closed under it."""
         self._closed = True
+        if self._prefetch is not None:
+            self._prefetch[1].cancel()
+            self._prefetch = None
         if self._process is not None:
             self._process.shutdown(wait=False, cancel_futures=True)
         if self._slots is not None:  # the renderer's mapping goes with its process
