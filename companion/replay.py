@@ -32,6 +32,7 @@ from __future__ import annotations
 import asyncio
 import bisect
 import dataclasses
+import itertools
 import logging
 import math
 import os
@@ -96,6 +97,9 @@ class ReplayClock:
         self.delivered_ns: int | None = None
         self.ended_ns: int | None = None
         self._end_extra_ns = 0
+        #: the real time a frame's processing adds to ``companion_ns`` at most: less than
+        #: the next step (a 10 ms tick, or the stream's shortest frame interval)
+        self.processing_cap_ns = TICK_US * 1000 - 1000
         #: called with :attr:`preroll_s` at :meth:`start`
         self.on_start: list[Callable[[float], None]] = []
 
@@ -121,11 +125,11 @@ class ReplayClock:
             self.ended_ns = time.monotonic_ns()
 
     def _processing_ns(self) -> int:
-        """The real time since the last frame's delivery, up to the next step's first
-        tick (0 while stepping)."""
+        """The real time since the last frame's delivery, up to the next step
+        (:attr:`processing_cap_ns`; 0 while stepping)."""
         if self.delivered_ns is None:
             return 0
-        return min(time.monotonic_ns() - self.delivered_ns, TICK_US * 1000 - 1000)
+        return min(time.monotonic_ns() - self.delivered_ns, self.processing_cap_ns)
 
     def fake_ns(self) -> int:
         """The fake's clock: real time; in ``--fast`` the recording's time as stepped
@@ -139,8 +143,8 @@ class ReplayClock:
 
     def companion_ns(self) -> int:
         """The companion's bridge's clock: the fake's, and in ``--fast`` while a frame is
-        processed also the real time since its delivery, up to the next step's first tick:
-        a fix's age is its processing's, and the clock never steps back."""
+        processed also the real time since its delivery, up to the next step: a fix's age
+        is its processing's, and the clock never steps back."""
         if not self.fast:
             return time.monotonic_ns()
         extra = self._processing_ns() if self.ended_ns is None else self._end_extra_ns
@@ -184,6 +188,9 @@ class ReplaySource(OnCompanionClock, ResultObserver):
         self._done = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
         times = [e.t_us for e in stream.entries]
+        shortest = min((b - a for a, b in itertools.pairwise(times) if b > a),
+                       default=TICK_US)
+        clock.processing_cap_ns = min(TICK_US, shortest) * 1000 - 1000
         period = 1.0 / stream.meta.fps if stream.meta.fps > 0 else 0.0
         self.seconds = (times[-1] - times[0]) / 1e6 + period if times else 0.0
 
