@@ -51,10 +51,15 @@ TARGETS = {"share": 0.9, "rmse_pct": 0.5, "nees_inside": 0.9, "wrong_frames": 10
 TOLERANCE = {"share": 0.01, "rmse_pct": 0.02, "nees_inside": 0.01, "wrong_frames": 3}
 
 
-def companion(*args: str) -> subprocess.CompletedProcess[str]:
-    """``python -m companion ARGS`` in a process of its own, output captured."""
-    return subprocess.run([sys.executable, "-m", "companion", *args], cwd=ROOT, text=True,
+def companion(*args: str) -> str:
+    """``python -m companion ARGS`` in a process of its own -> its output; a failure ends
+    the benchmark with its last line."""
+    done = subprocess.run([sys.executable, "-m", "companion", *args], cwd=ROOT, text=True,
                           capture_output=True, check=False)
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["(no output)"])[-1]
+        raise SystemExit(f"replay_worlds: companion {args[0]} {args[1]} failed: {last}")
+    return done.stdout
 
 
 def make_survey(folder: Path, quality: int) -> Path:
@@ -67,10 +72,7 @@ def make_survey(folder: Path, quality: int) -> Path:
                   "--overwrite"),
                  ("record", "--source", f"stream:{png}", "--out", str(out), "--format",
                   "jpg", "--jpeg-quality", str(quality))):
-        done = companion(*args)
-        if done.returncode != 0:
-            raise SystemExit(f"replay_worlds: companion {args[0]} failed: "
-                             f"{done.stderr.strip().splitlines()[-1:]}")
+        companion(*args)
     shutil.copy(png / "landmarks.geojson", out / "landmarks.geojson")
     shutil.copytree(png / "landmarks.appearance", out / "landmarks.appearance",
                     dirs_exist_ok=True)
@@ -87,12 +89,9 @@ def make_real(folder: Path, seed: int) -> Path:
 def replay(stream: Path, real: bool) -> dict[str, Any]:
     """The replay's summary (``companion replay --fast --json``)."""
     sets = REAL_WORLD_SETS if real else ()
-    done = companion("replay", str(stream), "--fast", "--json", "--config", str(SIM_LAYER),
-                     "--set", "monitor.enabled=false", *sets)
-    if done.returncode != 0:
-        raise SystemExit(f"replay_worlds: replay of {stream} failed: "
-                         f"{done.stderr.strip().splitlines()[-1:]}")
-    return dict(json.loads(done.stdout))
+    out = companion("replay", str(stream), "--fast", "--json", "--config", str(SIM_LAYER),
+                    "--set", "monitor.enabled=false", *sets)
+    return dict(json.loads(out))
 
 
 def figures(s: dict[str, Any]) -> dict[str, float]:

@@ -183,7 +183,6 @@ class ReplaySource(OnCompanionClock, ResultObserver):
         #: frame's fix reached the fake before the next step (UDP: bytes written, read)
         self.ends: tuple[Callable[[], Connection | None], Callable[[], Connection | None]] = (
             lambda: None, lambda: None)
-        self.late_steps = 0
         self.delivered = self.finished = self.settled = 0
         self._done = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -212,7 +211,6 @@ class ReplaySource(OnCompanionClock, ResultObserver):
                 break
             await asyncio.sleep(ARRIVAL_POLL_S)
         else:
-            self.late_steps += 1
             log.debug("replay: %d bytes still in flight on the loopback after %g s",
                       self._in_flight(), ARRIVAL_S)
         await asyncio.sleep(SETTLE_S)

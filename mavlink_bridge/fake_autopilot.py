@@ -333,8 +333,8 @@ class FakeAutopilot:
                                  int(self.boot_s() * 1000) & 0xFFFFFFFF)
 
     def send_heartbeat(self) -> None:
-        """One HEARTBEAT now, outside the stream schedule (a replay on a stepped clock keeps
-        the link alive on the companion's clock with it)."""
+        """One HEARTBEAT now, outside the stream schedule (``replay --fast``'s pre-roll,
+        where the fake's clock stands, brings the link up with it)."""
         if not self.faults.link_down():
             self._send_stream("HEARTBEAT", self.truth(self.flight_s()))
 
