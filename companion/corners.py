@@ -92,7 +92,8 @@ def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
                          else (TRACK_MIN_CORRELATION, config.ecc_edge_band_px,
                                config.ecc_fine_grey_share))
     return refine_ecc(ref, frame, hom, config.ecc_iterations, least,
-                      config.ecc_fine_iterations, weights, band, grey)
+                      config.ecc_fine_iterations, weights, band, grey,
+                      config.ecc_band_from_px)
 
 
 def moved_to_box(ref: Reference, hom: FloatArray, box: Box) -> FloatArray:

@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tracker import AdaptiveTracker
-from tracker.acquire import Weights
+from tracker.acquire import BAND_FROM_PX, Weights
 from tracker.edge_align import Patch
 from tracker.features import colour_weights
 from tracker.types import Box
@@ -45,6 +45,10 @@ class PerceptionConfig:
     #: The unsmoothed stage leaves out the reference's outer ring of this many pixels
     #: (0: none): there the frame mixes in what is behind the plate (docs/pose.md).
     ecc_edge_band_px: int = field(default=1, metadata={"ge": 0, "le": 8})
+    #: ... of a template (the reference at the plate's size in the frame) whose short side
+    #: is at least this many pixels (1: every one; 48 until 2026-12-05, docs/decisions.md,
+    #: "A small plate's ring is left out too").
+    ecc_band_from_px: int = field(default=BAND_FROM_PX, metadata={"ge": 1})
     #: ... and aligns a colour feature mixed with this share of grey levels: a camera keeps
     #: chroma at half resolution, grey levels at full (tracker.acquire.mixed_weights).
     ecc_fine_grey_share: float = field(default=0.5, metadata={"ge": 0, "le": 1})

@@ -418,10 +418,24 @@ def size_in_frame(ref: Reference, corners: FloatArray, least: int) -> tuple[int,
     scale = float(np.clip(np.sqrt(max(area, 1.0) / (w * h)), 0.05, 1.0))
     return max(least, round(w * scale)), max(least, round(h * scale))
 
+
+#: The unsmoothed stage leaves out the template's outer ring (``refine_ecc``'s
+#: ``edge_band_px``) when its short side is at least this long: every template (the
+#: default of ``perception.ecc_band_from_px``).  Until 2026-12-05 it was 48, a small
+#: plate keeping its ring; the ring's samples mix in the ground and pulled small real
+#: plates' outlines inwards (docs/decisions.md, "A small plate's ring is left out too").
+BAND_FROM_PX = 1
+
+#: The coarse ECC stage runs at half resolution when the template's short side is at
+#: least this long (so that the halved one still has some 24 px to align).
+HALVE_FROM_PX = 48
+
+
 def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
                iterations: int = 40, min_correlation: float = 0.6,
                fine_iterations: int = 10, weights_bgr: Weights | None = None,
-               edge_band_px: int = 0, fine_grey_share: float = 0.0) -> FloatArray | None:
+               edge_band_px: int = 0, fine_grey_share: float = 0.0,
+               band_from_px: int = BAND_FROM_PX) -> FloatArray | None:
     """Sub-pixel homography (reference -> frame) by ECC alignment, from an estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
@@ -443,6 +457,8 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     may not: an edge without grey contrast cannot hold a corner).  ``fine_grey_share``:
     the unsmoothed stage aligns on the feature mixed with that share of grey levels
     (:func:`mixed_weights`; the same window and template size, so the warp carries over).
+    ``band_from_px``: the ring is left out only of a template whose short side is at least
+    this long.
     """
     start = ecc_start(ref, frame, hom, weights_bgr)
     if start is None:
@@ -454,7 +470,8 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
             if weights_bgr is not None and fine_grey_share > 0.0:
                 template, roi = on_plane(start, ref, frame, mixed_weights(
                     ref, weights_bgr, fine_grey_share))
-            cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1, edge_band_px)
+            cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1, edge_band_px,
+                            band_from_px)
     except cv2.error:
         return None
     out = start.from_roi @ warp @ start.to_template
@@ -519,16 +536,6 @@ def on_plane(start: EccStart, ref: Reference, frame: npt.NDArray[np.uint8],
     return template, project(frame[y0:y0 + height, x0:x0 + width], weights_bgr)
 
 
-#: The unsmoothed stage leaves out the template's outer ring (``refine_ecc``'s
-#: ``edge_band_px``) only when its short side is at least this long: a small plate's
-#: outline is most of what holds it.
-BAND_FROM_PX = 48
-
-#: The coarse ECC stage runs at half resolution when the template's short side is at
-#: least this long (so that the halved one still has some 24 px to align).
-HALVE_FROM_PX = 48
-
-
 def resize_map(size: tuple[int, int], new_size: tuple[int, int]) -> FloatArray:
     """Pixel coordinates of an image of ``size`` (w, h) -> of it resized to ``new_size``;
     pixel centres sit on integers, so x' = (x + 0.5) s - 0.5."""
@@ -552,12 +559,14 @@ def _ecc_coarse(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32],
 
 
 def _ecc(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32], warp: FloatArray,
-         iterations: int, eps: float, blur: int, band: int = 0) -> tuple[float, FloatArray]:
+         iterations: int, eps: float, blur: int, band: int = 0,
+         band_from: int = BAND_FROM_PX) -> tuple[float, FloatArray]:
     """One cv2.findTransformECC run (homography template -> roi); raises cv2.error.
-    ``band``: the template's outer ``band`` px are left out."""
+    ``band``: the template's outer ``band`` px are left out when its short side is at least
+    ``band_from`` px."""
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, eps)
     start = (warp / warp[2, 2]).astype(np.float32)
-    if band > 0 and min(template.shape[:2]) >= BAND_FROM_PX:
+    if band > 0 and min(template.shape[:2]) >= band_from:
         mask = np.zeros(template.shape[:2], np.uint8)
         mask[band:-band, band:-band] = 1
         # no input mask (None), not an all-ones one: the same warp to the bit, measured
