@@ -1,4 +1,4 @@
-"""Issue 25's table: the survey as JPEG and the real-imagery worlds through ``companion replay``.
+"""Issue 25's table: the survey, the street and the real-imagery worlds through ``replay``.
 
     PYTHONPATH=. .venv/bin/python benchmarks/replay_worlds.py [--seeds 0-11] [--jobs 2]
         [--streams DIR] [--check] [--write-baseline]

@@ -13,7 +13,8 @@ import numpy as np
 
 from companion.corners import ecc
 from companion.perception_types import PerceptionConfig
-from tracker.acquire import ReferenceMatcher, homography_to, project_corners, reference_quad
+from tests.plates import textured_plate
+from tracker.acquire import homography_to, project_corners, reference_quad
 from tracker.pose.inputs import outline_basis
 
 SCALE_MODE = 3  # outline_basis: shift x, shift y, rotation, scale, ...
@@ -21,12 +22,10 @@ SCALE_MODE = 3  # outline_basis: shift x, shift y, rotation, scale, ...
 
 def scale_errors(band_from_px: int) -> np.ndarray:
     """The aligned outline's error along its scale mode (px) for a 56 px wide textured
-    plate on a dark ground (its template's short side 44 px), started 1 % large and
-    0.3 px off, six sub-pixel placements."""
+    plate (``tests.plates.textured_plate``) on a dark ground (its template's short side
+    37 px), started 1 % large and 0.3 px off, six sub-pixel placements."""
     rng = np.random.default_rng(3)
-    noise = cv2.GaussianBlur(rng.uniform(0, 255, (84, 107)).astype(np.float32), (0, 0), 2.5)
-    grey = (120 + 130 * (noise - noise.min()) / np.ptp(noise)).astype(np.uint8)
-    ref = ReferenceMatcher().add("plate", cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR))
+    grey, _, ref = textured_plate(3)
     w, h = ref.size_px
     config = dataclasses.replace(PerceptionConfig(), ecc_band_from_px=band_from_px)
     out = []
@@ -47,7 +46,7 @@ def scale_errors(band_from_px: int) -> np.ndarray:
 
 
 def test_a_small_plates_kept_ring_pulls_its_outline_in() -> None:
-    kept = scale_errors(48)  # the template's short side is 44 px: its ring kept
+    kept = scale_errors(48)  # the template's short side is 37 px: its ring kept
     assert kept.mean() < -0.2  # the ground's dark pixels in the ring's samples
 
 
