@@ -179,7 +179,16 @@ class Corners:
             and self._same_size(track.landmark_id, before, track.homography))
         track.patch = patch_around(image, track.corners) \
             if cut and track.corners is not None else None
-        track.saturated = 0.0 if track.corners is None else saturated_share(image, track.corners)
+        track.saturated = 0.0 if track.corners is None else \
+            self._over_exposed(track.landmark_id, image, track.corners)
+
+    def _over_exposed(self, landmark_id: str, image: npt.NDArray[np.uint8],
+                      corners: FloatArray) -> float:
+        """The share of the plate's pixels saturated beyond its own white
+        (``Reference.white_share``): a white plate seen at 255 is not over-exposed, and
+        its corners are no worse for it (docs/decisions.md, "A plate's own white")."""
+        white = self.references[landmark_id].white_share
+        return max(0.0, saturated_share(image, corners) - white)
 
     def _same_size(self, landmark_id: str, before: FloatArray | None,
                    now: FloatArray | None) -> bool:
@@ -250,7 +259,7 @@ class Corners:
             return False
         track.homography, track.corners, track.misses = aligned, corners, 0
         track.patch, track.outline_held = None, True  # whole and mostly in view
-        track.saturated = saturated_share(image, corners)
+        track.saturated = self._over_exposed(track.landmark_id, image, corners)
         return True
 
     def _align_turned(self, track: Track, image: npt.NDArray[np.uint8],

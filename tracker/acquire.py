@@ -82,6 +82,9 @@ class Reference:
     #: a colour feature mixed with grey levels (see :func:`mixed_weights`), made on demand
     mixes: dict[tuple[tuple[float, float, float], float], tuple[float, float, float]] = field(
         default_factory=dict, compare=False, repr=False)
+    #: share of the appearance image's pixels with a channel at ``WHITE_LEVEL`` or more: the
+    #: plate's own white, which a frame shows saturated without any over-exposure
+    white_share: float = 0.0
 
 
 Weights = tuple[float, float, float]
@@ -89,6 +92,9 @@ Weights = tuple[float, float, float]
 #: its size in the frame, to the pixel, for most frames (88 % on the survey), and a few
 #: sizes cover a plate growing or shrinking by a pixel back and forth.
 TEMPLATES_KEPT = 6
+#: A reference pixel with a channel at this level or more is the plate's own white
+#: (:attr:`Reference.white_share`).
+WHITE_LEVEL = 250
 _templates_lock = threading.Lock()  # the frame's threads and the lane share references
 
 
@@ -224,8 +230,9 @@ class ReferenceMatcher:
         pts = np.concatenate(pts_all) if pts_all else np.zeros((0, 2), np.float32)
         descriptors = np.concatenate(desc_all) if desc_all else np.zeros((0, 32), np.uint8)
         matchable = len(pts) >= self.config.min_inliers
+        white = float(np.mean(np.max(image_bgr, axis=2) >= WHITE_LEVEL))
         ref = Reference(landmark_id, (w, h), pts, descriptors, gray, matchable,
-                        np.ascontiguousarray(image_bgr))
+                        np.ascontiguousarray(image_bgr), white_share=white)
         self.references[landmark_id] = ref
         return ref
 
