@@ -186,7 +186,8 @@ class Corners:
                       corners: FloatArray) -> float:
         """The share of the plate's pixels saturated beyond its own white
         (``Reference.white_share``): a white plate seen at 255 is not over-exposed, and
-        its corners are no worse for it (docs/decisions.md, "A plate's own white")."""
+        its corners are no worse for it (docs/decisions.md, "A plate's own white is not
+        over-exposure")."""
         white = self.references[landmark_id].white_share
         return max(0.0, saturated_share(image, corners) - white)
 
