@@ -501,6 +501,10 @@ class EccStart:
     from_roi: FloatArray
     #: template px -> window px, from the homography the alignment starts at
     warp: FloatArray
+    #: each channel's (B, G, R) gain of the plate in the frame over its reference
+    #: (:func:`cast_gains`): the frame's colour planes are projected with the weights
+    #: divided by them
+    gains: FloatArray = field(default_factory=lambda: np.ones(3))
 
 
 def ecc_start(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
@@ -523,13 +527,44 @@ def ecc_start(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     t_roi = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # roi -> frame
     warp = np.linalg.inv(t_roi) @ hom @ np.linalg.inv(s_ref)  # template -> roi
     crop = frame[y0:y1, x0:x1]
+    gains = np.ones(3)
     if weights_bgr is not None:
-        roi = project(crop, weights_bgr)
+        gains = cast_gains(ref, crop, corners - (x0, y0))
+        roi = project(crop, cast_weights(weights_bgr, gains))
     elif crop.ndim == 3:  # grey levels of the region only, not of the whole frame
         roi = np.asarray(cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY), np.float32)
     else:
         roi = crop.astype(np.float32)
-    return EccStart(template, roi, s_ref, t_roi, warp)
+    return EccStart(template, roi, s_ref, t_roi, warp, gains)
+
+
+#: A plate whose channels' gains differ from their mean by less than this is under white
+#: light: its colour plane is left as it is
+CAST_FROM = 0.08
+
+
+def cast_gains(ref: Reference, crop: npt.NDArray[np.uint8], quad: FloatArray) -> FloatArray:
+    """Each channel's mean inside the outline ``quad`` (crop px) over the reference's, as a
+    share of their average: 1, 1, 1 under white light whatever its level; a colour cast
+    raises one channel against another, which no gain and offset of a colour plane such as
+    R - B takes up."""
+    if crop.ndim != 3:
+        return np.ones(3)
+    mask = np.zeros(crop.shape[:2], np.uint8)
+    cv2.fillConvexPoly(mask, np.round(quad).astype(np.int32), 255)
+    if cv2.countNonZero(mask) < 16:
+        return np.ones(3)
+    seen = np.asarray(cv2.mean(crop, mask=mask)[:3], np.float64)
+    own = ref.colour.reshape(-1, 3).mean(axis=0).astype(np.float64)
+    ratio = (seen + 1.0) / (own + 1.0)
+    gains = ratio / ratio.mean()
+    return gains if float(np.abs(gains - 1.0).max()) >= CAST_FROM else np.ones(3)
+
+
+def cast_weights(weights_bgr: Weights, gains: FloatArray) -> Weights:
+    """``weights_bgr`` for a frame whose channels carry ``gains``."""
+    b, g, r = (float(w / k) for w, k in zip(weights_bgr, gains, strict=True))
+    return b, g, r
 
 
 def on_plane(start: EccStart, ref: Reference, frame: npt.NDArray[np.uint8],
@@ -540,7 +575,8 @@ def on_plane(start: EccStart, ref: Reference, frame: npt.NDArray[np.uint8],
     x0, y0 = int(start.from_roi[0, 2]), int(start.from_roi[1, 2])
     height, width = start.roi.shape[:2]
     template = reference_template(ref, weights_bgr, start.template.shape[1::-1])
-    return template, project(frame[y0:y0 + height, x0:x0 + width], weights_bgr)
+    return template, project(frame[y0:y0 + height, x0:x0 + width],
+                             cast_weights(weights_bgr, start.gains))
 
 
 def resize_map(size: tuple[int, int], new_size: tuple[int, int]) -> FloatArray:
