@@ -85,6 +85,8 @@ class Reference:
     #: share of the appearance image's pixels with a channel at ``WHITE_LEVEL`` or more: the
     #: plate's own white, which a frame shows saturated without any over-exposure
     white_share: float = 0.0
+    #: the appearance image's mean B, G, R (:func:`cast_gains`; None: computed when asked)
+    channel_means: tuple[float, float, float] | None = None
 
 
 Weights = tuple[float, float, float]
@@ -231,8 +233,10 @@ class ReferenceMatcher:
         descriptors = np.concatenate(desc_all) if desc_all else np.zeros((0, 32), np.uint8)
         matchable = len(pts) >= self.config.min_inliers
         white = float(np.mean(np.max(image_bgr, axis=2) >= WHITE_LEVEL))
+        b_mean, g_mean, r_mean = cv2.mean(image_bgr)[:3]
         ref = Reference(landmark_id, (w, h), pts, descriptors, gray, matchable,
-                        np.ascontiguousarray(image_bgr), white_share=white)
+                        np.ascontiguousarray(image_bgr), white_share=white,
+                        channel_means=(b_mean, g_mean, r_mean))
         self.references[landmark_id] = ref
         return ref
 
@@ -555,7 +559,8 @@ def cast_gains(ref: Reference, crop: npt.NDArray[np.uint8], quad: FloatArray) ->
     if cv2.countNonZero(mask) < 16:
         return np.ones(3)
     seen = np.asarray(cv2.mean(crop, mask=mask)[:3], np.float64)
-    own = ref.colour.reshape(-1, 3).mean(axis=0).astype(np.float64)
+    own = np.asarray(ref.channel_means if ref.channel_means is not None
+                     else cv2.mean(ref.colour)[:3], np.float64)
     ratio = (seen + 1.0) / (own + 1.0)
     gains = ratio / ratio.mean()
     return gains if float(np.abs(gains - 1.0).max()) >= CAST_FROM else np.ones(3)
