@@ -1,7 +1,7 @@
 """Issue 25's table: the survey, the street and the real-imagery worlds through ``replay``.
 
     PYTHONPATH=. .venv/bin/python benchmarks/replay_worlds.py [--seeds 0-11] [--jobs 2]
-        [--streams DIR] [--check] [--write-baseline]
+        [--variants] [--streams DIR] [--check] [--write-baseline]
 
 Makes the streams once into ``--streams`` (kept for the next run): the survey and the street
 scenarios, 30 s each, recorded as JPEG at ``--quality`` (90), and one real-imagery world per seed
@@ -22,9 +22,15 @@ place, the slowest fix after a light step, and which of the targets (>= 0.9, <= 
 ring is left out too").  The street is not one of issue 25's streams: it is here because
 its small rendered signs are where that change costs (its lone wall-04 at the final hover).
 
+``--variants`` adds real-imagery worlds flown otherwise than the default's 17 m with the
+camera pitched 70 deg down (:data:`VARIANTS`, seeds 20-33, none of them looked at before
+they were measured): lower and higher, straight down and more oblique, smaller plates, a
+brighter step, a darker ramp, more noise.  They ask whether the perception holds on worlds
+it was not developed on (docs/decisions.md, "One place, one landmark").
+
 ``--check`` exits 1 when a stream of ``benchmarks/replay_worlds_baseline.json`` got worse
 than its baseline by more than the tolerances below; ``--write-baseline`` writes this run's
-figures there.
+figures there (a stream not run keeps its line).
 """
 
 from __future__ import annotations
@@ -52,6 +58,19 @@ TARGETS = {"share": 0.9, "rmse_pct": 0.5, "nees_inside": 0.9, "wrong_frames": 10
 #: how much worse than the baseline a stream may get before ``--check`` fails (the replay
 #: is repeatable to the last bit: these are for a deliberate change's side effects)
 TOLERANCE = {"share": 0.01, "rmse_pct": 0.02, "nees_inside": 0.01, "wrong_frames": 3}
+
+
+#: Real-imagery worlds flown otherwise (``--variants``): name -> seed and the
+#: :class:`RealWorldSpec` fields that differ from the default world's.
+VARIANTS: dict[str, tuple[int, dict[str, Any]]] = {
+    "low20": (20, {"height_m": 11.0}), "low30": (30, {"height_m": 11.0}),
+    "low31": (31, {"height_m": 11.0}), "high21": (21, {"height_m": 25.0}),
+    "nadir22": (22, {"camera_pitch_deg": -88.0}), "nadir32": (32, {"camera_pitch_deg": -88.0}),
+    "nadir33": (33, {"camera_pitch_deg": -88.0}),
+    "oblique23": (23, {"camera_pitch_deg": -50.0}),
+    "small24": (24, {"plate_size_m": (1.0, 1.6)}), "bright25": (25, {"light_high": 1.6}),
+    "dark26": (26, {"light_low": 0.35}), "noisy27": (27, {"noise_sigma": 6.0}),
+}
 
 
 def companion(*args: str) -> str:
@@ -82,10 +101,11 @@ def make_scenario(folder: Path, scenario: str, quality: int) -> Path:
     return out
 
 
-def make_real(folder: Path, seed: int) -> Path:
-    out = folder / f"real{seed}"
+def make_real(folder: Path, seed: int, name: str | None = None, **spec: Any) -> Path:
+    """A real-imagery world (``spec``: the :class:`RealWorldSpec` fields that differ)."""
+    out = folder / (name or f"real{seed}")
     if not (out / "frames.csv").is_file():
-        synth_real(RealWorldSpec(seed=seed), out, overwrite=True)
+        synth_real(RealWorldSpec(seed=seed, **spec), out, overwrite=True)
     return out
 
 
@@ -136,6 +156,8 @@ def main() -> int:
     ap.add_argument("--streams", type=Path, default=Path("/tmp/lmc-replay-worlds"),
                     help="where the streams are made, and kept for the next run")
     ap.add_argument("--jobs", type=int, default=1, help="replays side by side")
+    ap.add_argument("--variants", action="store_true",
+                    help="add the real-imagery worlds flown otherwise (VARIANTS)")
     ap.add_argument("--check", action="store_true", help="gate against the baseline")
     ap.add_argument("--write-baseline", action="store_true")
     args = ap.parse_args()
@@ -150,6 +172,8 @@ def main() -> int:
     if (data / "aerial").is_dir() and (data / "otb").is_dir():
         for seed in seeds:
             streams[f"real{seed}"] = (make_real(args.streams, seed), True)
+        for name, (seed, spec) in VARIANTS.items() if args.variants else ():
+            streams[name] = (make_real(args.streams, seed, name, **spec), True)
     else:
         print(f"real-imagery worlds skipped: no photographs at {data} (set LMC_SHARED_DATA)")
     print(f"replaying {len(streams)} streams ...", flush=True)
@@ -164,10 +188,11 @@ def main() -> int:
               f"{f['nees_inside']:7.3f} ({f['nees_under']:5.3f}) {f['wrong_frames']:5.0f} "
               f"{f['light_step_s']:6.2f}  {met(f)}")
     print(f"({time.monotonic() - started:.0f} s)")
-    if args.write_baseline:
+    if args.write_baseline:  # the streams not run this time keep their figures
+        kept = json.loads(BASELINE.read_text())["streams"] if BASELINE.is_file() else {}
         BASELINE.write_text(json.dumps({"measured": time.strftime("%Y-%m-%d %H:%M UTC",
                                                                   time.gmtime()),
-                                        "streams": rows}, indent=1) + "\n")
+                                        "streams": kept | rows}, indent=1) + "\n")
         print(f"wrote {BASELINE.relative_to(ROOT)}")
     if args.check:
         base = json.loads(BASELINE.read_text())["streams"]

@@ -48,7 +48,7 @@ from tracker.edge_align import align_cut, search_shift, shifted
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import ONE_BEARING_SOLVERS, MapLandmark, PoseFix
 from tracker.types import Box
-from tracker.verify import detail_ncc
+from tracker.verify import detail_ncc, part_nccs
 
 FloatArray = npt.NDArray[np.float64]
 Image = npt.NDArray[np.uint8]
@@ -56,6 +56,12 @@ Image = npt.NDArray[np.uint8]
 #: Trackers started n-th re-rank their features n x this many frames apart (a re-rank costs
 #: a few ms: several on one frame showed in the latency's tail).
 RANK_PHASE_STEP = 3
+#: The acquirers that name a plate by its appearance alone (not by where the map puts it):
+#: a look-alike can be named instead, so every quarter of the plate must match
+#: (``min_part_ncc``).  A plate placed by the fix or the autopilot's estimate is named by
+#: its place; there a plain sign's quarter, mostly its border, follows what is behind it
+#: (the street's bus stop: 0.0-0.3 against a dark window, 0.8 against the wall).
+BY_APPEARANCE = frozenset({"features", "detector", "search"})
 #: A predicted outline this far inside the image is a whole plate (aligned by ECC).
 WHOLE_MARGIN_PX = 4.0
 
@@ -91,7 +97,9 @@ class Acquirer(Protocol):
 
 class Starter:
     """Starts a verified track: the landmark's appearance warped by the homography found
-    must match the frame's (``min_appearance_ncc``)."""
+    must match the frame's (``min_appearance_ncc``), found by appearance alone on every
+    quarter of the plate with detail (``min_part_ncc``, :data:`BY_APPEARANCE`), at a place
+    no other track holds (:meth:`Occupancy.crowded`)."""
 
     def __init__(self, references: Mapping[str, Reference], config: PerceptionConfig,
                  tracker_config: TrackerConfig | None, seed: int) -> None:
@@ -109,8 +117,11 @@ class Starter:
         ref = self.references[lid]
         if squashed(corners, ref.size_px):
             return []  # a sliver is no plate in view (tracker.boxes.MIN_FORESHORTENING)
-        ncc = detail_ncc(ref, image, hom)
-        if ncc < self.config.min_appearance_ncc:
+        if sight.seen.crowded(box, starts):
+            return []  # matchers run best first: the place went to the better match
+        least = self.config.min_part_ncc if by in BY_APPEARANCE else 0.0
+        ncc, parts = part_nccs(ref, image, hom) if least > 0 else (detail_ncc(ref, image, hom), [])
+        if ncc < self.config.min_appearance_ncc or min(parts, default=1.0) < least:
             return []
         busy = sight.seen.busy(starts)
         tracker = AdaptiveTracker(self.tracker_config, seed=self.seed + busy)

@@ -15,6 +15,7 @@ import numpy.typing as npt
 
 from tracker import AdaptiveTracker
 from tracker.acquire import BAND_FROM_PX, Weights
+from tracker.boxes import box_iou
 from tracker.edge_align import Patch
 from tracker.features import colour_weights
 from tracker.types import Box
@@ -120,6 +121,12 @@ class PerceptionConfig:
     #: normalised correlation of its detail with the frame's (light-normalised,
     #: tracker.verify.detail_ncc) must reach this.
     min_appearance_ncc: float = field(default=0.65, metadata={"gt": 0, "le": 1})
+    #: ... and so must each quarter of the plate that has detail of its own
+    #: (tracker.verify.part_nccs): an outline placed by a look-alike's features on the part
+    #: the two photographs share hangs off the plate on one side, where it correlates
+    #: with the ground (0.29 measured), while on its plate every quarter reached 0.54 or
+    #: more (docs/decisions.md, "One place, one landmark").  0: not checked.
+    min_part_ncc: float = field(default=0.4, metadata={"ge": 0, "le": 1})
     #: Every this many frames each track is checked the same way; under
     #: ``track_appearance_ncc`` (or without corners) it is unverified: left out of the fix,
     #: and dropped after ``max_verify_failures`` checks in a row.
@@ -284,6 +291,8 @@ class Occupancy:
     tracked: frozenset[str] = frozenset()
     #: landmarks started by housekeeping, not yet adopted by ``process`` (in order)
     waiting: tuple[str, ...] = ()
+    #: the boxes of those tracks, running and waiting: the places taken
+    places: tuple[Box, ...] = ()
 
     def busy(self, starts: Sequence[Start] = ()) -> int:
         """Tracks running, waiting to be adopted and just started."""
@@ -294,6 +303,16 @@ class Occupancy:
         return lid in self.tracked or lid in self.waiting or any(
             s.track.landmark_id == lid for s in starts)
 
+    def crowded(self, box: Box, starts: Sequence[Start] = ()) -> bool:
+        """``box`` is a place another track holds (or one just started): overlapping it at
+        :data:`PLACE_IOU` or more.  One place shows one landmark; a second landmark found
+        there is a look-alike's features on the plate already tracked."""
+        taken = (*self.places, *(s.track.box for s in starts))
+        return any(box_iou(box, other) >= PLACE_IOU for other in taken)
+
+
+#: Two tracks' boxes overlapping this much (IoU) are on one place (:meth:`Occupancy.crowded`).
+PLACE_IOU = 0.5
 
 #: ECC correlation a running track's alignment must reach (a new sighting: verify_correlation).
 TRACK_MIN_CORRELATION = 0.6

@@ -76,10 +76,13 @@ class TrackSet:
     # -- the hand-over (background lane <-> worker) ------------------------------------
 
     def snapshot(self) -> Occupancy:
-        """Which landmarks are tracked or waiting to be adopted, as of now (any thread)."""
+        """Which landmarks are tracked or waiting to be adopted, and where, as of now (any
+        thread)."""
         with self._lock:
-            return Occupancy(frozenset(self._tracks), tuple(s.track.landmark_id
-                                                            for s in self._pending))
+            return Occupancy(frozenset(self._tracks),
+                             tuple(s.track.landmark_id for s in self._pending),
+                             tuple(t.box for t in self._tracks.values())
+                             + tuple(s.track.box for s in self._pending))
 
     def hand_over(self, starts: Sequence[Start]) -> None:
         """Tracks started off the worker thread, for the next :meth:`adopt`."""

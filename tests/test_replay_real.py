@@ -26,13 +26,14 @@ from companion.sim.realworld import REAL_WORLD_SETS, RealWorldSpec, shared_data,
 from tests.test_replay import replay
 
 
-def real_world(folder: Path, seed: int) -> Path:
+def real_world(folder: Path, seed: int, **spec: Any) -> Path:
+    """World ``seed`` (``spec``: the :class:`RealWorldSpec` fields that differ)."""
     data = shared_data()
     if not (data / "aerial").is_dir() or not (data / "otb").is_dir():
         print(f"SKIP: the real photographs are not at {data} (set LMC_SHARED_DATA)")
         pytest.skip(f"real photographs not available at {data} (set LMC_SHARED_DATA)")
     out = folder / f"real{seed}"
-    synth_real(RealWorldSpec(seed=seed), out)
+    synth_real(RealWorldSpec(seed=seed, **spec), out)
     return out
 
 
@@ -66,3 +67,22 @@ def test_replay_of_a_real_imagery_world_meets_the_issue_targets(
                              "nees_inside_95_share", "longest_wrong_track_frames",
                              "light_steps")})
     assert_issue_25_targets(s)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [20, 31])
+def test_look_alike_landmarks_are_not_taken_for_each_other(tmp_path: Path, seed: int) -> None:
+    """Flown at 11 m, seed 20 cuts two landmarks from overlapping parts of one dock photo
+    and seed 31 four from one leaf plant: a look-alike's features put its outline on the
+    plate in view, shifted so that one side hangs over the ground.  Before every quarter
+    of a plate named by its look was checked, and one place held one landmark, a track
+    sat on the wrong plate for 291 (seed 20) and 178 (seed 31) frames; now 5 and 1
+    (docs/decisions.md, "One place, one landmark").  Only the wrong run and the fix share
+    are asserted: at 11 m the lone plates' fixes are not yet honest (the same note)."""
+    stream = real_world(tmp_path, seed, height_m=11.0)
+    status, s = replay(tmp_path, stream, *REAL_WORLD_SETS)
+    assert status == 0
+    print({k: s[k] for k in ("fix_share_2plus_visible", "longest_wrong_track_frames")})
+    assert s["frames_2plus_visible"] >= 300, s
+    assert s["longest_wrong_track_frames"] <= 10, s
+    assert s["fix_share_2plus_visible"] >= SHARE_FLOOR, s

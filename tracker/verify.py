@@ -39,6 +39,9 @@ from tracker.acquire import (
 FloatArray = npt.NDArray[np.float64]
 #: Fewer pixels than this inside the outline: too small to judge.
 MIN_PIXELS = 64
+#: A quarter of a plate is judged by :func:`part_nccs` when its detail has at least this
+#: share of the whole plate's (standard deviation).
+PART_DETAIL_SHARE = 0.5
 #: Corner step (px) of the numerical derivative of the pixel positions.
 STEP_PX = 0.5
 #: The correlation inflation is capped (a nearly constant residual says nothing more).
@@ -57,10 +60,13 @@ class Overlay:
     frame: npt.NDArray[np.float32]
     mask: npt.NDArray[np.bool_]
     origin: tuple[int, int]
+    #: which quarter of the reference (0-3: top-left, top-right, bottom-left, bottom-right)
+    #: each region pixel shows (:func:`part_nccs`); None: not asked for
+    parts: npt.NDArray[np.uint8] | None = None
 
 
-def overlay(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
-            ) -> Overlay | None:
+def overlay(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray,
+            parts: bool = False) -> Overlay | None:
     """The reference (grey, scaled to about its size in the frame first) warped by ``hom``
     over the frame region around its outline; None when (almost) nothing is in view."""
     corners = project_corners(ref, hom)
@@ -87,8 +93,16 @@ def overlay(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
         return None
     crop = frame_bgr[y0:y1, x0:x1]
     grey = cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY) if crop.ndim == 3 else crop
+    quarters = None
+    if parts:
+        sw, sh = size
+        label = np.zeros((sh, sw), np.uint8)
+        label[:, sw // 2:] += 1
+        label[sh // 2:, :] += 2
+        quarters = np.asarray(cv2.warpPerspective(label, warp, roi_size,
+                                                  flags=cv2.INTER_NEAREST), np.uint8)
     return Overlay(np.asarray(template, np.float32), np.asarray(grey, np.float32), mask,
-                   (x0, y0))
+                   (x0, y0), quarters)
 
 
 def appearance_ncc(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
@@ -162,6 +176,29 @@ def detail_ncc(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
     return 0.0 if ov is None else _ncc(_detail(ov))
 
 
+def part_nccs(ref: Reference, frame_bgr: npt.NDArray[np.uint8], hom: FloatArray
+              ) -> tuple[float, list[float]]:
+    """:func:`detail_ncc`, and the same over each quarter of the plate that has detail of
+    its own (its template's detail at least :data:`PART_DETAIL_SHARE` of the whole's, in
+    standard deviation): an outline that hangs off its plate on one side, placed by a
+    look-alike's features on the part the two photographs share, matches there and not
+    over the ground beside it.  (0, []) when nothing is in view."""
+    ov = overlay(ref, frame_bgr, hom, parts=True)
+    if ov is None or ov.parts is None:
+        return 0.0, []
+    det = _detail(ov)
+    whole = float(np.std(det.template[det.mask]))
+    out = []
+    for q in range(4):
+        m = det.mask & (ov.parts == q)
+        if int(m.sum()) < MIN_PIXELS // 4:
+            continue
+        if float(np.std(det.template[m])) < PART_DETAIL_SHARE * whole:
+            continue  # a plain quarter: nothing to tell plate from ground
+        out.append(_ncc(Overlay(det.template, det.frame, m, det.origin)))
+    return _ncc(det), out
+
+
 def _detail_sigma(mask: npt.NDArray[np.bool_]) -> float:
     """The detail's blur: a tenth of the outline's short side, at least 1.5 px."""
     short = min(np.ptp(np.nonzero(mask)[0]), np.ptp(np.nonzero(mask)[1])) + 1
@@ -172,7 +209,7 @@ def _detail(ov: Overlay) -> Overlay:
     sigma = _detail_sigma(ov.mask)
     t = ov.template - cv2.GaussianBlur(ov.template, (0, 0), sigma)
     f = ov.frame - cv2.GaussianBlur(ov.frame, (0, 0), sigma)
-    return Overlay(t, f, ov.mask, ov.origin)
+    return Overlay(t, f, ov.mask, ov.origin, ov.parts)
 
 
 def _ncc(ov: Overlay) -> float:
