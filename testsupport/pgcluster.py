@@ -54,7 +54,13 @@ def throwaway_cluster() -> Iterator[str]:
             user = pwd.getpwnam("postgres")
         except KeyError:
             _skip("running as root and there is no 'postgres' user to run the server")
-        prefix = ["runuser", "-u", "postgres", "--"]
+        # runuser is in /usr/sbin, which a user's PATH may leave out (env -i, sudo -E)
+        runuser = shutil.which("runuser", path=os.pathsep.join(
+            [os.environ.get("PATH", ""), "/usr/sbin", "/sbin"]))
+        if runuser is None:
+            _skip("running as root and runuser (util-linux) is not installed")
+        assert runuser
+        prefix = [runuser, "-u", "postgres", "--"]
     root = tempfile.mkdtemp(prefix="lmc-pg-")
     data = os.path.join(root, "data")
     if prefix:
