@@ -528,22 +528,25 @@ class FakeAutopilot:
         self.timesync_offset_ns = offset if k == 0 else 0.9 * self.timesync_offset_ns + 0.1 * offset
         self.timesync_samples += 1
 
-    def _stamp_age_ms(self, stamp_us: int) -> float:
-        """How old the sample is in our clock: ArduPilot's jitter correction (the stamp plus
-        the smallest transport lag seen, :class:`JitterCorrection`); PX4 converts with the
-        TIMESYNC offset once synced, else uses the arrival time."""
+    def _stamp_age_ms(self, stamp_us: int, now_ns: int | None = None) -> float:
+        """How old the sample is in our clock at ``now_ns`` (our time since boot; now when
+        omitted): ArduPilot's jitter correction (the stamp plus the smallest transport lag
+        seen, :class:`JitterCorrection`); PX4 converts with the TIMESYNC offset once synced,
+        else uses the arrival time."""
+        now_ns = self._local_ns() if now_ns is None else now_ns
         if self.config.profile == "ardupilot":
-            return self.jitter.age_ms(stamp_us, self._local_ns() // 1000) \
+            return self.jitter.age_ms(stamp_us, now_ns // 1000) \
                 if self.config.jitter_correction else 0.0
         if not self.timesync_synced:
             return 0.0
         local_us = stamp_us + self.timesync_offset_ns / 1000
-        return (self._local_ns() / 1000 - local_us) / 1000
+        return (now_ns / 1000 - local_us) / 1000
 
     def _on_vision(self, name: str, msg: MAVLinkMessage) -> None:
+        arrival_ns = self._local_ns()  # one instant for the age and the record
         f = msg.to_dict()
         stamp = int(f["time_usec"] if name == "ODOMETRY" else f["usec"])
-        age_ms = self._stamp_age_ms(stamp)
+        age_ms = self._stamp_age_ms(stamp, arrival_ns)
         delay_s = self.ekf.delay_ms / 1000 if self.config.judge == "estimate" \
             else self.config.rules.delay_ms / 1000
         truth = self.truth(self.flight_s() - delay_s - max(age_ms, 0) / 1000)
@@ -553,7 +556,7 @@ class FakeAutopilot:
         else:
             ok, why, innov = self._fuse(name, f, pos, age_ms)
         self.vision.append(VisionRecord(
-            name=name, arrival_s=self.boot_s(), time_usec=stamp, position_ned_m=pos,
+            name=name, arrival_s=arrival_ns * 1e-9, time_usec=stamp, position_ned_m=pos,
             frame_id=int(f.get("frame_id", 1)), child_frame_id=int(f.get("child_frame_id", 0)),
             estimator_type=int(f.get("estimator_type", 0)), quality=int(f.get("quality", 0)),
             reset_counter=int(f.get("reset_counter", 0)), accepted=ok, reason=why,

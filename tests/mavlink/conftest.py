@@ -52,6 +52,21 @@ async def wired(fake_kw: dict[str, Any] | None = None,
             yield ap, bridge
 
 
+def stamp_age_errors_ms(ap: FakeAutopilot) -> list[float]:
+    """Each vision record's stated stamp age less its true age, in ms.
+
+    The fake and the companion share one machine clock (the fake's is the same monotonic
+    clock less ``boot_ns``), so a record's true age at its arrival is known exactly. A
+    TIMESYNC offset is right to half the round trip of the samples it took (the fake keeps
+    those under ``timesync_max_rtt_ms``), however late the message arrived; an unconverted
+    stamp is off by the companion's whole uptime."""
+    out = []
+    for r in ap.vision:
+        stamp_local_ms = r.time_usec / 1000 - ap.boot_ns / 1e6
+        out.append(r.stamp_age_ms - (r.arrival_s * 1000 - stamp_local_ms))
+    return out
+
+
 async def wait_for(pred: Callable[[], bool], timeout_s: float = 3.0) -> bool:
     """Poll ``pred`` every 10 ms until it holds or ``timeout_s`` passes."""
     deadline = time.monotonic() + timeout_s
