@@ -1,10 +1,12 @@
 """The corners' noise model: the 1-sigma a perception states for a plate's corners.
 
 No frames, no threads (it reads the tracks it is given; :meth:`CornerNoise.learn` writes
-each track's learnt residual, ``Track.residual_var``): from the corners' size in the
-image, the rectification's stretch there, the alignment's own fit, saturation, the
-residuals the corners really showed in fixes from two or more plates (issue 25), and,
-for a plate cut by the image's edge, which corners are measured (issue 19).
+each track's learnt residuals, ``Track.residual_var`` and ``Track.bias_modes``): from the
+corners' size in the image, the rectification's stretch there, the alignment's own fit,
+saturation, the residuals the corners really showed in fixes from two or more plates (issue
+25), and, for a plate cut by the image's edge, which corners are measured (issue 19).  A
+frame's only plate with corners has them taken less the steady error it showed beside
+other plates (:meth:`CornerNoise.alone`).
 :class:`companion.perception.Perception` keeps the tracks and asks this model;
 docs/pose.md ("Corner noise") says where each term comes from.
 """
@@ -16,10 +18,11 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from companion.perception_types import PerceptionConfig, Track
+from companion.perception_types import FloatArray, PerceptionConfig, Track
 from tracker.boxes import in_view_share, inside
 from tracker.camera import CameraModel, Rectifier
 from tracker.pose.config import PoseConfig
+from tracker.pose.inputs import outline_basis
 from tracker.pose.landmarks import landmark_corners_ned
 from tracker.pose.types import MapLandmark, Observation, PoseFix
 
@@ -123,6 +126,27 @@ class CornerNoise:
         return obs if sigma == obs.corner_sigma_px else \
             dataclasses.replace(obs, corner_sigma_px=sigma)
 
+    def alone(self, observations: Sequence[Observation], tracks: Mapping[str, Track]
+              ) -> list[Observation]:
+        """``observations``, where only one has corners, with that plate's corners less
+        the steady error its track showed beside other plates (``corner_bias_fixes``);
+        as given otherwise."""
+        out = list(observations)
+        need = self.config.corner_bias_fixes / 2
+        with_corners = [i for i, o in enumerate(out) if o.corners_px is not None]
+        if need <= 0 or len(with_corners) != 1:
+            return out
+        obs = out[with_corners[0]]
+        track = None if obs.landmark_id is None else tracks.get(obs.landmark_id)
+        if track is None or track.bias_modes is None or track.bias_fixes < need \
+                or not obs.all_corners or obs.corners_px is None:
+            return out
+        px = np.asarray(obs.corners_px, np.float64)
+        moved = px - (outline_basis(px) @ track.bias_modes).reshape(-1, 2)
+        out[with_corners[0]] = dataclasses.replace(
+            obs, corners_px=tuple((float(u), float(v)) for u, v in moved))
+        return out
+
     def learn(self, observations: Sequence[Observation], fix: PoseFix,
               tracks: Mapping[str, Track]) -> None:
         """Average each track's corner residuals against a fix from two or more plates'
@@ -132,11 +156,12 @@ class CornerNoise:
         loosely already), and a floor learnt from them outlived them -- a lone plate's
         corners stated at pixels for the rest of its track, so that its fixes followed the
         autopilot's attitude (docs/decisions.md, "The corners' residual floor is learnt
-        from settled plates")."""
+        from settled plates").  Each plate's residual along its outline's modes is averaged
+        too, for when it is alone (:meth:`alone`)."""
         used = [(o.landmark_id, o) for o in observations if o.corners_px is not None
                 and o.landmark_id in fix.landmark_ids and o.landmark_id in tracks]
         fixes = self.config.residual_sigma_fixes
-        if len(used) < 2 or fixes <= 0 \
+        if len(used) < 2 or (fixes <= 0 and self.config.corner_bias_fixes <= 0) \
                 or any(self.unsettled(tracks[lid]) for lid, _ in used if lid is not None):
             return
         n = 8 * len(used)
@@ -149,8 +174,23 @@ class CornerNoise:
                                               pos, fix.attitude_rpy_rad)
             if not np.all(pts[:, 2] > 0):
                 continue
-            resid = np.asarray(o.corners_px) - self.camera.project_camera_points(pts)
+            measured = np.asarray(o.corners_px, np.float64)
+            resid = measured - self.camera.project_camera_points(pts)
             var = float(np.mean(resid**2)) * n / (n - POSE_PARAMETERS)
             track = tracks[lid]
-            last = track.residual_var
-            track.residual_var = var if last is None else last + (var - last) / fixes
+            if fixes > 0:
+                last = track.residual_var
+                track.residual_var = var if last is None else last + (var - last) / fixes
+            if o.all_corners:
+                self._learn_bias(track, outline_basis(measured).T @ resid.ravel())
+
+    def _learn_bias(self, track: Track, modes: FloatArray) -> None:
+        """Average a plate's residual along its outline's modes over about
+        ``corner_bias_fixes`` fixes."""
+        span = self.config.corner_bias_fixes
+        if span <= 0:
+            return
+        last = track.bias_modes
+        track.bias_fixes += 1
+        track.bias_modes = modes if last is None \
+            else last + (modes - last) / min(span, track.bias_fixes)

@@ -259,7 +259,8 @@ class Perception:
                                tuple(events))
         particles = self.trackset.particles()
         read, side = self.side.at(frame.t_us) if sensed is None else sensed
-        observed = [self.noise.floor(o, self.tracks) for o in self.observations(frame.index)]
+        observed = self.noise.alone([self.noise.floor(o, self.tracks)
+                                     for o in self.observations(frame.index)], self.tracks)
         fix = solve_pose(observed, self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)

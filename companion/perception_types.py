@@ -109,6 +109,16 @@ class PerceptionConfig:
     #: and a real crop can sit biased (0.6-0.8 px) where neither the size model nor the fit
     #: sees it; the other plates do (docs/decisions.md, issue 25).
     residual_sigma_fixes: float = field(default=10.0, metadata={"ge": 0})
+    #: A plate that is the frame's only one with corners has them taken less their steady
+    #: error along its outline's eight modes (shift, rotation, scale, aspect, shear,
+    #: perspective: tracker.pose.inputs.outline_basis), averaged over about this many of its
+    #: residuals in fixes of two or more plates, once half as many are in (0: off).  A real
+    #: crop's corners sit 1-2 sigma off in the same modes for hundreds of frames; in a fix of
+    #: several plates the others outvote that, but a lone plate's fix carries it whole
+    #: (docs/decisions.md, "A lone plate's steady corner error, learnt beside other plates").
+    #: Not taken off when other plates' corners are in the fix: two plates' residuals split
+    #: their disagreement, and a correction learnt from them moved good fixes (real seed 10).
+    corner_bias_fixes: float = field(default=0.0, metadata={"ge": 0})
     #: A plate's corners with a share ``s`` of its pixels saturated state their sigma times
     #: ``1 + saturated_sigma_gain * s``: sudden_light's plates 50-60 % saturated (160 %
     #: light) had corners 0.41 px off against 0.10 px unsaturated, 4x (docs/pose.md).
@@ -220,6 +230,10 @@ class Track:
     #: mean squared corner reprojection residual (px^2, per coordinate, corrected for the
     #: pose's parameters) over recent fixes from two or more plates (None: none yet)
     residual_var: float | None = None
+    #: the corners' mean residual along the outline's eight modes (px) in recent fixes from
+    #: two or more plates (None: none yet), and how many fixes taught it
+    bias_modes: FloatArray | None = None
+    bias_fixes: int = 0
     #: fixes in a row that left this track's corners out
     pose_rejections: int = 0
     #: appearance checks failed in a row (0: the last check found the landmark)

@@ -77,12 +77,36 @@ def test_look_alike_landmarks_are_not_taken_for_each_other(tmp_path: Path, seed:
     plate in view, shifted so that one side hangs over the ground.  Before every quarter
     of a plate named by its look was checked, and one place held one landmark, a track
     sat on the wrong plate for 291 (seed 20) and 178 (seed 31) frames; now 5 and 1
-    (docs/decisions.md, "One place, one landmark").  Only the wrong run and the fix share
-    are asserted: at 11 m the lone plates' fixes are not yet honest (the same note)."""
+    (docs/decisions.md, "One place, one landmark").  Their fixes are honest too since a
+    lone plate's corners are taken less the error it showed beside others (NEES inside
+    0.942 / 0.817 before, 0.936 / 0.935 after: "A lone plate's steady corner error"); seed
+    20's RMSE (0.75 %) is not yet within the target."""
     stream = real_world(tmp_path, seed, height_m=11.0)
     status, s = replay(tmp_path, stream, *REAL_WORLD_SETS)
     assert status == 0
-    print({k: s[k] for k in ("fix_share_2plus_visible", "longest_wrong_track_frames")})
+    print({k: s[k] for k in ("fix_share_2plus_visible", "longest_wrong_track_frames",
+                             "nees_inside_95_share")})
     assert s["frames_2plus_visible"] >= 300, s
     assert s["longest_wrong_track_frames"] <= 10, s
     assert s["fix_share_2plus_visible"] >= SHARE_FLOOR, s
+    assert s["nees_inside_95_share"] >= NEES_FLOOR, s
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("seed", "spec", "rmse_pct", "nees"), [
+    (22, {"camera_pitch_deg": -88.0}, 0.8, NEES_FLOOR),
+    (30, {"height_m": 11.0}, RMSE_PCT_CEILING, 0.8)])
+def test_a_lone_plate_does_not_carry_its_steady_corner_error_into_its_fixes(
+        tmp_path: Path, seed: int, spec: dict[str, Any], rmse_pct: float, nees: float) -> None:
+    """Straight down (seed 22) real-03 is alone for 3 s, its corners biased; at 11 m (seed
+    30) real-03 is alone with a steady rotation and scale error of 1-2 sigma.  Taken as
+    measured, seed 22's RMSE was 1.03 % (0.52 m off at a stated 0.15 m) and seed 30's NEES
+    inside 0.68; less the error each plate showed beside the others, 0.68 % / 0.954 and
+    0.40 % / 0.840 (docs/decisions.md, "A lone plate's steady corner error").  The bounds
+    sit between; where they are short of the issue's targets, the targets are not met."""
+    stream = real_world(tmp_path, seed, **spec)
+    status, s = replay(tmp_path, stream, *REAL_WORLD_SETS)
+    assert status == 0
+    print({k: s[k] for k in ("position_rmse_pct_of_distance", "nees_inside_95_share")})
+    assert s["position_rmse_pct_of_distance"] <= rmse_pct, s
+    assert s["nees_inside_95_share"] >= nees, s
