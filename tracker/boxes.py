@@ -18,13 +18,24 @@ from tracker.types import Box
 MIN_FORESHORTENING = 0.15
 
 
-def box_iou(a: Box, b: Box) -> float:
-    """Intersection over union of two (x, y, w, h) boxes."""
+def box_overlap(a: Box, b: Box) -> float:
+    """The area two (x, y, w, h) boxes share."""
     x0, y0 = max(a[0], b[0]), max(a[1], b[1])
     x1, y1 = min(a[0] + a[2], b[0] + b[2]), min(a[1] + a[3], b[1] + b[3])
-    inter = max(0.0, x1 - x0) * max(0.0, y1 - y0)
+    return max(0.0, x1 - x0) * max(0.0, y1 - y0)
+
+
+def box_iou(a: Box, b: Box) -> float:
+    """Intersection over union of two (x, y, w, h) boxes."""
+    inter = box_overlap(a, b)
     union = a[2] * a[3] + b[2] * b[3] - inter
     return inter / union if union > 0 else 0.0
+
+
+def box_cover(a: Box, b: Box) -> float:
+    """The share of the smaller of two (x, y, w, h) boxes that lies in the other."""
+    smaller = min(a[2] * a[3], b[2] * b[3])
+    return box_overlap(a, b) / smaller if smaller > 0 else 0.0
 
 
 def clip_box(box: Box, width: int, height: int) -> Box | None:

@@ -16,7 +16,7 @@ from companion.perception import Perception
 from companion.perception_types import Occupancy, Start, Track
 from tests.acquire.test_verify import scene
 from tracker.acquire import ReferenceMatcher, homography_to
-from tracker.boxes import outline_box
+from tracker.boxes import box_cover, box_iou, outline_box
 from tracker.camera import CameraModel
 from tracker.pose.types import MapLandmark
 from tracker.verify import detail_ncc, part_nccs
@@ -83,6 +83,13 @@ def test_a_second_landmark_does_not_start_where_a_track_is() -> None:
     away = (box[0] + 0.6 * box[2], box[1], box[2], box[3])  # IoU 0.25: another place
     beside = Sighting(frame, Occupancy(frozenset({"q"}), (), (away,)))
     assert len(start("p", beside, box, hom, corners, "features", [])) == 1
+    # a look-alike cut from the same photograph: its outline reaches past the tracked
+    # plate, larger, so that the two boxes' IoU is under 0.5, yet the plate's box lies in it
+    grown = (box[0] - 0.3 * box[2], box[1] - 0.3 * box[3], 1.6 * box[2], 1.6 * box[3])
+    plate_box = (box[0], box[1], box[2], box[3])
+    assert box_iou(grown, plate_box) < 0.5 < box_cover(grown, plate_box)
+    inside = Sighting(frame, Occupancy(frozenset({"q"}), (), (grown,)))
+    assert start("p", inside, box, hom, corners, "features", []) == []
     # a start of this very call holds its place too (matchers hand over the best first)
     earlier = [Start(Track("q", None, moved, hom), {})]  # type: ignore[arg-type]
     assert start("p", Sighting(frame, Occupancy()), box, hom, corners, "features",
