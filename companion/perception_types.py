@@ -323,7 +323,8 @@ class Occupancy:
         one landmark; a second landmark found there is a look-alike's features on the plate
         already tracked.  Not by IoU: a look-alike cut from the same photograph has its
         outline reach past the plate it matched, larger (real seed 62: IoU 0.49 with the
-        plate's box, 77 % of that box inside; docs/decisions.md, "One place, one landmark")."""
+        plate's box, 77 % of that box inside; docs/decisions.md, "One place by half of
+        the plate's box")."""
         taken = (*self.places, *(s.track.box for s in starts))
         return any(box_cover(box, other) >= PLACE_COVER for other in taken)
 

@@ -80,7 +80,7 @@ def test_a_second_landmark_does_not_start_where_a_track_is() -> None:
     moved = (box[0] + 0.2 * box[2], box[1], box[2], box[3])  # IoU 0.67 with box
     taken = Sighting(frame, Occupancy(frozenset({"q"}), (), (moved,)))
     assert start("p", taken, box, hom, corners, "features", []) == []
-    away = (box[0] + 0.6 * box[2], box[1], box[2], box[3])  # IoU 0.25: another place
+    away = (box[0] + 0.6 * box[2], box[1], box[2], box[3])  # IoU 0.25, 40 % inside: another place
     beside = Sighting(frame, Occupancy(frozenset({"q"}), (), (away,)))
     assert len(start("p", beside, box, hom, corners, "features", [])) == 1
     # a look-alike cut from the same photograph: its outline reaches past the tracked
