@@ -34,6 +34,7 @@ from tracker.acquire import (
 )
 from tracker.boxes import (
     box_corners,
+    box_iou,
     centre_on,
     clip_box,
     in_view_share,
@@ -67,6 +68,13 @@ PARTIAL_BOX_SHARE = 0.9
 #: the bottom edge of the real-imagery world seed 1: its box stayed 98 px tall while 10 to
 #: 1 px of the plate were in view, then followed nothing for 3 frames).
 LEFT_VIEW_SHARE = 0.1
+
+#: A cut plate's tracker box whose part in the image overlaps the part of the outline in view
+#: less than this (IoU) is seated on that part again: the particles cannot follow a plate
+#: out of the image, and a box left on the background while the aligned corners held the
+#: plate was scored on a wrong place (the real-imagery world seed 57: real-02 leaving at
+#: the bottom, its box 76 x 140 over 16 to 5 rows of the plate for 14 frames).
+PART_IOU = 0.5
 
 
 #: Largest change of a cut plate's outline size (the square root of its area) from one frame
@@ -225,6 +233,8 @@ class Corners:
         width, height = self.camera.width, self.camera.height
         if not inside(track.corners, width, height, margin=0.0):
             track.partial_box = track.partial_box or box_partial(track.corners, width, height)
+            if track.partial_box:
+                self._hold_part(track, image)
             return
         if not track.partial_box:
             return  # the usual case, every frame of every whole plate: nothing to do
@@ -234,6 +244,18 @@ class Corners:
         track.tracker.init(image, box, rank_phase=track.tracker.state.since_rank)
         track.box, track.partial_box = box, False
 
+    def _hold_part(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
+        """A cut plate's tracker started again on the part of its outline in view when its
+        box's part in view has drifted off it (``PART_IOU``); its re-rank schedule kept."""
+        assert track.corners is not None
+        width, height = self.camera.width, self.camera.height
+        part = clip_box(outline_box(track.corners), width, height)
+        seen = clip_box(track.box, width, height)
+        if part is None or (seen is not None and box_iou(part, seen) >= PART_IOU):
+            return
+        track.tracker.init(image, part, rank_phase=track.tracker.state.since_rank)
+        track.box = part
+
     def coast(self, track: Track, image: npt.NDArray[np.uint8],
               motion: FloatArray | None = None) -> bool:
         """A whole plate's corners aligned from its last homography (turned by ``motion``)
@@ -242,9 +264,11 @@ class Corners:
         too.  False (the track as it was) otherwise: the tracker runs, then :meth:`follow`."""
         ref = self.references[track.landmark_id]
         if not self.config.refine_corners or track.homography is None \
-                or track.corners is None \
+                or track.corners is None or track.partial_box \
                 or not self._agrees(track.corners, track.corners, track.box):
-            return False  # box-only, no outline, or the box is not on it: the tracker runs
+            # box-only, no outline, a box on the part of a cut plate (seated on the plate
+            # by follow once it is whole) or not on it: the tracker runs
+            return False
         start = track.homography if motion is None else motion @ track.homography
         start = start / start[2, 2]
         if self.is_cut(track.landmark_id, start):
