@@ -338,12 +338,12 @@ def telemetry_of(folder: Path) -> TelemetryReplay | None:
                             for t, name, fields in rows])
 
 
-def _attitude(settings: Settings, truth: RecordedTruth, telemetry: TelemetryReplay | None
-              ) -> tuple[Settings, TruthAttitude | None, str]:
+def _attitude(settings: Settings, truth: RecordedTruth, telemetry: TelemetryReplay | None,
+              seed: int = 0) -> tuple[Settings, TruthAttitude | None, str]:
     """Where the solver's attitude comes from (said in one line), and the settings that
-    state its noise to the solver."""
+    state its noise to the solver; ``seed``: the simulated error's, without telemetry."""
     uses_telemetry = telemetry is not None and telemetry.covers("ATTITUDE")
-    attitude = None if uses_telemetry or not truth else TruthAttitude(truth)
+    attitude = None if uses_telemetry or not truth else TruthAttitude(truth, seed=seed)
     if attitude is not None:
         from companion.demo import with_fake_attitude_sigmas
 
@@ -352,7 +352,8 @@ def _attitude(settings: Settings, truth: RecordedTruth, telemetry: TelemetryRepl
         settings = with_fake_attitude_sigmas(settings, attitude.config, seconds)
     said = ("the recording's ATTITUDE (telemetry.csv), replayed by the fake autopilot"
             if uses_telemetry else "truth_pose.csv with an autopilot's stated noise "
-            "(no recorded telemetry)" if attitude is not None else "the fake autopilot's")
+            f"(no recorded telemetry; error seed {seed})" if attitude is not None
+            else "the fake autopilot's")
     log.warning("replay: attitude from %s", said)
     return settings, attitude, said
 
@@ -378,9 +379,11 @@ def _fake(settings: Settings, clock: ReplayClock, source: ReplaySource, truth: R
     return fake
 
 
-async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> dict[str, Any]:
+async def run_replay(settings: Settings, folder: Path, fast: bool = False,
+                     attitude_seed: int = 0) -> dict[str, Any]:
     """Replay ``folder`` through the whole companion; returns the summary
-    (:func:`companion.replay_score.replay_summary`)."""
+    (:func:`companion.replay_score.replay_summary`).  ``attitude_seed``: the simulated
+    autopilot error's seed for a stream without recorded telemetry."""
     stream = RecordedStreamSource(folder, realtime=False)
     settings = replay_settings(settings, stream)
     telemetry = telemetry_of(folder)
@@ -391,7 +394,7 @@ async def run_replay(settings: Settings, folder: Path, fast: bool = False) -> di
     if not truth and telemetry is None:
         raise InputError(f"{folder}: neither truth_pose.csv nor telemetry.csv: nothing to "
                          "take the attitude from or to score against (docs/replay.md)")
-    settings, attitude, said = _attitude(settings, truth, telemetry)
+    settings, attitude, said = _attitude(settings, truth, telemetry, attitude_seed)
     detector_for(settings)  # loaded before the clock starts
     fake = _fake(settings, clock, source, truth, telemetry)
     camera = stream.meta.camera

@@ -76,7 +76,8 @@ def test_record_with_an_autopilot_writes_telemetry_as_format_2(recorded: Path) -
 
 def test_replay_gives_the_solver_the_recorded_attitude(tmp_path: Path, recorded: Path) -> None:
     """The attitude given is the recording's ATTITUDE (8 deg off in yaw), not the truth;
-    without telemetry.csv the same frames get truth_pose.csv plus the stated noise."""
+    without telemetry.csv the same frames get truth_pose.csv plus the stated noise, a draw
+    of it ``--attitude-seed`` chooses."""
     status, s = replay(tmp_path, recorded)
     assert status == 0
     assert s["attitude"].startswith("the recording's ATTITUDE"), s["attitude"]
@@ -93,4 +94,10 @@ def test_replay_gives_the_solver_the_recorded_attitude(tmp_path: Path, recorded:
     status, s1 = replay(tmp_path / "plain", plain)
     assert status == 0
     assert s1["attitude"].startswith("truth_pose.csv with an autopilot's stated noise")
+    assert s1["attitude"].endswith("error seed 0)"), s1["attitude"]
     assert abs(s1["attitude_error_deg"]["yaw_mean"]) < 3.0, s1["attitude_error_deg"]
+    # another draw of that error: said, and different
+    status, s2 = replay(tmp_path / "seeded", plain, "--attitude-seed", "5")
+    assert status == 0
+    assert s2["attitude"].endswith("error seed 5)"), s2["attitude"]
+    assert s2["attitude_error_deg"] != s1["attitude_error_deg"]

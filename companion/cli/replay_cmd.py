@@ -26,6 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="frames as fast as they are processed, none dropped (default: "
                         "in real time, dropping what the processing cannot keep up with)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    parser.add_argument("--attitude-seed", type=int, default=0, metavar="N",
+                        help="a stream without recorded telemetry: the seed of the simulated "
+                        "autopilot's attitude error added to truth_pose.csv (default 0)")
     parser.set_defaults(handler=run)
 
 
@@ -37,7 +40,8 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     if not (args.stream / "stream.toml").is_file():
         raise InputError(f"{args.stream}: not a recorded stream folder (no stream.toml)")
     check_flightlog_dir(settings)
-    result = asyncio.run(run_replay(settings, args.stream, args.fast))
+    result = asyncio.run(run_replay(settings, args.stream, args.fast,
+                                     args.attitude_seed))
     if args.json:
         print(json.dumps(result))
     else:
