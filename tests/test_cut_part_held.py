@@ -1,7 +1,9 @@
-"""A cut plate's tracker box follows the part of the plate in view (``Corners._hold_part``):
-the particles cannot follow a plate out of the image, and on the real-imagery world seed 57
-real-02's box stayed 76 x 140 px over the 16 to 5 rows of the plate still in view, scored on
-a wrong place for 14 frames while the aligned corners held the plate."""
+"""A cut plate's tracker box and the part of the plate in view (``Corners._off_part``): the
+particles cannot follow a plate across the image's edge.  A plate entering has outgrown the
+box seated on its part, and the tracker is seated on the part again; a plate leaving has
+left its box on the background, and the track ends (``Corners.left_view``): on the
+real-imagery world seed 57 real-02's box stayed 76 x 140 px over the 16 to 5 rows of the
+plate still in view, scored on a wrong place for 14 frames."""
 
 from __future__ import annotations
 
@@ -28,18 +30,26 @@ def scene(box: tuple[float, float, float, float]) -> tuple[Corners, Track, np.nd
     return corners, track, image
 
 
-def test_a_box_left_above_a_plate_leaving_the_image_is_seated_on_its_part_in_view() -> None:
-    # centred on the plate (so its outline is kept), but 170 rows of it in the image over
-    # the plate's 80: IoU 0.47 with the part in view
-    corners, track, image = scene((200.0, 310.0, 240.0, 240.0))
-    assert box_iou((200.0, 310.0, 240.0, 170.0), PART) < PART_IOU
+def test_a_box_over_a_part_of_the_part_in_view_is_seated_on_all_of_it() -> None:
+    # a plate coming into view: its box holds the 25 rows that were in view (IoU 0.31)
+    corners, track, image = scene((200.0, 455.0, 240.0, 25.0))
+    assert box_iou(track.box, PART) < PART_IOU
     corners.follow(track, image, track.box)
     assert track.corners is not None and not track.disputed
     assert box_iou(track.box, PART) > 0.9, track.box
-    assert track.partial_box
+    assert track.partial_box and not corners.left_view(track)
     # the tracker itself was started there: its next update stays on the part
     result = track.tracker.update(image)
     assert result.box is not None and box_iou(result.box, PART) > 0.7, result.box
+
+
+def test_a_box_left_above_a_plate_leaving_the_image_ends_its_track() -> None:
+    # centred on the plate (so its outline is kept), but 170 rows of it in the image over
+    # the plate's 80: IoU 0.47 with the part in view, the rest background
+    corners, track, image = scene((200.0, 310.0, 240.0, 240.0))
+    corners.follow(track, image, track.box)
+    assert track.corners is not None and not track.disputed
+    assert corners.left_view(track)
 
 
 def test_a_box_on_the_part_in_view_is_left_to_its_tracker() -> None:
@@ -48,4 +58,4 @@ def test_a_box_on_the_part_in_view_is_left_to_its_tracker() -> None:
     track.tracker.init = lambda *a, **k: started.append(a)  # type: ignore[method-assign]
     corners.follow(track, image, track.box)
     assert track.corners is not None
-    assert track.box == PART and not started
+    assert track.box == PART and not started and not corners.left_view(track)
