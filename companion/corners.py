@@ -278,11 +278,9 @@ class Corners:
         too.  False (the track as it was) otherwise: the tracker runs, then :meth:`follow`."""
         ref = self.references[track.landmark_id]
         if not self.config.refine_corners or track.homography is None \
-                or track.corners is None or track.partial_box \
+                or track.corners is None \
                 or not self._agrees(track.corners, track.corners, track.box):
-            # box-only, no outline, a box on the part of a cut plate (seated on the plate
-            # by follow once it is whole) or not on it: the tracker runs
-            return False
+            return False  # box-only, no outline, or the box is not on it: the tracker runs
         start = track.homography if motion is None else motion @ track.homography
         start = start / start[2, 2]
         if self.is_cut(track.landmark_id, start):
@@ -299,6 +297,8 @@ class Corners:
         track.homography, track.corners, track.misses = aligned, corners, 0
         track.patch, track.outline_held = None, True  # whole and mostly in view
         track.saturated = self._over_exposed(track.landmark_id, image, corners)
+        if track.partial_box:  # a box seated on a part: on the plate once it is whole
+            self._seat(track, image)
         return True
 
     def _align_turned(self, track: Track, image: npt.NDArray[np.uint8],
