@@ -73,11 +73,10 @@ LEFT_VIEW_SHARE = 0.1
 #: less than this (IoU) has drifted off its plate: the particles cannot follow a plate across
 #: the image's edge.  Entering (the part in view larger than the box's), the tracker is
 #: seated on that part again; leaving (the box's part larger: background), the plate has
-#: left the view as far as its tracker can tell (the real-imagery world seed 57: real-02
-#: leaving at the bottom, its box 76 x 140 over 16 to 5 rows of the plate for 14 frames,
-#: scored on a wrong place).  Re-seating a leaving plate instead kept its tracker alive on
-#: a sliver (real seed 43: real-03's cut corners in 2-plate fixes half a second longer, the
-#: lone plate after them 0.3 deg worse in pitch, RMSE 0.472 -> 0.583 %; docs/decisions.md).
+#: left the view as far as its tracker can tell, and the track ends (the real-imagery world
+#: seed 57: real-02 leaving at the bottom, its box 76 x 140 over the 16 to 5 rows of the
+#: plate in view for 14 frames, scored on a wrong place; docs/decisions.md, "A cut plate's
+#: box follows its part in view").
 PART_IOU = 0.5
 
 
