@@ -228,10 +228,11 @@ class Corners:
     def _seat(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """A tracker whose box holds the part of a cut plate that was in view is started
         again on the plate's box once the plate is whole in the image (its features re-ranked
-        there, its re-rank schedule kept); an outline cut now marks the box partial.  A box
-        that kept the part's size while the plate came into view was centred ever further
-        from it, until its outline was refused (the square's corners, frames perceived one
-        in three: docs/decisions.md)."""
+        there, its re-rank schedule kept); an outline cut now marks the box partial, and a
+        partial box the plate entering has outgrown is seated on its part in view
+        (:meth:`_hold_part`).  A box that kept the part's size while the plate came into
+        view was centred ever further from it, until its outline was refused (the square's
+        corners, frames perceived one in three: docs/decisions.md)."""
         assert track.corners is not None
         width, height = self.camera.width, self.camera.height
         if not inside(track.corners, width, height, margin=0.0):
