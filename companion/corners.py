@@ -34,7 +34,6 @@ from tracker.acquire import (
 )
 from tracker.boxes import (
     box_corners,
-    box_iou,
     centre_on,
     clip_box,
     in_view_share,
@@ -68,16 +67,6 @@ PARTIAL_BOX_SHARE = 0.9
 #: the bottom edge of the real-imagery world seed 1: its box stayed 98 px tall while 10 to
 #: 1 px of the plate were in view, then followed nothing for 3 frames).
 LEFT_VIEW_SHARE = 0.1
-
-#: A cut plate's tracker box whose part in the image overlaps the part of the outline in view
-#: less than this (IoU) has drifted off its plate: the particles cannot follow a plate across
-#: the image's edge.  Entering (the part in view larger than the box's), the tracker is
-#: seated on that part again; leaving (the box's part larger: background), the plate has
-#: left the view as far as its tracker can tell, and the track ends (the real-imagery world
-#: seed 57: real-02 leaving at the bottom, its box 76 x 140 over the 16 to 5 rows of the
-#: plate in view for 14 frames, scored on a wrong place; docs/decisions.md, "A cut plate's
-#: box follows its part in view").
-PART_IOU = 0.5
 
 
 #: Largest change of a cut plate's outline size (the square root of its area) from one frame
@@ -228,17 +217,14 @@ class Corners:
     def _seat(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """A tracker whose box holds the part of a cut plate that was in view is started
         again on the plate's box once the plate is whole in the image (its features re-ranked
-        there, its re-rank schedule kept); an outline cut now marks the box partial, and a
-        partial box the plate entering has outgrown is seated on its part in view
-        (:meth:`_hold_part`).  A box that kept the part's size while the plate came into
-        view was centred ever further from it, until its outline was refused (the square's
-        corners, frames perceived one in three: docs/decisions.md)."""
+        there, its re-rank schedule kept); an outline cut now marks the box partial.  A box
+        that kept the part's size while the plate came into view was centred ever further
+        from it, until its outline was refused (the square's corners, frames perceived one
+        in three: docs/decisions.md)."""
         assert track.corners is not None
         width, height = self.camera.width, self.camera.height
         if not inside(track.corners, width, height, margin=0.0):
             track.partial_box = track.partial_box or box_partial(track.corners, width, height)
-            if track.partial_box:
-                self._hold_part(track, image)
             return
         if not track.partial_box:
             return  # the usual case, every frame of every whole plate: nothing to do
@@ -247,28 +233,6 @@ class Corners:
             return
         track.tracker.init(image, box, rank_phase=track.tracker.state.since_rank)
         track.box, track.partial_box = box, False
-
-    def _off_part(self, track: Track) -> tuple[Box, float] | None:
-        """A cut plate's part in view and how much larger it is than its tracker box's part
-        in view (area ratio), when the two overlap under ``PART_IOU``; None otherwise."""
-        if track.corners is None or inside(track.corners, self.camera.width,
-                                           self.camera.height, margin=0.0):
-            return None
-        part = clip_box(outline_box(track.corners), self.camera.width, self.camera.height)
-        seen = clip_box(track.box, self.camera.width, self.camera.height)
-        if part is None or seen is None or box_iou(part, seen) >= PART_IOU:
-            return None
-        return part, (part[2] * part[3]) / max(seen[2] * seen[3], 1.0)
-
-    def _hold_part(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
-        """A cut plate's tracker started again on the part of its outline in view when that
-        part has outgrown its box's (``PART_IOU``: a plate entering); its re-rank schedule
-        kept."""
-        off = self._off_part(track)
-        if off is None or off[1] < 1.0:
-            return
-        track.tracker.init(image, off[0], rank_phase=track.tracker.state.since_rank)
-        track.box = off[0]
 
     def coast(self, track: Track, image: npt.NDArray[np.uint8],
               motion: FloatArray | None = None) -> bool:
@@ -297,8 +261,6 @@ class Corners:
         track.homography, track.corners, track.misses = aligned, corners, 0
         track.patch, track.outline_held = None, True  # whole and mostly in view
         track.saturated = self._over_exposed(track.landmark_id, image, corners)
-        if track.partial_box:  # a box seated on a part: on the plate once it is whole
-            self._seat(track, image)
         return True
 
     def _align_turned(self, track: Track, image: npt.NDArray[np.uint8],
@@ -349,12 +311,9 @@ class Corners:
 
     def left_view(self, track: Track) -> bool:
         """Has the track's plate left the image (its last outline under ``LEFT_VIEW_SHARE``
-        in view), or left its tracker's box on the background (``PART_IOU``: leaving)?"""
+        in view)?"""
         if track.homography is None:
             return False
-        off = self._off_part(track)
-        if off is not None and off[1] < 1.0:
-            return True
         outline = track.corners if track.corners is not None else \
             project_corners(self.references[track.landmark_id], track.homography)
         return in_view_share(outline, self.camera.width, self.camera.height) < LEFT_VIEW_SHARE
