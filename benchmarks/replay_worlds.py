@@ -203,6 +203,8 @@ def main() -> int:
     ap.add_argument("--check", action="store_true", help="gate against the baseline")
     ap.add_argument("--write-baseline", action="store_true")
     args = ap.parse_args()
+    if args.attitude_seed < 0:
+        ap.error(f"--attitude-seed: expected an integer >= 0, got {args.attitude_seed}")
     if args.attitude_seed and (args.check or args.write_baseline):
         ap.error("the baseline is measured with --attitude-seed 0")
     try:

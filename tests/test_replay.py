@@ -197,3 +197,12 @@ def test_replay_refuses_a_stream_without_truth_or_telemetry(
     status, _ = replay(tmp_path, bare)
     assert status == 2
     assert "neither truth_pose.csv nor telemetry.csv" in capsys.readouterr().err
+
+
+def test_replay_refuses_a_negative_attitude_seed_in_one_line(
+        tmp_path: Path, survey: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    status, _ = replay(tmp_path, survey, "--attitude-seed", "-1")
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith("--attitude-seed: expected an integer >= 0, got -1"), err
+    assert "Traceback" not in "\n".join(err)

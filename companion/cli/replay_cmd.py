@@ -37,6 +37,8 @@ def run(args: argparse.Namespace, settings: Settings) -> int:
     from companion.replay import run_replay
     from companion.replay_score import print_replay
 
+    if args.attitude_seed < 0:
+        raise InputError(f"--attitude-seed: expected an integer >= 0, got {args.attitude_seed}")
     if not (args.stream / "stream.toml").is_file():
         raise InputError(f"{args.stream}: not a recorded stream folder (no stream.toml)")
     check_flightlog_dir(settings)
