@@ -74,8 +74,10 @@ LEFT_VIEW_SHARE = 0.1
 #: image: the particles cannot follow a plate across the image's edge, so the tracker is
 #: seated on the part in view again (the real-imagery world seed 57's real-02: its box 76 x
 #: 140 px over the 16 to 5 rows of the plate in view for 14 frames, scored on a wrong place).
-#: The track goes on while its corners hold (``LEFT_VIEW_SHARE``): ending it on the box lost
-#: corners that fixes still needed (real seed 73).  A plate entering keeps the box seated on
+#: Only on a held outline (``Track.outline_held``): real seed 44's real-02 jumped 25-60 px as
+#: it left, and a box seated there sat on a wrong place for 6 frames.  The track goes on
+#: while its corners hold (``LEFT_VIEW_SHARE``): ending it on the box lost corners that fixes
+#: still needed (real seed 73).  A plate entering keeps the box seated on
 #: its first part until it is whole (:meth:`Corners._seat`): seating it on each larger part
 #: moved real seed 43's RMSE over issue 25's target (docs/decisions.md, "A leaving plate's
 #: box seated on its part in view").
@@ -180,9 +182,6 @@ class Corners:
         recovered = track.homography is None or track.misses >= self.config.max_corner_misses
         if recovered:
             self.recover(track, image)
-        if track.corners is not None:
-            track.disputed = False
-            self._seat(track, image)
         cut = track.homography is not None and self.is_cut(track.landmark_id, track.homography)
         # no corners: the homography kept is the one it had; found afresh: held if mostly
         # in view; aligned (whole or carried by the cut plate's alignment): held if mostly
@@ -190,6 +189,9 @@ class Corners:
         track.outline_held = was if track.corners is None else not cut or (
             not recovered and was
             and self._same_size(track.landmark_id, before, track.homography))
+        if track.corners is not None:
+            track.disputed = False
+            self._seat(track, image)
         track.patch = patch_around(image, track.corners) \
             if cut and track.corners is not None else None
         track.saturated = 0.0 if track.corners is None else \
@@ -253,8 +255,11 @@ class Corners:
     def _hold_part(self, track: Track, image: npt.NDArray[np.uint8]) -> None:
         """A cut plate's tracker started again on the part of its outline in view when its
         box's part in view overlaps that under ``PART_IOU`` and is the larger (left on the
-        background by the plate leaving); its re-rank schedule kept."""
+        background by the plate leaving), and the outline is held (``Track.outline_held``:
+        its size did not jump); its re-rank schedule kept."""
         assert track.corners is not None
+        if not track.outline_held:
+            return  # a cut outline that jumped (real seed 44's real-02, 25-60 px): not a guide
         part = clip_box(outline_box(track.corners), self.camera.width, self.camera.height)
         seen = clip_box(track.box, self.camera.width, self.camera.height)
         if part is None or seen is None or box_iou(part, seen) >= PART_IOU \
