@@ -77,10 +77,10 @@ LEFT_VIEW_SHARE = 0.1
 #: Only on a held outline (``Track.outline_held``): real seed 44's real-02 jumped 25-60 px as
 #: it left, and a box seated there sat on a wrong place for 6 frames.  The track goes on
 #: while its corners hold (``LEFT_VIEW_SHARE``): ending it on the box lost corners that fixes
-#: still needed (real seed 73).  A plate entering keeps the box seated on
-#: its first part until it is whole (:meth:`Corners._seat`): seating it on each larger part
-#: moved real seed 43's RMSE over issue 25's target (docs/decisions.md, "A leaving plate's
-#: box seated on its part in view").
+#: still needed (real seed 73).  A plate entering keeps the box seated on its first part
+#: until it is whole (:meth:`Corners._seat`): seating it on each larger part moved real seed
+#: 43's RMSE over issue 25's target (docs/decisions.md, "A leaving plate's box seated on its
+#: part in view").
 PART_IOU = 0.5
 
 
