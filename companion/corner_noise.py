@@ -39,12 +39,16 @@ class CornerNoise:
     later builds a new model (``Perception.noise``) for the change to reach it."""
 
     def __init__(self, camera: CameraModel, config: PerceptionConfig, pose_config: PoseConfig,
-                 rectify: Rectifier | None, landmarks: Sequence[MapLandmark]) -> None:
+                 rectify: Rectifier | None, landmarks: Sequence[MapLandmark],
+                 grey_plates: frozenset[str] = frozenset()) -> None:
         self.camera = camera
         self.config = config
         self.pose_config = pose_config
         self.rectify = rectify
         self.landmarks = list(landmarks)
+        #: the landmarks whose running tracks align on grey levels alone
+        #: (:func:`companion.corners.grey_aligned`), stated by their fit (``grey_fit_sigma``)
+        self.grey_plates = grey_plates
 
     def cut(self, track: Track) -> tuple[tuple[bool, bool, bool, bool] | None, float] | None:
         """Which of a track's corners are measured (None: all four) and the factor on their
@@ -112,6 +116,17 @@ class CornerNoise:
         model = float(s * self.pose_config.pixel_sigma_px
                       * (cfg.corner_sigma_ref_px * s / width) ** cfg.corner_sigma_exponent)
         return model if fit is None else max(model, cfg.fit_sigma_scale * fit)
+
+    def stated(self, track: Track, corners: Sequence[tuple[float, float]] | None, s: float
+               ) -> float | None:
+        """The 1-sigma stated for ``track``'s ``corners``: :meth:`sigma` with its alignment's
+        fit, or, for a grey-aligned plate with ``grey_fit_sigma`` on, the fit alone (times
+        ``fit_sigma_scale``): the size model was fitted on corners of the mixed plane."""
+        fit = track.fit_sigma
+        if corners is not None and fit is not None and self.config.grey_fit_sigma \
+                and track.landmark_id in self.grey_plates:
+            return self.config.fit_sigma_scale * fit
+        return self.sigma(corners, s, fit)
 
     def floor(self, obs: Observation, tracks: Mapping[str, Track]) -> Observation:
         """``obs`` with its corner sigma raised for saturation (``saturated_sigma_gain``)

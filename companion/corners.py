@@ -96,16 +96,26 @@ def box_partial(corners: FloatArray, width: int, height: int) -> bool:
     return in_view_share(corners, width, height) < PARTIAL_BOX_SHARE
 
 
+def grey_aligned(config: PerceptionConfig, ref: Reference) -> bool:
+    """Does a running track of ``ref`` align its unsmoothed stage on grey levels alone?
+    A plate with little colour (its luma's gradient energy at least
+    ``ecc_grey_from_ratio`` times its chroma's: a photograph) does: in a frame its chroma
+    is mostly the camera's chroma error, which the mixed plane scales up to unit spread."""
+    least = config.ecc_grey_from_ratio
+    return least > 0 and ref.luma_over_chroma >= least
+
+
 def ecc(config: PerceptionConfig, ref: Reference, frame: npt.NDArray[np.uint8],
         hom: FloatArray, verify: bool = True, weights: Weights | None = None
         ) -> FloatArray | None:
     """ECC alignment with the perception's settings; ``verify``: a new sighting, held to
     ``verify_correlation`` over the whole reference (a running track to
     ``TRACK_MIN_CORRELATION``, its outer ring left out: ``ecc_edge_band_px``, and its
-    unsmoothed stage on the feature mixed with grey levels: ``ecc_fine_grey_share``)."""
+    unsmoothed stage on the feature mixed with grey levels: ``ecc_fine_grey_share``, or on
+    grey levels alone: :func:`grey_aligned`)."""
+    share = 1.0 if grey_aligned(config, ref) else config.ecc_fine_grey_share
     least, band, grey = ((config.verify_correlation, 0, 0.0) if verify
-                         else (TRACK_MIN_CORRELATION, config.ecc_edge_band_px,
-                               config.ecc_fine_grey_share))
+                         else (TRACK_MIN_CORRELATION, config.ecc_edge_band_px, share))
     return refine_ecc(ref, frame, hom, config.ecc_iterations, least,
                       config.ecc_fine_iterations, weights, band, grey,
                       config.ecc_band_from_px)

@@ -49,7 +49,7 @@ from companion.acquirers import (
 from companion.acquisition import Acquisition
 from companion.app import Frame, FrameResult
 from companion.corner_noise import CornerNoise
-from companion.corners import Corners
+from companion.corners import Corners, grey_aligned
 from companion.ego_motion import TurnPredictor
 from companion.fixgate import FixGate, FixGateConfig
 from companion.perception_types import DetectFn, PerceptionConfig, Track
@@ -136,8 +136,6 @@ class Perception:
         self.config = config or PerceptionConfig()
         self.pose_config = pose_config or PoseConfig()
         self.side = SideInputs(sensors, self.pose_config)
-        self.noise = CornerNoise(self.camera, self.config, self.pose_config, self._rectify,
-                                 self.landmarks)
         self.matcher = ReferenceMatcher(acquire_config)  # housekeeping's
         self.unmatchable: dict[str, str] = {}
         for lid, image in references.items():
@@ -146,6 +144,10 @@ class Perception:
             except ValueError as err:
                 self.unmatchable[lid] = str(err)
         refs = self.matcher.references
+        self.noise = CornerNoise(self.camera, self.config, self.pose_config, self._rectify,
+                                 self.landmarks, frozenset(
+                                     lid for lid, ref in refs.items()
+                                     if grey_aligned(self.config, ref)))
         self.trackset = TrackSet(self.config, Corners(self.camera, self.config, refs,
                                                       self.matcher.sibling()))
         starter = Starter(refs, self.config, tracker_config, seed)

@@ -53,6 +53,13 @@ class PerceptionConfig:
     #: ... and aligns a colour feature mixed with this share of grey levels: a camera keeps
     #: chroma at half resolution, grey levels at full (tracker.acquire.mixed_weights).
     ecc_fine_grey_share: float = field(default=0.5, metadata={"ge": 0, "le": 1})
+    #: ... or grey levels alone, on a plate whose luma's gradient energy is at least this
+    #: many times its chroma's (tracker.acquire.luma_chroma_ratio; 0: never).  Under JPEG
+    #: a photograph's mixed plane is mostly chroma error and held its corners 0.1-0.4 px
+    #: off along one outline mode for a whole track (docs/decisions.md, "Grey levels alone
+    #: on a plate with little colour").  Measured on simulated JPEG frames only: 0 (off) in
+    #: the deployment, 4 in the simulator's layer (config/sim.toml).
+    ecc_grey_from_ratio: float = field(default=0.0, metadata={"ge": 0})
     #: A track's corners feed the pose only while this share of its quadrilateral is in
     #: the image: corners extrapolated from a sliver are off by pixels.
     min_corner_in_view: float = field(default=0.6, metadata={"ge": 0, "le": 1})
@@ -102,6 +109,11 @@ class PerceptionConfig:
     #: The fit sigma times this is stated: the fit knows the noise, not the bias JPEG and
     #: resampling leave (real crops' corner errors were ~1.5x the fit sigma, RMS).
     fit_sigma_scale: float = field(default=2.0, metadata={"ge": 1})
+    #: A plate aligned on grey levels alone (``ecc_grey_from_ratio``) states its corners at
+    #: the fit sigma times ``fit_sigma_scale`` only, not at the larger of that and the size
+    #: model, which was fitted on mixed-plane corners (grey-aligned corners erred 0.50-0.75
+    #: of it on real-imagery worlds).  Off in the deployment, on in config/sim.toml.
+    grey_fit_sigma: bool = False
     #: ... and no less than what the track's corners have really missed by: the RMS of
     #: their reprojection residuals in fixes from two or more plates (corrected for the
     #: six pose parameters fitted to them), averaged over about ``residual_sigma_fixes``

@@ -339,7 +339,7 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
                   else tuple(float(c) for c in np.mean(corners, axis=0)))
         stretch = 1.0 if corners is None else noise.stretch(corners)  # once a plate
         scale = None if corners is None else config.corner_scale_sigma_px * stretch
-        sigma = noise.sigma(corners, stretch, t.fit_sigma)
+        sigma = noise.stated(t, corners, stretch)
         measured, grow = (None, 1.0) if cut is None else cut
         outside = None
         if sigma is not None:

@@ -87,6 +87,9 @@ class Reference:
     white_share: float = 0.0
     #: the appearance image's mean B, G, R (:func:`cast_gains`; None: computed when asked)
     channel_means: tuple[float, float, float] | None = None
+    #: its luma's gradient energy over its chroma's (:func:`luma_chroma_ratio`): a
+    #: photograph's is high, a coloured sign's low
+    luma_over_chroma: float = 0.0
 
 
 Weights = tuple[float, float, float]
@@ -157,6 +160,40 @@ def mixed_weights(ref: Reference, weights_bgr: Weights, grey_share: float) -> We
         mixed = (float(v[0]), float(v[1]), float(v[2]))
         ref.mixes[key] = mixed
     return mixed
+
+
+#: :func:`luma_chroma_ratio` looks at an image resized to about this long side (px) ...
+RATIO_SIDE_PX = 80
+#: ... with this share of each side left out (the plate's border and what a crop caught
+#: beyond it).
+RATIO_BORDER = 0.08
+#: The ratio of an image without chroma contrast (a crop of grey video).
+NO_CHROMA_RATIO = 1e6
+
+
+def luma_chroma_ratio(image_bgr: npt.NDArray[np.uint8]) -> float:
+    """The gradient energy of an image's luma (Y) over that of its chroma (Cr + Cb).
+
+    A camera keeps chroma at half resolution and quantises it coarser (YUV 4:2:0, JPEG),
+    so in a frame a plate's chroma edges are the least certain part of it.  A photograph
+    of a wall or of the ground has little colour: 4.3 to 90 (and 40 % none at all) on the
+    crops of 104 real-imagery worlds; rendered signs 0.5-2.1 (docs/decisions.md, "Grey
+    levels alone on a plate with little colour")."""
+    h, w = image_bgr.shape[:2]
+    scale = min(1.0, RATIO_SIDE_PX / max(h, w))
+    small = image_bgr if scale >= 1.0 else cv2.resize(
+        image_bgr, (max(3, round(w * scale)), max(3, round(h * scale))),
+        interpolation=cv2.INTER_AREA)
+    sh, sw = small.shape[:2]
+    by, bx = int(RATIO_BORDER * sh), int(RATIO_BORDER * sw)
+    ycc = cv2.cvtColor(small, cv2.COLOR_BGR2YCrCb).astype(np.float32)[by:sh - by, bx:sw - bx]
+    energy = []
+    for c in range(3):
+        gx = cv2.Sobel(ycc[:, :, c], cv2.CV_32F, 1, 0, ksize=3)
+        gy = cv2.Sobel(ycc[:, :, c], cv2.CV_32F, 0, 1, ksize=3)
+        energy.append(float(np.sum(gx * gx + gy * gy)))
+    chroma = energy[1] + energy[2]
+    return NO_CHROMA_RATIO if chroma <= energy[0] / NO_CHROMA_RATIO else energy[0] / chroma
 
 
 def project(image_bgr: npt.NDArray[np.uint8], weights_bgr: Weights) -> npt.NDArray[np.float32]:
@@ -236,7 +273,8 @@ class ReferenceMatcher:
         b_mean, g_mean, r_mean = cv2.mean(image_bgr)[:3]
         ref = Reference(landmark_id, (w, h), pts, descriptors, gray, matchable,
                         np.ascontiguousarray(image_bgr), white_share=white,
-                        channel_means=(b_mean, g_mean, r_mean))
+                        channel_means=(b_mean, g_mean, r_mean),
+                        luma_over_chroma=luma_chroma_ratio(image_bgr))
         self.references[landmark_id] = ref
         return ref
 
