@@ -36,7 +36,7 @@ def fake_python(tmp_path: Path, flights: int, rest: int, sleep: float = 0.6) -> 
     a flight does, landing) and so does the child it starts (``sleep``), writes both pids,
     prints a line, waits for the child, prints another and exits ``flights``.  Any other
     pytest waits until the flights have started (they run at the same time), then prints a
-    line and exits ``rest``."""
+    line and exits ``rest``.  Both print their scheduling priority (``nice``)."""
     pids = tmp_path / "flights.pid"
     script = tmp_path / "python"
     script.write_text(f"""#!/bin/sh
@@ -45,6 +45,7 @@ if [ "$4" = "realtime" ]; then
   sleep {sleep} &
   echo "$$ $!" > "{pids}.tmp" && mv "{pids}.tmp" "{pids}"
   echo "flights: $*"
+  echo "flights at nice $(nice)"
   wait
   echo "flights end"
   exit {flights}
@@ -53,6 +54,7 @@ i=0
 while [ ! -f "{pids}" ] && [ $i -lt 200 ]; do sleep 0.05; i=$((i + 1)); done
 [ -f "{pids}" ] || {{ echo "rest: the flights had not started"; exit 99; }}
 echo "rest: $*"
+echo "rest at nice $(nice)"
 exit {rest}
 """)
     script.chmod(script.stat().st_mode | stat.S_IXUSR)
@@ -92,6 +94,10 @@ def test_both_pytests_run_at_once_and_either_failing_fails(
     assert out.index("rest: -m pytest") < out.index("flights: -m pytest -m realtime") \
         < out.index("flights end")
     assert (said in out) if said else ("failed" not in out)
+    # the rest yields the cores to the flights, which are judged on their timing
+    niceness = {who: int(out.split(f"{who} at nice ", 1)[1].split()[0])
+                for who in ("rest", "flights")}
+    assert niceness["rest"] - niceness["flights"] == dev.REST_NICE > 0
     assert not any(running(int(pid)) for pid in (tmp_path / "flights.pid").read_text().split())
 
 
@@ -105,7 +111,7 @@ def test_an_interrupted_suite_leaves_no_flight_running(
     monkeypatch.setattr(dev, "STOP_GRACE_S", 0.3)
     pids = tmp_path / "flights.pid"
 
-    def interrupted(*_cmd: object, check: bool = True) -> int:
+    def interrupted(*_cmd: object, check: bool = True, nice: int = 0) -> int:
         deadline = time.monotonic() + 10.0
         while not pids.exists():  # the flights have started
             assert time.monotonic() < deadline, "the flights never started"
