@@ -97,7 +97,8 @@ def test_both_pytests_run_at_once_and_either_failing_fails(
     # the rest yields the cores to the flights, which are judged on their timing
     niceness = {who: int(out.split(f"{who} at nice ", 1)[1].split()[0])
                 for who in ("rest", "flights")}
-    assert niceness["rest"] - niceness["flights"] == dev.REST_NICE > 0
+    assert dev.REST_NICE > 0  # (19 is the lowest priority: a niced suite's stand-ins cap)
+    assert niceness["rest"] == min(niceness["flights"] + dev.REST_NICE, 19) > niceness["flights"]
     assert not any(running(int(pid)) for pid in (tmp_path / "flights.pid").read_text().split())
 
 
