@@ -4,7 +4,9 @@
     python3 dev.py demo [ARGS...]   install (once) and run the main job: companion demo ARGS
     python3 dev.py test [ARGS...]   install (once) and run the whole test suite:
                                     ruff, mypy, then pytest (ARGS go to pytest; without
-                                    ARGS the long real-time flights run beside the rest)
+                                    ARGS the flights that need the machine to
+                                    themselves fly first, then the other long real-time
+                                    flights run beside the rest)
     python3 dev.py lock             regenerate requirements/*.lock (maintainers)
 
 The environment is a virtualenv in .venv, installed from the hash-checked lock files in
@@ -37,6 +39,9 @@ PYTEST_NO_TESTS = 5
 #: their pytest's output while the rest of the suite runs beside them (test-output/ is ignored
 #: by git).
 REALTIME = "realtime"
+#: The marker of the flights that fly alone, before the others and the rest, with nothing
+#: beside them (conftest.py ALONE): their bounds are on timing that a busy core breaks.
+ALONE = "alone"
 FLIGHTS_LOG = ROOT / "test-output" / "pytest-realtime.log"
 #: How much lower the rest of the suite runs beside the flights (``nice``): on a 2-core
 #: machine where the rest took 795 s, the strict square dropped 17 % of its frames beside
@@ -135,20 +140,27 @@ def pytest_status(status: int) -> int:
 
 
 def pytest_beside_flights() -> int:
-    """The whole suite as two pytest processes at once: the long real-time flights
-    (marker ``realtime``, conftest.py) in the background, writing to :data:`FLIGHTS_LOG`,
-    and the rest in the foreground; then the flights' output, followed live until they end.
+    """The whole suite as three pytests: first the flights marked ``alone`` (conftest.py
+    ALONE) with nothing beside them, in the foreground; then the other real-time flights
+    (marker ``realtime``) in the background, writing to :data:`FLIGHTS_LOG`, while the rest
+    runs in the foreground; then the flights' output, followed live until they end.
     The flights wait on the clock (~0.5 core each, one at a time): side by side the suite
     takes the longer of the two instead of their sum (docs/testing.md, "CI's budget").
+    Every part runs whatever an earlier one did, and any failing fails the suite.
     Interrupted, the flights' process group is ended too (:func:`stop_group`)."""
+    say(f"pytest: the flights that fly alone (-m \"{REALTIME} and {ALONE}\"), nothing beside")
+    alone = run(PY, "-m", "pytest", "-m", f"{REALTIME} and {ALONE}", "-p", "no:cacheprovider",
+                check=False)
     FLIGHTS_LOG.parent.mkdir(exist_ok=True)
     shown = FLIGHTS_LOG.relative_to(ROOT)
-    say(f"pytest: the real-time flights (-m {REALTIME}) in the background, output in {shown}")
+    beside = f"{REALTIME} and not {ALONE}"
+    say(f"pytest: the other real-time flights (-m \"{beside}\") in the background, output in "
+        f"{shown}")
     with FLIGHTS_LOG.open("w") as log:
         # a session of its own: the terminal's Ctrl-C reaches the rest only, and the flights
         # (pytest and every process it started) are stopped as one group below
         flights = subprocess.Popen(
-            [str(PY), "-m", "pytest", "-m", REALTIME, "-p", "no:cacheprovider"],
+            [str(PY), "-m", "pytest", "-m", beside, "-p", "no:cacheprovider"],
             cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             say(f"pytest: the rest (-m \"not {REALTIME}\")")
@@ -160,7 +172,8 @@ def pytest_beside_flights() -> int:
             flown = follow(flights, FLIGHTS_LOG)
         finally:
             stop_group(flights)  # interrupted: no flight left running
-    statuses = {"the rest": pytest_status(rest), "the real-time flights": pytest_status(flown)}
+    statuses = {"the flights alone": pytest_status(alone), "the rest": pytest_status(rest),
+                "the real-time flights": pytest_status(flown)}
     failed = [f"{name} ({status})" for name, status in statuses.items() if status]
     if failed:
         say("failed: " + ", ".join(failed))
