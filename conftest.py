@@ -210,12 +210,22 @@ REALTIME: tuple[str, ...] = ("sitl_tests/",)
 ALONE: tuple[str, ...] = ("sitl_tests/test_fly_strict.py::test_three_laps_against_the_strict_fake",)
 
 
-def is_realtime(nodeid: str, prefixes: tuple[str, ...] | None = None) -> bool:
-    """Whether ``prefixes`` (:data:`REALTIME` unless given) list the test (its folder, its
-    file, or the test with all its parameters)."""
+def listed(nodeid: str, prefixes: tuple[str, ...]) -> bool:
+    """Whether ``prefixes`` list the test (its folder, its file, or the test with all its
+    parameters)."""
     node = nodeid.split("[", 1)[0]
     return any(node == p or node.startswith(p if p.endswith("/") else p + "::")
-               for p in (REALTIME if prefixes is None else prefixes))
+               for p in prefixes)
+
+
+def is_realtime(nodeid: str) -> bool:
+    """Whether :data:`REALTIME` lists the test."""
+    return listed(nodeid, REALTIME)
+
+
+def is_alone(nodeid: str) -> bool:
+    """Whether :data:`ALONE` lists the test."""
+    return listed(nodeid, ALONE)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -226,5 +236,5 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.slow)
         if is_realtime(item.nodeid):
             item.add_marker(pytest.mark.realtime)
-        if is_realtime(item.nodeid, ALONE):
+        if is_alone(item.nodeid):
             item.add_marker(pytest.mark.alone)

@@ -36,10 +36,9 @@ def test_the_flights_alone_are_the_strict_square_and_realtime() -> None:
     square = "sitl_tests/test_fly_strict.py::test_three_laps_against_the_strict_fake"
     for prefix in conftest.ALONE:
         assert conftest.is_realtime(prefix)  # flown by the flights' pytest, never the rest's
-    assert conftest.is_realtime(f"{square}[4]", conftest.ALONE)
-    assert not conftest.is_realtime(
-        "sitl_tests/test_fly_strict.py::test_an_8s_outage_in_flight_lands_and_stops_fly[0-px4]",
-        conftest.ALONE)
+    assert conftest.is_alone(f"{square}[4]")
+    assert not conftest.is_alone(
+        "sitl_tests/test_fly_strict.py::test_an_8s_outage_in_flight_lands_and_stops_fly[0-px4]")
 
 
 def fake_python(tmp_path: Path, flights: int, rest: int, sleep: float = 0.6,
