@@ -32,6 +32,11 @@ EDGE_MARGIN_PX = 3.0
 POSE_PARAMETERS = 6
 
 
+def cornered(observations: Sequence[Observation]) -> list[int]:
+    """The indices of the observations that have corners (one: a lone plate's fix)."""
+    return [i for i, o in enumerate(observations) if o.corners_px is not None]
+
+
 class CornerNoise:
     """The corner sigma of a plate seen by ``camera`` (rectified by ``rectify`` if any).
 
@@ -148,7 +153,7 @@ class CornerNoise:
         as given otherwise."""
         out = list(observations)
         need = self.config.corner_bias_fixes / 2
-        with_corners = [i for i, o in enumerate(out) if o.corners_px is not None]
+        with_corners = cornered(out)
         if need <= 0 or len(with_corners) != 1:
             return out
         obs = out[with_corners[0]]

@@ -48,7 +48,7 @@ from companion.acquirers import (
 )
 from companion.acquisition import Acquisition
 from companion.app import Frame, FrameResult
-from companion.corner_noise import CornerNoise
+from companion.corner_noise import CornerNoise, cornered
 from companion.corners import Corners, grey_aligned
 from companion.ego_motion import TurnPredictor
 from companion.fixgate import FixGate, FixGateConfig
@@ -263,6 +263,8 @@ class Perception:
         read, side = self.side.at(frame.t_us) if sensed is None else sensed
         observed = self.noise.alone([self.noise.floor(o, self.tracks)
                                      for o in self.observations(frame.index)], self.tracks)
+        if len(cornered(observed)) == 1:
+            side = self.side.for_lone_plate(read, side)
         fix = solve_pose(observed, self.landmarks, self.camera,
                          frame.t_us, attitude=side.attitude, altitude=side.altitude,
                          laser=side.laser, config=self.pose_config)

@@ -85,6 +85,13 @@ class SideInputs:
             return read, read
         return read, replace(read, attitude=self.bias.correct(read.attitude))
 
+    def for_lone_plate(self, read: SideSensors, side: SideSensors) -> SideSensors:
+        """``side`` as a lone plate's fix takes it: the attitude corrected with the learnt
+        error's floors for one plate (``pose.attitude_bias_lone_floor_*``)."""
+        if self.bias is None:
+            return side
+        return replace(read, attitude=self.bias.correct(read.attitude, lone=True))
+
     def settle(self, read: SideSensors, fix: PoseFix | NoFix
                ) -> tuple[PoseFix | NoFix, list[dict[str, Any]]]:
         """The solution as the frame gives it, and its event: a fix that rejected the

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -54,3 +55,36 @@ def test_the_sigma_is_floored() -> None:
     assert got is not None
     assert math.degrees(got.roll_pitch_sigma_rad) == pytest.approx(0.2)
     assert math.degrees(got.yaw_sigma_rad) == pytest.approx(0.5)
+
+
+def test_a_lone_plate_takes_the_lone_floors() -> None:
+    """A lone plate's prior is floored at ``attitude_bias_lone_floor_*``; a fix of several
+    plates keeps the floors, and the estimate is forgotten when theirs would be."""
+    bias = AttitudeBias(PoseConfig(learn_attitude_bias=True, attitude_bias_lone_floor_rp_deg=0.1,
+                                   attitude_bias_lone_floor_yaw_deg=0.2))
+    bias.learn(raw(0.0), fix(0.0, (0.01, 0.01, 0.01)))
+    several, lone = bias.correct(raw(0.0)), bias.correct(raw(0.0), lone=True)
+    assert several is not None and lone is not None
+    assert (math.degrees(several.roll_pitch_sigma_rad), math.degrees(several.yaw_sigma_rad)) \
+        == pytest.approx((0.2, 0.5))
+    assert (math.degrees(lone.roll_pitch_sigma_rad), math.degrees(lone.yaw_sigma_rad)) \
+        == pytest.approx((0.1, 0.2))
+    assert (lone.roll_rad, lone.yaw_rad) == (several.roll_rad, several.yaw_rad)
+    bias.learn(raw(0.0), fix(0.0, (0.15, 0.15, 0.3)))  # a fix's own sigma over them holds
+    lone = bias.correct(raw(0.0), lone=True)
+    assert lone is not None
+    assert (math.degrees(lone.roll_pitch_sigma_rad), math.degrees(lone.yaw_sigma_rad)) \
+        == pytest.approx((0.15, 0.3))
+    # forgotten by the several plates' floors: from 0.2 deg, a walk of 0.3 deg/sqrt(s)
+    # reaches a sample's stated 0.3 deg after (0.3^2 - 0.2^2) / 0.3^2 = 0.56 s (from 0.15:
+    # 0.75 s)
+    tight = AttitudeSample(700_000, RAD(1.0), RAD(-1.0), RAD(90.0), RAD(0.3), RAD(5.0))
+    assert bias.correct(tight, lone=True) == tight
+    assert bias.correct(replace(tight, time_us=500_000), lone=True) != \
+        replace(tight, time_us=500_000)
+
+
+def test_without_lone_floors_a_lone_plate_takes_the_floors() -> None:
+    bias = AttitudeBias(PoseConfig(learn_attitude_bias=True))
+    bias.learn(raw(0.0), fix(0.0, (0.01, 0.01, 0.01)))
+    assert bias.correct(raw(1.0), lone=True) == bias.correct(raw(1.0))

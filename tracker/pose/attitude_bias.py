@@ -15,6 +15,10 @@ The loop cannot run away on its own: the corrected attitude is still checked aga
 landmarks by the solver (``PoseConfig.check_attitude``), the estimate is only ever set
 from a fix's attitude covariance (one small plate hardly narrows it) and floored at
 ``attitude_bias_floor_*_deg``, since consecutive frames' pixel errors are not independent.
+A lone plate's prior is floored at ``attitude_bias_lone_floor_*_deg`` instead (when set):
+there the floors' guard against counting the same plates twice hardly applies, and what
+counts is how well the estimate is known (docs/decisions.md, "The learnt attitude's floor
+for a lone plate").
 Pure: no clock of its own; times are the samples' microseconds.
 """
 
@@ -38,27 +42,37 @@ class AttitudeBias:
                                        config.attitude_bias_walk_yaw_deg_rt_s]) ** 2
         self.floor_rad = np.radians([config.attitude_bias_floor_rp_deg,
                                      config.attitude_bias_floor_yaw_deg])
+        self.lone_floor_rad = np.radians([
+            config.attitude_bias_lone_floor_rp_deg or config.attitude_bias_floor_rp_deg,
+            config.attitude_bias_lone_floor_yaw_deg or config.attitude_bias_floor_yaw_deg])
         self.error_rad = np.zeros(3)  # autopilot minus truth, roll pitch yaw
-        self.var_rad2: np.ndarray | None = None  # None: nothing learnt (or forgotten)
+        # the last fix's own attitude variance, unfloored; None: nothing learnt (or forgotten)
+        self.var_rad2: np.ndarray | None = None
         self.t_us: int | None = None
         self.learnt = 0
 
-    def _grow(self, sample: AttitudeSample) -> np.ndarray | None:
-        """The estimate's variance at the sample's time (None: forgotten)."""
+    def _grow(self, sample: AttitudeSample, lone: bool = False) -> np.ndarray | None:
+        """The estimate's variance at the sample's time, floored for a fix of several
+        plates or (``lone``) of one (None: forgotten, by the several plates' floor)."""
         if self.var_rad2 is None or self.t_us is None:
             return None
-        dt = max(sample.time_us - self.t_us, 0) / 1e6
-        var = self.var_rad2 + self.walk_rad2_s[[0, 0, 1]] * dt
+        walk = self.walk_rad2_s[[0, 0, 1]] * max(sample.time_us - self.t_us, 0) / 1e6
+        var = np.maximum(self.var_rad2, self.floor_rad[[0, 0, 1]] ** 2) + walk
         cap = np.array([sample.roll_pitch_sigma_rad, sample.roll_pitch_sigma_rad,
                         sample.yaw_sigma_rad]) ** 2
-        return None if np.any(var >= cap) else var
+        if np.any(var >= cap):
+            return None
+        return np.maximum(self.var_rad2, self.lone_floor_rad[[0, 0, 1]] ** 2) + walk \
+            if lone else var
 
-    def correct(self, sample: AttitudeSample | None) -> AttitudeSample | None:
+    def correct(self, sample: AttitudeSample | None, lone: bool = False
+                ) -> AttitudeSample | None:
         """``sample`` less the learnt error, with the estimate's sigma (roll/pitch: the
-        larger of the two); unchanged when nothing is learnt."""
+        larger of the two; ``lone``: as a lone plate's prior); unchanged when nothing is
+        learnt."""
         if sample is None:
             return None
-        var = self._grow(sample)
+        var = self._grow(sample, lone)
         if var is None:
             return sample
         r, p, y = np.array([sample.roll_rad, sample.pitch_rad, sample.yaw_rad]) - self.error_rad
@@ -73,7 +87,7 @@ class AttitudeBias:
         if raw is None or not isinstance(fix, PoseFix) or fix.attitude_prior == "none":
             return
         cov = np.asarray(fix.covariance)[3:, 3:]
-        var = np.maximum(np.diag(cov), self.floor_rad[[0, 0, 1]] ** 2)
+        var = np.diag(cov).copy()
         if not np.all(np.isfinite(var)):
             return
         raw_rpy = np.array([raw.roll_rad, raw.pitch_rad, raw.yaw_rad])

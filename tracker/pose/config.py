@@ -76,6 +76,14 @@ class PoseConfig:
     attitude_bias_walk_yaw_deg_rt_s: float = field(default=0.4, metadata={"gt": 0})
     attitude_bias_floor_rp_deg: float = field(default=0.2, metadata={"gt": 0})
     attitude_bias_floor_yaw_deg: float = field(default=0.5, metadata={"gt": 0})
+    #: The learnt attitude's floors when it is the prior of a lone plate's fix (one plate
+    #: with corners: its tilt and yaw come mostly from that prior); 0: the floors above.
+    #: The floors above guard a fix of several plates against the error those plates taught
+    #: the estimate a frame before (counted twice); a lone plate's prior was taught mostly
+    #: by others, so only how well the estimate is known counts (docs/decisions.md, "The
+    #: learnt attitude's floor for a lone plate").
+    attitude_bias_lone_floor_rp_deg: float = field(default=0.0, metadata={"ge": 0})
+    attitude_bias_lone_floor_yaw_deg: float = field(default=0.0, metadata={"ge": 0})
     #: 1-sigma of the autopilot's height (LOCAL_POSITION_NED down) as a prior.
     altitude_sigma_m: float = field(default=0.5, metadata={"gt": 0})
     #: Use the autopilot's height (LOCAL_POSITION_NED down) as a prior.
