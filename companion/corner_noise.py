@@ -133,6 +133,16 @@ class CornerNoise:
             return self.config.fit_sigma_scale * fit
         return self.sigma(corners, s, fit)
 
+    def modes(self, track: Track) -> tuple[float, ...] | None:
+        """The outline modes stated for ``track``'s corners: a plate aligned on the mixed
+        plane takes ``mixed_corner_mode_sigma_rel`` (a mode at 0 the pose's); None for a
+        grey-aligned plate, or when nothing is set (the pose's)."""
+        own = self.config.mixed_corner_mode_sigma_rel
+        if not any(own) or track.landmark_id in self.grey_plates:
+            return None
+        return tuple(m or p for m, p in zip(own, self.pose_config.corner_mode_sigma_rel,
+                                            strict=True))
+
     def floor(self, obs: Observation, tracks: Mapping[str, Track]) -> Observation:
         """``obs`` with its corner sigma raised for saturation (``saturated_sigma_gain``)
         and to what its track's corners have really missed by in recent fixes

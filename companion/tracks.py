@@ -355,5 +355,7 @@ def observations(tracks: Mapping[str, Track], noise: CornerNoise, config: Percep
                                frame_index=frame_index,
                                corner_sigma_px=sigma,
                                corner_scale_sigma_px=scale, corners_measured=measured,
-                               extrapolated_sigma_px=outside))
+                               extrapolated_sigma_px=outside,
+                               corner_mode_sigma_rel=None if corners is None
+                               else noise.modes(t)))
     return out

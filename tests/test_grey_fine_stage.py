@@ -132,3 +132,19 @@ def test_a_grey_plate_is_stated_by_its_fit_only_when_on() -> None:
     assert _noise(off).stated(track("photo"), corners, 1.0) == pytest.approx(model)
     assert _noise(on).stated(track("sign"), corners, 1.0) == pytest.approx(model)
     assert _noise(on).stated(track("photo"), None, 1.0) is None
+
+
+def test_a_mixed_plane_plate_states_its_own_modes() -> None:
+    """``mixed_corner_mode_sigma_rel`` reaches a plate aligned on the mixed plane (a mode
+    at 0 takes the pose's), not a grey-aligned one; unset, no plate states its own."""
+    rel = (1.0, 0.0, 0.8, 1.2, 0.0, 0.7, 0.9, 1.1)
+    config = dataclasses.replace(PerceptionConfig(), mixed_corner_mode_sigma_rel=rel)
+    pose = PoseConfig(corner_mode_sigma_rel=(0.5,) * 8)
+    noise = CornerNoise(CameraModel(), config, pose, None, [], frozenset({"photo"}))
+
+    def track(lid: str) -> Track:
+        return Track(lid, AdaptiveTracker(), (300.0, 200.0, 40.0, 27.0), None)
+
+    assert noise.modes(track("sign")) == (1.0, 0.5, 0.8, 1.2, 0.5, 0.7, 0.9, 1.1)
+    assert noise.modes(track("photo")) is None
+    assert _noise(PerceptionConfig()).modes(track("sign")) is None

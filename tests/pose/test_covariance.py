@@ -177,6 +177,28 @@ def test_plates_whose_corners_err_together_are_stated_so(camera: CameraModel) ->
     np.testing.assert_array_equal(alone[0].covariance, alone[1].covariance)
 
 
+def test_a_plate_states_its_own_modes(camera: CameraModel) -> None:
+    """An observation's ``corner_mode_sigma_rel`` stands for the solver's for that plate:
+    three plates telling theirs give the covariance the configuration gives; one plate
+    telling others than its neighbours changes it."""
+    lms = wall()[:3]
+    obs = [replace(o, corner_sigma_px=0.1) for o in see(lms, camera)]
+    rel = (1.5, 1.5, 0.3, 2.0, 0.3, 0.3, 0.5, 0.5)
+    att = AttitudeSample(0, *TRUE_RPY)
+    by_config = solve_pose(obs, lms, camera, 0, attitude=att,
+                           config=PoseConfig(corner_mode_sigma_rel=rel))
+    by_plates = solve_pose([replace(o, corner_mode_sigma_rel=rel) for o in obs], lms,
+                           camera, 0, attitude=att)
+    one_own = solve_pose([replace(obs[0], corner_mode_sigma_rel=(1.0,) * 8), *obs[1:]],
+                         lms, camera, 0, attitude=att,
+                         config=PoseConfig(corner_mode_sigma_rel=rel))
+    assert all(isinstance(f, PoseFix) for f in (by_config, by_plates, one_own))
+    assert isinstance(by_config, PoseFix) and isinstance(by_plates, PoseFix)
+    assert isinstance(one_own, PoseFix)
+    np.testing.assert_allclose(by_plates.covariance, by_config.covariance, rtol=1e-9)
+    assert not np.allclose(one_own.covariance, by_config.covariance, rtol=1e-3)
+
+
 def test_outline_modes_are_orthonormal_and_named_in_order() -> None:
     """The basis over a skewed quadrilateral's eight coordinates: orthonormal; its first
     two columns move every corner alike, the fourth along the corners' offsets."""

@@ -121,7 +121,6 @@ def make_groups(
     cfg = ctx.config
     centre_sigma = math.hypot(cfg.pixel_sigma_px, cfg.centre_sigma_px)
     modes = np.asarray(cfg.corner_mode_sigma_rel, dtype=np.float64)
-    modes_stated = bool(np.any(modes != 1.0))  # all 1: the corners are independent
     groups = []
     for i, lm in best.values():
         obs = observations[i]
@@ -142,7 +141,10 @@ def make_groups(
         scale = obs.corner_scale_sigma_px if obs.all_corners else None
         rel = (cfg.one_plate_outline_sigma_rel, cfg.one_plate_tilt_sigma_rel)
         outline, tilt = (r * sig if obs.all_corners else 0.0 for r in rel)
-        mode_rel = modes if obs.all_corners and modes_stated else None
+        stated = modes if obs.corner_mode_sigma_rel is None else \
+            np.asarray(obs.corner_mode_sigma_rel, dtype=np.float64)
+        # all 1: the corners are independent
+        mode_rel = stated if obs.all_corners and bool(np.any(stated != 1.0)) else None
         groups.append(Group(lm, obs, pts, px, ideal, sig, *_scale_error(ideal, sig, scale),
                             outline, tilt, mode_rel, each))
     return groups

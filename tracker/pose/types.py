@@ -52,6 +52,9 @@ class Observation:
     out, which then count as weak points (a cut plate's outline carried out of the image by
     its alignment on the part in view: they hold its scale and turn, which its measured
     corners alone do not); None: they are left out.
+    ``corner_mode_sigma_rel``: the plate's outline modes over its corner sigma in a fix of
+    several plates, when its perception states them; None: the solver's
+    ``corner_mode_sigma_rel``.
     """
 
     centre_px: tuple[float, float]
@@ -66,6 +69,7 @@ class Observation:
     corner_scale_sigma_px: float | None = None
     corners_measured: tuple[bool, bool, bool, bool] | None = None
     extrapolated_sigma_px: float | None = None
+    corner_mode_sigma_rel: tuple[float, ...] | None = None
 
     @property
     def all_corners(self) -> bool:
