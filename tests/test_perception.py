@@ -87,6 +87,14 @@ def test_no_track_for_a_landmark_out_of_view() -> None:
     perception.config = dataclasses.replace(perception.config, corner_scale_sigma_px=0.2)
     assert all(o.corner_scale_sigma_px == 0.2 for o in perception.observations(199)
                if o.corners_px is not None)
+    # the outline modes: the solver's unless a mixed-plane plate's are set (every plate
+    # here aligns on the mixed plane: ecc_grey_from_ratio is off)
+    assert all(o.corner_mode_sigma_rel is None for o in obs)
+    rel = (0.9, 0.8, 0.7, 1.1, 0.6, 0.7, 0.8, 1.2)
+    perception.noise.config = dataclasses.replace(perception.noise.config,
+                                                  mixed_corner_mode_sigma_rel=rel)
+    assert all(o.corner_mode_sigma_rel == rel for o in perception.observations(199)
+               if o.corners_px is not None)
 
 
 def test_a_detector_hit_restarts_a_track_when_the_reference_aligns_there() -> None:
