@@ -54,6 +54,8 @@ class CornerNoise:
         #: the landmarks whose running tracks align on grey levels alone
         #: (:func:`companion.corners.grey_aligned`), stated by their fit (``grey_fit_sigma``)
         self.grey_plates = grey_plates
+        #: whether the frame being processed came through a lossy codec (``Frame.lossy``)
+        self.lossy = False
 
     def cut(self, track: Track) -> tuple[tuple[bool, bool, bool, bool] | None, float] | None:
         """Which of a track's corners are measured (None: all four) and the factor on their
@@ -134,11 +136,12 @@ class CornerNoise:
         return self.sigma(corners, s, fit)
 
     def modes(self, track: Track) -> tuple[float, ...] | None:
-        """The outline modes stated for ``track``'s corners: a plate aligned on the mixed
-        plane takes ``mixed_corner_mode_sigma_rel`` (a mode at 0 the pose's); None for a
-        grey-aligned plate, or when nothing is set (the pose's)."""
-        own = self.config.mixed_corner_mode_sigma_rel
-        if not any(own) or track.landmark_id in self.grey_plates:
+        """The outline modes stated for ``track``'s corners: on a lossy frame, a plate
+        aligned on the mixed plane takes ``lossy_mixed_corner_mode_sigma_rel`` (a mode at 0
+        the pose's); None on a lossless frame, for a grey-aligned plate, or when nothing is
+        set (the pose's)."""
+        own = self.config.lossy_mixed_corner_mode_sigma_rel
+        if not self.lossy or not any(own) or track.landmark_id in self.grey_plates:
             return None
         return tuple(m or p for m, p in zip(own, self.pose_config.corner_mode_sigma_rel,
                                             strict=True))

@@ -180,6 +180,7 @@ class Perception:
         adopted here.
         """
         image = frame.image
+        self.noise.lossy = frame.lossy
         events = self.trackset.adopt()
         if image.shape[:2] != (self.camera.height, self.camera.width):
             return FrameResult(frame.index, frame.t_us, bad_frame=True,

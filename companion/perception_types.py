@@ -114,12 +114,14 @@ class PerceptionConfig:
     #: model, which was fitted on mixed-plane corners (grey-aligned corners erred 0.50-0.75
     #: of it on real-imagery worlds).  Off in the deployment, on in config/sim.toml.
     grey_fit_sigma: bool = False
-    #: A plate aligned on the mixed plane (not on grey levels alone): its outline's eight
-    #: modes over its corners' sigma in a fix of several plates, as
-    #: ``pose.corner_mode_sigma_rel`` (which a mode at 0 here takes, and every grey-aligned
-    #: plate).  The two alignments err differently; the simulator's layer measures each
-    #: (docs/decisions.md, "A plate's modes by its alignment").
-    mixed_corner_mode_sigma_rel: tuple[float, float, float, float, float, float, float,
+    #: A plate aligned on the mixed plane (not on grey levels alone) on a lossy frame
+    #: (``Frame.lossy``: JPEG, video): its outline's eight modes over its corners' sigma in
+    #: a fix of several plates, as ``pose.corner_mode_sigma_rel`` (which a mode at 0 here
+    #: takes, and every grey-aligned plate, and every plate of a lossless frame).  The two
+    #: alignments err differently, and a codec moves a rendered plate's edges; the
+    #: simulator's layer measures each (docs/decisions.md, "A plate's modes by its
+    #: alignment", "... on lossy frames").
+    lossy_mixed_corner_mode_sigma_rel: tuple[float, float, float, float, float, float, float,
                                        float] = field(default=(0.0,) * 8, metadata={"ge": 0})
     #: ... and no less than what the track's corners have really missed by: the RMS of
     #: their reprojection residuals in fixes from two or more plates (corrected for the

@@ -13,6 +13,7 @@ recorded frame that was.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import OrderedDict
@@ -56,7 +57,7 @@ class OnCompanionClock:
         frame = await self.source.recv()
         t_us = max(monotonic_us(), (self.last_us or 0) + 1)  # strictly increasing
         self.remember(t_us, frame.index, frame.t_us)
-        return Frame(frame.index, t_us, frame.image, frame.camera_id)
+        return dataclasses.replace(frame, t_us=t_us)
 
     def remember(self, t_us: int, index: int, recorded_us: int) -> None:
         """Note that the frame stamped ``t_us`` is recorded frame ``index`` of

@@ -282,7 +282,7 @@ class ReplaySource(OnCompanionClock, ResultObserver):
         t_us = max(t_us, (self.last_us or 0) + 1)
         self.remember(t_us, frame.index, frame.t_us)
         self.delivered += 1
-        return Frame(frame.index, t_us, frame.image, frame.camera_id)
+        return dataclasses.replace(frame, t_us=t_us)
 
 
 def recorded_flight(poses: dict[int, tuple[int, TruthPose]]) -> TruthFn | None:

@@ -135,16 +135,21 @@ def test_a_grey_plate_is_stated_by_its_fit_only_when_on() -> None:
 
 
 def test_a_mixed_plane_plate_states_its_own_modes() -> None:
-    """``mixed_corner_mode_sigma_rel`` reaches a plate aligned on the mixed plane (a mode
-    at 0 takes the pose's), not a grey-aligned one; unset, no plate states its own."""
+    """``lossy_mixed_corner_mode_sigma_rel`` reaches a plate aligned on the mixed plane
+    on a lossy frame (a mode at 0 takes the pose's), not a grey-aligned one nor any plate
+    on a lossless frame; unset, no plate states its own."""
     rel = (1.0, 0.0, 0.8, 1.2, 0.0, 0.7, 0.9, 1.1)
-    config = dataclasses.replace(PerceptionConfig(), mixed_corner_mode_sigma_rel=rel)
+    config = dataclasses.replace(PerceptionConfig(), lossy_mixed_corner_mode_sigma_rel=rel)
     pose = PoseConfig(corner_mode_sigma_rel=(0.5,) * 8)
     noise = CornerNoise(CameraModel(), config, pose, None, [], frozenset({"photo"}))
 
     def track(lid: str) -> Track:
         return Track(lid, AdaptiveTracker(), (300.0, 200.0, 40.0, 27.0), None)
 
+    assert noise.modes(track("sign")) is None
+    noise.lossy = True
     assert noise.modes(track("sign")) == (1.0, 0.5, 0.8, 1.2, 0.5, 0.7, 0.9, 1.1)
     assert noise.modes(track("photo")) is None
-    assert _noise(PerceptionConfig()).modes(track("sign")) is None
+    unset = _noise(PerceptionConfig())
+    unset.lossy = True
+    assert unset.modes(track("sign")) is None

@@ -74,7 +74,7 @@ def test_survey_fixes_match_the_truth_and_say_how_good_they_are() -> None:
 
 
 def test_no_track_for_a_landmark_out_of_view() -> None:
-    _, perception, out = flight("survey", range(180, 200))
+    sim, perception, out = flight("survey", range(180, 200))
     visible = {b.landmark_id for _, truth, _ in out for b in truth.boxes if b.in_view_frac > 0}
     assert perception.tracks, "nothing was acquired: the test would prove nothing"
     assert set(perception.tracks) <= visible
@@ -87,14 +87,19 @@ def test_no_track_for_a_landmark_out_of_view() -> None:
     perception.config = dataclasses.replace(perception.config, corner_scale_sigma_px=0.2)
     assert all(o.corner_scale_sigma_px == 0.2 for o in perception.observations(199)
                if o.corners_px is not None)
-    # the outline modes: the solver's unless a mixed-plane plate's are set (every plate
-    # here aligns on the mixed plane: ecc_grey_from_ratio is off)
+    # the outline modes: the solver's unless a mixed-plane plate's are set for a lossy
+    # frame (every plate here aligns on the mixed plane: ecc_grey_from_ratio is off)
     assert all(o.corner_mode_sigma_rel is None for o in obs)
     rel = (0.9, 0.8, 0.7, 1.1, 0.6, 0.7, 0.8, 1.2)
     perception.noise.config = dataclasses.replace(perception.noise.config,
-                                                  mixed_corner_mode_sigma_rel=rel)
-    assert all(o.corner_mode_sigma_rel == rel for o in perception.observations(199)
-               if o.corners_px is not None)
+                                                  lossy_mixed_corner_mode_sigma_rel=rel)
+    assert all(o.corner_mode_sigma_rel is None for o in perception.observations(199)), \
+        "the rendered frames are lossless: the pose's modes"
+    frame = Frame(200, round(200 * 1e6 / sim.fps), sim.render(200)[0], lossy=True)
+    perception.process(frame)
+    lossy = [o for o in perception.observations(200) if o.corners_px is not None]
+    assert lossy, "no corners on the lossy frame: the rest would prove nothing"
+    assert all(o.corner_mode_sigma_rel == rel for o in lossy)
 
 
 def test_a_detector_hit_restarts_a_track_when_the_reference_aligns_there() -> None:

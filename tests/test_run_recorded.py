@@ -13,6 +13,7 @@ import pytest
 from companion.cli import main
 from companion.landmarks.geodesy import LocalFrame
 from companion.recorded import OnCompanionClock, RecordedTruth, TruthAttitude
+from companion.sources.base import Frame
 from companion.sources.files import RecordedStreamSource
 from tests.run_helpers import fake_flying, flight_records, run_args, synth
 
@@ -38,6 +39,16 @@ def test_frames_are_stamped_on_the_companion_clock_and_keep_their_recording(
     stamps, recorded = asyncio.run(two())
     assert all(t >= before for t in stamps) and stamps == sorted(set(stamps))
     assert recorded == [(0, 0), (1, 33333), (2, 66667)]
+
+
+def test_a_frame_keeps_its_codec_on_the_companion_clock() -> None:
+    """Restamped, a JPEG frame is still lossy (the perception states its corners by it)."""
+    class Jpeg:
+        async def recv(self) -> Frame:
+            return Frame(0, 7, np.zeros((4, 4, 3), np.uint8), lossy=True)
+
+    frame = asyncio.run(OnCompanionClock(Jpeg()).recv())
+    assert frame.lossy and frame.t_us != 7
 
 
 def test_truth_attitude_is_the_recorded_one_plus_the_stated_error(hover: Path) -> None:

@@ -18,13 +18,16 @@ class Frame:
 
     ``index``: position in the source (0-based, increasing).  ``t_us``: capture time in
     microseconds on the companion's monotonic clock (recorded streams keep their own times).
-    ``image``: HxWx3 BGR uint8.  ``camera_id``: which camera took it.
+    ``image``: HxWx3 BGR uint8.  ``camera_id``: which camera took it.  ``lossy``: the
+    image passed through a lossy codec (a JPEG file, a video, a network stream) on its way
+    here, which moves edges (docs/decisions.md, "A plate's modes on lossy frames").
     """
 
     index: int
     t_us: int
     image: ImageU8
     camera_id: str = "cam0"
+    lossy: bool = False
 
     @property
     def size(self) -> tuple[int, int]:

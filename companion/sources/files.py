@@ -24,6 +24,7 @@ from companion.errors import InputError
 from companion.sources.base import EndOfStream, Frame, ImageU8, Pacer, SourceStatus
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
+LOSSY_SUFFIXES = (".jpg", ".jpeg")
 
 
 @dataclass(frozen=True)
@@ -37,6 +38,12 @@ class Entry:
     t_us: int
     path: Path
     frame_no: int | None = None
+
+
+def lossy(entry: Entry) -> bool:
+    """Whether ``entry``'s image was stored by a lossy codec: a JPEG file or a frame of a
+    video (an FFV1 video is lossless but counted lossy: the cautious side)."""
+    return entry.frame_no is not None or entry.path.suffix.lower() in LOSSY_SUFFIXES
 
 
 class VideoFrameReader:
@@ -131,7 +138,7 @@ class FileSequenceSource:
             self._delivered_this_pass += 1
             self.status.delivered += 1
             index = entry.index + self._pass * self._index_step
-            return Frame(index, t_us, image, self.camera_id)
+            return Frame(index, t_us, image, self.camera_id, lossy=lossy(entry))
 
     async def _load(self, loop: asyncio.AbstractEventLoop, entry: Entry) -> ImageU8:
         if entry.frame_no is None:

@@ -105,7 +105,7 @@ class VideoFileSource:
             await self._pacer.wait(t_us)
             self._last_t_us = t_us
             self.status.delivered += 1
-            return Frame(index, t_us, image, self.camera_id)
+            return Frame(index, t_us, image, self.camera_id, lossy=True)
 
     async def _end_of_pass(self, loop: asyncio.AbstractEventLoop) -> None:
         if not self.loop or self._n == 0:
@@ -259,7 +259,8 @@ class CameraSource:
             return
         if self._latest is not None:
             self.status.dropped += 1  # a newer frame replaced it before recv took it
-        self._latest = Frame(self._index, t_us, image, self.camera_id)
+        self._latest = Frame(self._index, t_us, image, self.camera_id,
+                             lossy="://" in self.spec)
         self._index += 1
         assert self._ready is not None
         self._ready.set()

@@ -39,6 +39,7 @@ async def test_video_file_frames_times_and_loop(tmp_path: Path) -> None:
     assert abs(float(frames[2].image.mean()) - 40) < 3
     assert np.array_equal(frames[4].image, frames[0].image)
     assert source.status.loops == 1
+    assert all(f.lossy for f in frames)
 
 
 async def test_video_file_ends_and_bad_files_are_one_line_errors(tmp_path: Path) -> None:
@@ -101,6 +102,7 @@ async def test_camera_delivers_newest_frames_then_stalls() -> None:
         source.close()
     assert 1 <= len(got) <= 4
     assert all(b.t_us > a.t_us and b.index > a.index for a, b in itertools.pairwise(got))
+    assert not any(f.lossy for f in got), "a local camera's frames are taken as raw"
     assert source.status.stalls == 1 and source.status.skip_reasons["size"] == 1
     assert source.status.skip_reasons["read_failed"] >= 1
     assert source.status.delivered + source.status.dropped == 4
@@ -124,6 +126,17 @@ async def test_camera_asks_for_the_configured_size() -> None:
     source = await CameraSource.open("0", size=(64, 48), capture_factory=lambda s: fake)
     source.close()
     assert fake.props[cv2.CAP_PROP_FRAME_WIDTH] == 64.0
+
+
+async def test_a_network_camera_s_frames_are_lossy() -> None:
+    """A stream over the network reaches the companion through a codec (H.264, MJPEG)."""
+    source = await CameraSource.open("rtsp://127.0.0.1:8554/cam",
+                                     capture_factory=lambda s: FakeCapture(2))
+    try:
+        frame = await source.recv()
+    finally:
+        source.close()
+    assert frame.lossy
 
 
 class RoundingCapture(FakeCapture):

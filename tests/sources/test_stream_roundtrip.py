@@ -75,7 +75,7 @@ async def test_png_round_trip_is_bit_exact(tmp_path: Path) -> None:
     assert [f.index for f in got] == [f.index for f in frames]
     assert [f.t_us for f in got] == [f.t_us for f in frames]
     for a, b in zip(got, frames, strict=True):
-        assert a.camera_id == "c1"
+        assert a.camera_id == "c1" and not a.lossy
         assert np.array_equal(a.image, b.image)
     assert source.status.delivered == 5 and source.status.skipped == 0
 
@@ -89,6 +89,7 @@ async def test_ffv1_video_stream_round_trip_is_bit_exact(tmp_path: Path) -> None
     source.close()
     for a, b in zip(got, [*frames, *frames[:2]], strict=True):
         assert np.array_equal(a.image, b.image)
+        assert a.lossy, "a video's frames count as lossy, FFV1 too (the cautious side)"
     assert got[5].index == 5
 
 
@@ -107,6 +108,7 @@ async def test_jpeg_round_trip_is_close(tmp_path: Path) -> None:
     got = await read_all(RecordedStreamSource(tmp_path / "s", realtime=False))
     for a, b in zip(got, frames, strict=True):
         assert np.abs(a.image.astype(int) - b.image.astype(int)).max() <= 2
+        assert a.lossy
 
 
 def test_meta_and_truth_round_trip(tmp_path: Path) -> None:
