@@ -50,6 +50,7 @@ from companion.landmarks.geodesy import LocalFrame
 from companion.perception import Perception, SideSensors
 from companion.settings import SIM_LAYERS, load_settings
 from companion.sources.base import Frame
+from companion.sources.files import Entry, lossy
 from tracker.boxes import box_iou
 from tracker.pose.types import AltitudeSample, AttitudeSample, MapLandmark, PoseFix
 
@@ -107,7 +108,8 @@ def frames(folder: Path, limit: int | None) -> Iterator[Frame]:
     with (folder / "frames.csv").open(encoding="utf-8") as fh:
         rows = list(csv.reader(fh))[1:]
     for row in rows[:limit]:
-        yield Frame(int(row[0]), int(row[1]), read_image(folder / row[2]))
+        entry = Entry(int(row[0]), int(row[1]), folder / row[2])
+        yield Frame(entry.index, entry.t_us, read_image(entry.path), lossy=lossy(entry))
 
 
 def score_track(score: Score, lid: str, box: tuple[float, float, float, float] | None,

@@ -125,9 +125,9 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     try:  # the shift first (a wide basin), then the affine map from there
         cc, affine = cv2.findTransformECC(rendered, roi, np.eye(2, 3, dtype=np.float32),
                                           cv2.MOTION_TRANSLATION, criteria, mask, 5)
-        shift = affine.copy()
-        cc, affine = cv2.findTransformECC(rendered, roi, shift, cv2.MOTION_AFFINE, criteria,
-                                          mask, 1)
+        shift = affine.copy()  # findTransformECC writes its result into the warp it starts at
+        cc, affine = cv2.findTransformECC(rendered, roi, shift.copy(), cv2.MOTION_AFFINE,
+                                          criteria, mask, 1)
     except cv2.error:
         return None
     if float(cc) < min_correlation or not np.all(np.isfinite(affine)):

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from tracker.acquire import ReferenceMatcher, homography_to, project_corners, refine_ecc
-from tracker.edge_align import align_cut, box_shift, search_shift, shifted
+from tracker.edge_align import MAX_LINEAR_STEP, align_cut, box_shift, search_shift, shifted
 
 from .test_acquire import place, textured_poster
 
@@ -51,6 +51,23 @@ def test_a_cut_plate_holds_its_corners_where_a_full_alignment_bends_them() -> No
         assert inside.max() < 0.5
         assert np.array(err_cut)[:, 1:].max() < 1.0
         assert np.array(err_full)[:, 1:].max() > 2.0  # what the affine move avoids
+
+
+def test_a_cut_plate_s_step_beyond_the_linear_limit_keeps_its_shape() -> None:
+    """The plate grows 9 % between frames, more than ``MAX_LINEAR_STEP`` lets an affine
+    step of a cut plate take: the outline is only shifted, its shape (and what is out of
+    view) kept.  OpenCV's ECC writes its result into the warp it starts at, so a shift
+    kept for this once came back as the affine step it was to replace."""
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    start, _ = _frames(0)
+    grown = start[0] + (start - start[0]) * (1.0 + 3 * MAX_LINEAR_STEP)
+    gray = cv2.cvtColor(place(poster, grown, seed=1), cv2.COLOR_BGR2GRAY)
+    hom = homography_to(ref, start)
+    moved = align_cut(ref, gray, hom)
+    assert moved is not None
+    step = project_corners(ref, moved) - project_corners(ref, hom)
+    assert np.abs(step - step[0]).max() < 1e-6, step  # one shift for all four corners
 
 
 def test_too_little_in_view_is_refused() -> None:
