@@ -30,8 +30,8 @@ from tracker.geometry import FloatArray
 
 #: Fewest pixels of the plate in view that an alignment rests on.
 MIN_PIXELS = 200
-#: Largest change of scale, squash or shear a frame (the affine map's linear part less the
-#: identity) taken from a cut plate; more is the alignment wandering on too little.
+#: Largest change of scale, squash or shear a frame (:func:`stretch`; a rotation is none)
+#: taken from a cut plate; more is the alignment wandering on too little.
 MAX_LINEAR_STEP = 0.03
 #: The window whose shift moves a cut plate's start: the box of its outline's part in view
 #: widened by this many px (its edges and the wall around them).
@@ -123,20 +123,30 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
         return None
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
     try:  # the shift first (a wide basin), then the affine map from there
-        cc, affine = cv2.findTransformECC(rendered, roi, np.eye(2, 3, dtype=np.float32),
-                                          cv2.MOTION_TRANSLATION, criteria, mask, 5)
-        shift = affine.copy()  # findTransformECC writes its result into the warp it starts at
+        cc, shift = cv2.findTransformECC(rendered, roi, np.eye(2, 3, dtype=np.float32),
+                                         cv2.MOTION_TRANSLATION, criteria, mask, 5)
+        # a copy: findTransformECC writes its result into the warp it starts at
         cc, affine = cv2.findTransformECC(rendered, roi, shift.copy(), cv2.MOTION_AFFINE,
                                           criteria, mask, 1)
     except cv2.error:
         return None
     if float(cc) < min_correlation or not np.all(np.isfinite(affine)):
         return None
-    if float(np.abs(affine[:, :2] - np.eye(2)).max()) > MAX_LINEAR_STEP:
-        affine = shift  # a sliver's affine map wandered (shear, squash): keep the shift
+    if stretch(affine) > MAX_LINEAR_STEP:
+        affine = shift  # a sliver's affine map wandered (scale, squash, shear): keep the shift
     to_roi = np.linalg.inv(start.from_roi)
     moved = start.from_roi @ np.vstack([affine, (0.0, 0.0, 1.0)]) @ to_roi @ hom
     return np.asarray(moved / moved[2, 2], np.float64)
+
+
+def stretch(affine: npt.ArrayLike) -> float:
+    """How far an affine map (2x3) scales, squashes or shears: its linear part's singular
+    values off 1 (the largest).  A rotation stretches nothing: a camera rolling turns a cut
+    plate by degrees a frame (the strict square), which its affine step must follow; a
+    sliver's stretch is the alignment wandering (the survey's hover: a fifth of wall-04 in
+    view flipped between two outlines frame by frame, docs/decisions.md)."""
+    values = np.linalg.svd(np.asarray(affine, np.float64)[:, :2], compute_uv=False)
+    return float(np.abs(values - 1.0).max())
 
 
 def search_shift(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,

@@ -55,9 +55,9 @@ def test_a_cut_plate_holds_its_corners_where_a_full_alignment_bends_them() -> No
 
 def test_a_cut_plate_s_step_beyond_the_linear_limit_keeps_its_shape() -> None:
     """The plate grows 9 % between frames, more than ``MAX_LINEAR_STEP`` lets an affine
-    step of a cut plate take: the outline is only shifted, its shape (and what is out of
-    view) kept.  OpenCV's ECC writes its result into the warp it starts at, so a shift
-    kept for this once came back as the affine step it was to replace."""
+    step of a cut plate take: the outline only moves (its rotation and shift), its shape
+    (and what is out of view) kept.  OpenCV's ECC writes its result into the warp it starts
+    at, so a shift kept for this once came back as the affine step it was to replace."""
     poster = textured_poster(5, 256, 170)
     ref = ReferenceMatcher().add("poster", poster)
     start, _ = _frames(0)
@@ -66,8 +66,32 @@ def test_a_cut_plate_s_step_beyond_the_linear_limit_keeps_its_shape() -> None:
     hom = homography_to(ref, start)
     moved = align_cut(ref, gray, hom)
     assert moved is not None
-    step = project_corners(ref, moved) - project_corners(ref, hom)
-    assert np.abs(step - step[0]).max() < 1e-6, step  # one shift for all four corners
+    before, after = project_corners(ref, hom), project_corners(ref, moved)
+    assert np.allclose(_sides(after), _sides(before), atol=1e-6)  # moved as a rigid body
+
+
+def _sides(quad: np.ndarray) -> np.ndarray:
+    """The six distances between a quad's corners (its shape, not where it is)."""
+    return np.array([np.linalg.norm(quad[i] - quad[j]) for i in range(4) for j in range(i)])
+
+
+def test_a_cut_plate_turning_with_the_camera_is_followed() -> None:
+    """The image turns 3 deg a frame about the plate's corner in view (a camera rolling):
+    a rotation is no stretch, so the affine step follows it whole, far corners too."""
+    poster = textured_poster(5, 256, 170)
+    ref = ReferenceMatcher().add("poster", poster)
+    start, _ = _frames(1)
+    hom = homography_to(ref, start)
+    truth = start
+    for k in range(1, 5):
+        a = np.radians(3.0 * k)
+        turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        truth = (start - start[0]) @ turn.T + start[0]
+        gray = cv2.cvtColor(place(poster, truth, seed=k), cv2.COLOR_BGR2GRAY)
+        moved = align_cut(ref, gray, hom)
+        assert moved is not None, k
+        hom = moved
+    assert np.abs(project_corners(ref, hom) - truth).max() < 2.0
 
 
 def test_too_little_in_view_is_refused() -> None:
