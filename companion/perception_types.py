@@ -121,8 +121,9 @@ class PerceptionConfig:
     #: alignments err differently, and a codec moves a rendered plate's edges; the
     #: simulator's layer measures each (docs/decisions.md, "A plate's modes by its
     #: alignment", "... on lossy frames").
-    lossy_mixed_corner_mode_sigma_rel: tuple[float, float, float, float, float, float, float,
-                                       float] = field(default=(0.0,) * 8, metadata={"ge": 0})
+    lossy_mixed_corner_mode_sigma_rel: tuple[float, float, float, float, float, float,
+                                             float, float] = field(default=(0.0,) * 8,
+                                                                   metadata={"ge": 0})
     #: ... and no less than what the track's corners have really missed by: the RMS of
     #: their reprojection residuals in fixes from two or more plates (corrected for the
     #: six pose parameters fitted to them), averaged over about ``residual_sigma_fixes``
