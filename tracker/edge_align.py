@@ -31,8 +31,15 @@ from tracker.geometry import FloatArray
 #: Fewest pixels of the plate in view that an alignment rests on.
 MIN_PIXELS = 200
 #: Largest change of scale, squash or shear a frame (:func:`stretch`; a rotation is none)
-#: taken from a cut plate; more is the alignment wandering on too little.
+#: taken from a sliver of a cut plate; more is the alignment wandering on too little.
 MAX_LINEAR_STEP = 0.03
+#: A part in view on fewer pixels than this (a 63 px square) is a sliver, whose affine
+#: step's stretch is held to ``MAX_LINEAR_STEP``; on more, the stretch is measured, not
+#: wandering: the survey's hover flipped wall-04's outline on 400-3500 px (stretch 0.04-0.14
+#: a frame, undone the next), the flown square's roll and entering plates stretch 0.04-0.3 on
+#: 9600-17000 px, and holding those lost the plates (docs/decisions.md, "A cut plate's
+#: stretch is held on a sliver only").
+SLIVER_PIXELS = 4000
 #: The window whose shift moves a cut plate's start: the box of its outline's part in view
 #: widened by this many px (its edges and the wall around them).
 PATCH_MARGIN_PX = 30
@@ -119,7 +126,8 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
         return None
     roi = start.roi
     rendered, mask = _rendered(start)
-    if int(np.count_nonzero(mask)) < MIN_PIXELS:
+    pixels = int(np.count_nonzero(mask))
+    if pixels < MIN_PIXELS:
         return None
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
     try:  # the shift first (a wide basin), then the affine map from there
@@ -132,7 +140,7 @@ def align_cut(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
         return None
     if float(cc) < min_correlation or not np.all(np.isfinite(affine)):
         return None
-    if stretch(affine) > MAX_LINEAR_STEP:
+    if pixels < SLIVER_PIXELS and stretch(affine) > MAX_LINEAR_STEP:
         affine = shift  # a sliver's affine map wandered (scale, squash, shear): keep the shift
     to_roi = np.linalg.inv(start.from_roi)
     moved = start.from_roi @ np.vstack([affine, (0.0, 0.0, 1.0)]) @ to_roi @ hom
