@@ -35,10 +35,10 @@ MIN_PIXELS = 200
 MAX_LINEAR_STEP = 0.03
 #: A part in view on fewer pixels than this (a 63 px square) is a sliver, whose affine
 #: step's stretch is held to ``MAX_LINEAR_STEP``; on more, the stretch is measured, not
-#: wandering: the survey's hover flipped wall-04's outline on 400-3500 px (stretch 0.04-0.14
+#: wandering: the survey's hover flipped wall-04's outline on 400-3500 px (stretch 0.04-0.9
 #: a frame, undone the next), the flown square's roll and entering plates stretch 0.04-0.3 on
-#: 9600-17000 px, and holding those lost the plates (docs/decisions.md, "A cut plate's
-#: stretch is held on a sliver only").
+#: 9600-17000 px, and holding those lost the plates.  Measured on the simulator's 640x480
+#: frames only (docs/decisions.md, "A cut plate's stretch is held on a sliver only").
 SLIVER_PIXELS = 4000
 #: The window whose shift moves a cut plate's start: the box of its outline's part in view
 #: widened by this many px (its edges and the wall around them).
