@@ -15,6 +15,7 @@ references are read-only.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Mapping
 
@@ -89,6 +90,26 @@ PART_IOU = 0.5
 #: the flown square's view changed 1-2 % a frame; the survey's wall-04, 25 % when its
 #: alignment jumped (its corners out of view 15-20 px off).
 HELD_SIZE_STEP = 0.1
+
+#: A cut plate's alignment that grows its outline (the square root of its area) by more than
+#: this share, shrinks it to under 1 / (1 + this), or turns it in the image by more than
+#: ``MAX_CUT_TURN_DEG``, from one processed frame to the next, gives no corners (its
+#: homography is kept and tried again next frame): no flight moves a plate so far in a
+#: frame.  The strict square beside a busy core (seed 1, 23.07 s): sign-01, cut by the
+#: bottom edge, 283 x 135 px, was aligned the next frame onto an outline 3.5 times its size
+#: and turned 62 deg; the ECC windows over that outline took 0.25-0.4 s a frame, the fixes
+#: were refused as stale and both tracks were lost (2.56 s without a fix; docs/decisions.md,
+#: "A cut plate's outline may not jump").  The survey's wall-04 shrank 25 % in a frame when
+#: its alignment slipped (``HELD_SIZE_STEP``: kept, its part out of view no longer held).
+MAX_CUT_SIZE_STEP = 0.4
+MAX_CUT_TURN_DEG = 30.0
+
+
+def outline_angle(corners: FloatArray) -> float:
+    """The direction (deg, image axes) of an outline's left-to-right axis: from the middle
+    of its left side (corners 0 and 3) to the middle of its right side (1 and 2)."""
+    dx, dy = (corners[1] + corners[2] - corners[0] - corners[3]) / 2.0
+    return math.degrees(math.atan2(float(dy), float(dx)))
 
 
 def box_partial(corners: FloatArray, width: int, height: int) -> bool:
@@ -178,7 +199,9 @@ class Corners:
             ref = self.references[track.landmark_id]
             corners = None if aligned is None else project_corners(ref, aligned)
             if corners is not None and (squashed(corners, ref.size_px)
-                                        or self._off_its_box(track, corners)):
+                                        or self._off_its_box(track, corners)
+                                        or self._jumped(track.landmark_id, predicted,
+                                                        aligned)):
                 # a sliver (tracker.boxes.squashed): neither corners nor box.  Seen once in
                 # ten real-time square flights: a plate entering at the image's edge aligned
                 # onto a 7 px wide sliver, the tracker re-seated on it, and its box-only fix
@@ -216,18 +239,38 @@ class Corners:
         white = self.references[landmark_id].white_share
         return max(0.0, saturated_share(image, corners) - white)
 
-    def _same_size(self, landmark_id: str, before: FloatArray | None,
-                   now: FloatArray | None) -> bool:
-        """Do the two homographies' outlines differ in size (the square root of their
-        areas) by at most ``HELD_SIZE_STEP``?  An alignment that moved a cut plate's
-        outline by more jumped (a wrong start, a camera turn misread): its part out of
-        view is no longer the shape it had."""
+    def _size_ratio(self, landmark_id: str, before: FloatArray | None,
+                    now: FloatArray | None) -> float | None:
+        """The second homography's outline's size (the square root of its area) over the
+        first's; None without both or with an empty first one."""
         if before is None or now is None:
-            return False
+            return None
         ref = self.references[landmark_id]
         a, b = (abs(float(cv2.contourArea(project_corners(ref, h).astype(np.float32))))
                 for h in (before, now))
-        return a > 0.0 and abs(float(np.sqrt(b / a)) - 1.0) <= HELD_SIZE_STEP
+        return float(np.sqrt(b / a)) if a > 0.0 else None
+
+    def _same_size(self, landmark_id: str, before: FloatArray | None,
+                   now: FloatArray | None) -> bool:
+        """Do the two homographies' outlines differ in size by at most
+        ``HELD_SIZE_STEP``?  An alignment that moved a cut plate's outline by more jumped
+        (a wrong start, a camera turn misread): its part out of view is no longer the shape
+        it had."""
+        ratio = self._size_ratio(landmark_id, before, now)
+        return ratio is not None and abs(ratio - 1.0) <= HELD_SIZE_STEP
+
+    def _jumped(self, landmark_id: str, before: FloatArray, now: FloatArray | None) -> bool:
+        """Did a cut plate's alignment move its outline further than a flight can in a
+        frame (``MAX_CUT_SIZE_STEP``, ``MAX_CUT_TURN_DEG``)?  False for a plate whole in
+        both (held to its tracker's box already) and without an alignment."""
+        if now is None or not (self.is_cut(landmark_id, before) or self.is_cut(landmark_id, now)):
+            return False
+        ratio = self._size_ratio(landmark_id, before, now)
+        if ratio is None or not 1.0 / (1.0 + MAX_CUT_SIZE_STEP) <= ratio <= 1.0 + MAX_CUT_SIZE_STEP:
+            return True
+        ref = self.references[landmark_id]
+        a, b = (outline_angle(project_corners(ref, h)) for h in (before, now))
+        return abs(math.remainder(b - a, 360.0)) > MAX_CUT_TURN_DEG
 
     def _off_its_box(self, track: Track, corners: FloatArray) -> bool:
         """Does a cut plate's outline (one reaching out of the image) leave its tracker's

@@ -72,3 +72,37 @@ def test_a_cut_outline_is_held_only_when_carried_from_a_held_one() -> None:
     track.misses = corners.config.max_corner_misses  # recovered from the box
     corners.follow(track, image, track.box)
     assert track.corners is not None and not track.outline_held  # found afresh on the cut plate
+
+
+def about_box_centre(linear: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """``truth`` moved by ``linear`` (2x2) about the tracker box's centre (320, 440)."""
+    about = np.array([[1.0, 0.0, 320.0], [0.0, 1.0, 440.0], [0.0, 0.0, 1.0]])
+    move = np.eye(3)
+    move[:2, :2] = linear
+    return about @ move @ np.linalg.inv(about) @ truth
+
+
+def test_a_cut_outline_that_jumps_gives_no_corners() -> None:
+    """The strict square beside a busy core: sign-01 cut by the bottom edge aligned onto an
+    outline four times its size and turned 60 deg, the box centre still inside; its ECC
+    windows then took 0.25-0.4 s a frame and the flight went 2.56 s without a fix.  A cut
+    plate's outline may grow or shrink by ``MAX_CUT_SIZE_STEP`` and turn by
+    ``MAX_CUT_TURN_DEG`` in a frame, no more."""
+    turn = np.radians(45.0)
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    for linear in (np.eye(2) * 1.6, np.eye(2) / 1.6, rotation):
+        corners, track, image, truth = scene()
+        jumped = about_box_centre(linear, truth)
+        corners.align_cut = lambda *_a, _h=jumped, **_kw: _h  # type: ignore[method-assign]
+        corners.follow(track, image, track.box)
+        assert track.corners is None and track.disputed
+        np.testing.assert_array_equal(track.homography, truth)  # kept: tried again
+    turn = np.radians(20.0)
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    for linear in (np.eye(2) * 1.3, np.eye(2) / 1.3, rotation):  # a brisk flight's frame
+        corners, track, image, truth = scene()
+        moved = about_box_centre(linear, truth)
+        corners.align_cut = lambda *_a, _h=moved, **_kw: _h  # type: ignore[method-assign]
+        corners.follow(track, image, track.box)
+        assert track.corners is not None and not track.disputed
+
