@@ -463,9 +463,11 @@ class Corners:
         hom = track.homography
         if hom is None:
             ncc, fit = 0.0, None
-        elif track.corners is None:  # no corners this frame: at the box, a few px off
-            ncc, fit = check_appearance_near(ref, image, moved_to_box(ref, hom, track.box),
-                                             self._reach_px(track))
+        elif track.corners is None:
+            # no corners this frame: a whole plate's outline at its tracker's box, a few px
+            # off; a cut plate's box holds only its part in view, its outline stays put
+            at = hom if track.partial_box else moved_to_box(ref, hom, track.box)
+            ncc, fit = check_appearance_near(ref, image, at, self._reach_px(track))
         else:
             ncc, fit = check_appearance(ref, image, hom)
         track.fit_sigma = fit if self.config.corner_sigma_from_fit else None

@@ -106,3 +106,20 @@ def test_a_cut_outline_that_jumps_gives_no_corners() -> None:
         corners.follow(track, image, track.box)
         assert track.corners is not None and not track.disputed
 
+
+def test_a_cut_plate_without_corners_is_checked_where_its_outline_is() -> None:
+    """The periodic appearance check of a track without corners this frame places its
+    outline at its tracker's box (a whole plate's box, a few px off); a cut plate's box holds
+    only the part in view, so there the outline stays where it was.  Moved to the part's box
+    the outline sat 40 px off its plate and the check failed on the right homography (the
+    strict square: sign-01 cut by the bottom edge, dropped "correlation 0.00" again and
+    again, 2026-12-07)."""
+    corners, track, image, truth = scene()
+    assert track.partial_box
+    track.corners, track.homography = None, truth
+    assert corners.check(track, image) > corners.config.track_appearance_ncc
+    assert track.verify_failures == 0
+    # a plate whose homography is wrong still fails its check
+    track.homography = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, -40.0], [0.0, 0.0, 1.0]]) @ truth
+    assert corners.check(track, image) < corners.config.track_appearance_ncc
+    assert track.verify_failures == 1
