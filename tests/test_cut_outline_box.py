@@ -123,3 +123,8 @@ def test_a_cut_plate_without_corners_is_checked_where_its_outline_is() -> None:
     track.homography = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, -40.0], [0.0, 0.0, 1.0]]) @ truth
     assert corners.check(track, image) < corners.config.track_appearance_ncc
     assert track.verify_failures == 1
+    # ... and so does a box left beside its plate, the outline right (real seed 41's real-01
+    # leaving by the bottom edge: its box 45 px left of it, scored on a wrong place)
+    track.homography, track.verify_failures, track.box = truth, 0, (-60.0, 400.0, 240.0, 80.0)
+    assert corners.check(track, image) < corners.config.track_appearance_ncc
+    assert track.verify_failures == 1
