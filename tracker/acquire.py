@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tracker.boxes import aspect_change, in_view_share, outline_box
+from tracker.plate_light import channel_ratio, unclipped
 from tracker.validation import check_image
 
 FloatArray = npt.NDArray[np.float64]
@@ -134,6 +135,9 @@ def reference_template(ref: Reference, weights_bgr: Weights | None, size: tuple[
     return template
 
 
+#: B, G and R alone as weights (the appearance image's channels as planes).
+CHANNEL_WEIGHTS: tuple[Weights, Weights, Weights] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
+                                                     (0.0, 0.0, 1.0))
 #: OpenCV's grey levels of BGR (``cv2.COLOR_BGR2GRAY``) as weights.
 GREY_WEIGHTS: Weights = (0.114, 0.587, 0.299)
 
@@ -484,7 +488,8 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
                iterations: int = 40, min_correlation: float = 0.6,
                fine_iterations: int = 10, weights_bgr: Weights | None = None,
                edge_band_px: int = 0, fine_grey_share: float = 0.0,
-               band_from_px: int = BAND_FROM_PX) -> FloatArray | None:
+               band_from_px: int = BAND_FROM_PX, clipped_out: bool = True
+               ) -> FloatArray | None:
     """Sub-pixel homography (reference -> frame) by ECC alignment, from an estimate.
 
     Keypoints from ORB's coarser pyramid levels are off by a pixel or more, and the
@@ -507,7 +512,8 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
     the unsmoothed stage aligns on the feature mixed with that share of grey levels
     (:func:`mixed_weights`; the same window and template size, so the warp carries over).
     ``band_from_px``: the ring is left out only of a template whose short side is at least
-    this long.
+    this long.  ``clipped_out``: the unsmoothed stage leaves out the template's pixels that
+    the plate's light took past what the frame holds (:func:`unclipped_part`).
     """
     start = ecc_start(ref, frame, hom, weights_bgr)
     if start is None:
@@ -519,8 +525,9 @@ def refine_ecc(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
             if weights_bgr is not None and fine_grey_share > 0.0:
                 template, roi = on_plane(start, ref, frame, mixed_weights(
                     ref, weights_bgr, fine_grey_share))
+            keep = unclipped_part(start, ref, frame, warp) if clipped_out else None
             cc, warp = _ecc(template, roi, warp, fine_iterations, 1e-5, 1, edge_band_px,
-                            band_from_px)
+                            band_from_px, keep)
     except cv2.error:
         return None
     out = start.from_roi @ warp @ start.to_template
@@ -585,21 +592,33 @@ def ecc_start(ref: Reference, frame: npt.NDArray[np.uint8], hom: FloatArray,
 CAST_FROM = 0.08
 
 
+def own_means(ref: Reference) -> FloatArray:
+    """The appearance image's mean B, G, R."""
+    return np.asarray(ref.channel_means if ref.channel_means is not None
+                      else cv2.mean(ref.colour)[:3], np.float64)
+
+
+def unclipped_part(start: EccStart, ref: Reference, frame: npt.NDArray[np.uint8],
+                   warp: FloatArray) -> npt.NDArray[np.uint8] | None:
+    """:func:`tracker.plate_light.unclipped` of ``start``'s template in ``frame``, the
+    outline where ``warp`` (template -> window) puts it."""
+    x0, y0 = int(start.from_roi[0, 2]), int(start.from_roi[1, 2])
+    height, width = start.roi.shape[:2]
+    quad = project_corners(ref, start.from_roi @ warp @ start.to_template) - (x0, y0)
+    size = start.template.shape[1::-1]
+    channels = [reference_template(ref, w, size) for w in CHANNEL_WEIGHTS]
+    return unclipped(frame[y0:y0 + height, x0:x0 + width], quad, warp, channels,
+                     own_means(ref))
+
+
 def cast_gains(ref: Reference, crop: npt.NDArray[np.uint8], quad: FloatArray) -> FloatArray:
     """Each channel's mean inside the outline ``quad`` (crop px) over the reference's, as a
     share of their average: 1, 1, 1 under white light whatever its level; a colour cast
     raises one channel against another, which no gain and offset of a colour plane such as
     R - B takes up."""
-    if crop.ndim != 3:
+    ratio = channel_ratio(crop, quad, own_means(ref))
+    if ratio is None:
         return np.ones(3)
-    mask = np.zeros(crop.shape[:2], np.uint8)
-    cv2.fillConvexPoly(mask, np.round(quad).astype(np.int32), 255)
-    if cv2.countNonZero(mask) < 16:
-        return np.ones(3)
-    seen = np.asarray(cv2.mean(crop, mask=mask)[:3], np.float64)
-    own = np.asarray(ref.channel_means if ref.channel_means is not None
-                     else cv2.mean(ref.colour)[:3], np.float64)
-    ratio = (seen + 1.0) / (own + 1.0)
     gains = ratio / ratio.mean()
     return gains if float(np.abs(gains - 1.0).max()) >= CAST_FROM else np.ones(3)
 
@@ -646,15 +665,18 @@ def _ecc_coarse(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32],
 
 def _ecc(template: npt.NDArray[np.float32], roi: npt.NDArray[np.float32], warp: FloatArray,
          iterations: int, eps: float, blur: int, band: int = 0,
-         band_from: int = BAND_FROM_PX) -> tuple[float, FloatArray]:
+         band_from: int = BAND_FROM_PX, keep: npt.NDArray[np.uint8] | None = None
+         ) -> tuple[float, FloatArray]:
     """One cv2.findTransformECC run (homography template -> roi); raises cv2.error.
     ``band``: the template's outer ``band`` px are left out when its short side is at least
-    ``band_from`` px."""
+    ``band_from`` px.  ``keep``: the template's pixels to align on (1; None: all)."""
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, eps)
     start = (warp / warp[2, 2]).astype(np.float32)
-    if band > 0 and min(template.shape[:2]) >= band_from:
-        mask = np.zeros(template.shape[:2], np.uint8)
-        mask[band:-band, band:-band] = 1
+    banded = band > 0 and min(template.shape[:2]) >= band_from
+    if banded or keep is not None:
+        mask = np.ones(template.shape[:2], np.uint8) if keep is None else keep.copy()
+        if banded:
+            mask[:band], mask[-band:], mask[:, :band], mask[:, -band:] = 0, 0, 0, 0
         # no input mask (None), not an all-ones one: the same warp to the bit, measured
         # ~18 % less time (docs/benchmarks.md, "The follow-mode square's CPU")
         cc, found = cv2.findTransformECCWithMask(  # type: ignore[call-overload]
