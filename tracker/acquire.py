@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tracker.boxes import aspect_change, in_view_share, outline_box
-from tracker.plate_light import channel_ratio, unclipped
+from tracker.plate_light import channel_ratio, clipped, unclipped
 from tracker.validation import check_image
 
 FloatArray = npt.NDArray[np.float64]
@@ -604,11 +604,14 @@ def unclipped_part(start: EccStart, ref: Reference, frame: npt.NDArray[np.uint8]
     outline where ``warp`` (template -> window) puts it."""
     x0, y0 = int(start.from_roi[0, 2]), int(start.from_roi[1, 2])
     height, width = start.roi.shape[:2]
+    crop = frame[y0:y0 + height, x0:x0 + width]
+    flat = clipped(crop)
+    if flat is None:  # most windows: nothing more to do
+        return None
     quad = project_corners(ref, start.from_roi @ warp @ start.to_template) - (x0, y0)
     size = start.template.shape[1::-1]
     channels = [reference_template(ref, w, size) for w in CHANNEL_WEIGHTS]
-    return unclipped(frame[y0:y0 + height, x0:x0 + width], quad, warp, channels,
-                     own_means(ref))
+    return unclipped(crop, flat, quad, warp, channels, own_means(ref))
 
 
 def cast_gains(ref: Reference, crop: npt.NDArray[np.uint8], quad: FloatArray) -> FloatArray:

@@ -52,26 +52,33 @@ def channel_ratio(crop: npt.NDArray[np.uint8], quad: FloatArray, own: FloatArray
     return np.asarray((seen + 1.0) / (np.asarray(own, np.float64) + 1.0), np.float64)
 
 
-def unclipped(crop: npt.NDArray[np.uint8], quad: FloatArray, warp: FloatArray,
-              channels: Sequence[npt.NDArray[np.float32]], own: FloatArray
-              ) -> npt.NDArray[np.uint8] | None:
-    """The template pixels (``channels``: the appearance image's B, G, R at the template's
-    size; ``warp``: template -> ``crop`` px) to align on in the window ``crop`` whose
-    outline is ``quad``: 1 except where the frame is clipped, or within ``CLIPPED_SPREAD_PX`` of a
-    clipped pixel, and the plate's gain (:func:`channel_ratio`) takes a channel to
-    ``LOST_LEVEL`` or more.  None: all of them (none lost, or more than
-    ``MAX_LOST_SHARE``)."""
+def clipped(crop: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8] | None:
+    """255 where a pixel of the window ``crop`` has a channel at ``CLIPPED_LEVEL`` or more;
+    None when none has (or the crop is grey): nothing to leave out, at the cost of one
+    ``inRange``."""
     if crop.ndim != 3:
         return None
     fine = cv2.inRange(crop, (0,) * 3, (CLIPPED_LEVEL - 1,) * 3)
     if cv2.countNonZero(fine) == fine.size:
         return None
+    return np.asarray(cv2.bitwise_not(fine), np.uint8)
+
+
+def unclipped(crop: npt.NDArray[np.uint8], flat: npt.NDArray[np.uint8], quad: FloatArray,
+              warp: FloatArray, channels: Sequence[npt.NDArray[np.float32]], own: FloatArray
+              ) -> npt.NDArray[np.uint8] | None:
+    """The template pixels (``channels``: the appearance image's B, G, R at the template's
+    size; ``warp``: template -> ``crop`` px) to align on in the window ``crop`` whose
+    outline is ``quad`` and whose clipped pixels are ``flat`` (:func:`clipped`): 1 except
+    where the frame is clipped, or within ``CLIPPED_SPREAD_PX`` of a clipped pixel, and the
+    plate's gain (:func:`channel_ratio`) takes a channel to ``LOST_LEVEL`` or more.  None:
+    all of them (none lost, or more than ``MAX_LOST_SHARE``)."""
     ratio = channel_ratio(crop, quad, own)
     if ratio is None:
         return None
     reach = np.ones((2 * CLIPPED_SPREAD_PX + 1,) * 2, np.uint8)
     height, width = channels[0].shape[:2]
-    near = cv2.warpPerspective(cv2.dilate(cv2.bitwise_not(fine), reach),
+    near = cv2.warpPerspective(cv2.dilate(flat, reach),
                                np.asarray(warp, np.float64), (width, height),
                                flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
     lost = near > 0

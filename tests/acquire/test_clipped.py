@@ -17,7 +17,7 @@ from tracker.acquire import (
     refine_ecc,
     resize_map,
 )
-from tracker.plate_light import MAX_LOST_SHARE, unclipped
+from tracker.plate_light import MAX_LOST_SHARE, clipped, unclipped
 
 QUAD = np.array([[250, 150], [370, 156], [368, 236], [252, 232]], np.float64)
 
@@ -66,10 +66,15 @@ def test_nothing_is_left_out_in_its_own_light_or_past_a_quarter() -> None:
     crop, quad = frame[140:245, 240:380], QUAD - (240, 140)
     ref = ReferenceMatcher().add("plate", poster)
     warp = homography_to(ref, quad) @ np.linalg.inv(resize_map(ref.size_px, size))
-    assert unclipped(crop, quad, warp, channels, own) is None
-    assert unclipped(lit(crop, 2.0), quad, warp, channels, own) is None
+
+    def keep_of(window: np.ndarray) -> np.ndarray | None:
+        flat = clipped(window)
+        return None if flat is None else unclipped(window, flat, quad, warp, channels, own)
+
+    assert keep_of(crop) is None
+    assert keep_of(lit(crop, 2.0)) is None
     assert corner_error(poster, frame, True) == corner_error(poster, frame, False)
-    keep = unclipped(lit(crop, 1.5), quad, warp, channels, own)
+    keep = keep_of(lit(crop, 1.5))
     assert keep is not None and 0.0 < 1.0 - keep.mean() <= 2 * MAX_LOST_SHARE
     # what is left out is mostly the plate's bright side, where its light takes it past
     # what the frame holds
